@@ -1,0 +1,1 @@
+"""mjcodesign: co-design of tendon-driven soft grippers on MuJoCo."""
