@@ -1,0 +1,122 @@
+"""Per-block Young's modulus of the two fingers, as log E [ln Pa]."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from mjcodesign.errors import StiffnessError
+
+__all__ = ["LOG_E_MIN", "LOG_E_MAX", "PRESETS", "Stiffness"]
+
+LOG_E_MIN = 13.5
+"""Softest printable block, ln(E / Pa): about 0.73 MPa (TPU 95A at low infill)."""
+LOG_E_MAX = 17.0
+"""Stiffest printable block, ln(E / Pa): about 24 MPa (solid TPU 95A)."""
+
+_BLOCKS_PER_FINGER = 11
+_N_FINGERS = 2
+
+# The paper's jointly optimised design, base to tip, segment (flexure) alternating (shared/NOTES.md).
+_PAPER_OPT_A = [16.05, 15.16, 14.62, 14.89, 15.31, 14.62, 15.85, 14.65, 15.23, 15.34, 15.22]
+_PAPER_OPT_B = [15.54, 14.53, 14.27, 14.81, 15.00, 15.97, 14.54, 15.14, 14.95, 15.31, 15.47]
+
+PRESETS: dict[str, np.ndarray] = {
+    "soft": np.full(_N_FINGERS * _BLOCKS_PER_FINGER, 13.5),
+    "semi-rigid": np.full(_N_FINGERS * _BLOCKS_PER_FINGER, 16.5),
+    "paper-optimized": np.array(_PAPER_OPT_A + _PAPER_OPT_B),
+}
+"""Named designs, each 22 values of ln(E / Pa): finger A base to tip, then finger B."""
+
+
+@dataclass(frozen=True)
+class Stiffness:
+    """ln(E / Pa) of every block of both fingers, shape (n_fingers, n_blocks).
+
+    Build it from 2·n values (finger A base to tip, then finger B), or n values for two equal fingers.
+    """
+
+    log_e: np.ndarray
+
+    def __init__(self, values, n_blocks: int = _BLOCKS_PER_FINGER):
+        try:
+            arr = np.asarray(values, dtype=float).ravel()
+        except (TypeError, ValueError) as exc:
+            raise StiffnessError(f"stiffness values are not numbers: {values!r}") from exc
+        if arr.size == n_blocks:
+            arr = np.tile(arr, _N_FINGERS)
+        if arr.size != _N_FINGERS * n_blocks:
+            raise StiffnessError(
+                f"stiffness needs {n_blocks} or {_N_FINGERS * n_blocks} values of log E, "
+                f"got {arr.size}"
+            )
+        if not np.all(np.isfinite(arr)):
+            raise StiffnessError("stiffness contains NaN or inf")
+        bad = (arr < LOG_E_MIN - 1e-9) | (arr > LOG_E_MAX + 1e-9)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise StiffnessError(
+                f"log E[{i}] = {arr[i]:g} is outside the printable range [{LOG_E_MIN}, {LOG_E_MAX}]"
+            )
+        arr = arr.reshape(_N_FINGERS, n_blocks)
+        arr.setflags(write=False)
+        object.__setattr__(self, "log_e", arr)
+
+    @classmethod
+    def preset(cls, name: str, n_blocks: int = _BLOCKS_PER_FINGER) -> Stiffness:
+        """A named preset (``soft``, ``semi-rigid``, ``paper-optimized``)."""
+        if name not in PRESETS:
+            raise StiffnessError(
+                f"unknown stiffness preset {name!r}; choose from {sorted(PRESETS)}"
+            )
+        values = PRESETS[name]
+        if n_blocks != _BLOCKS_PER_FINGER:
+            if name == "paper-optimized":
+                raise StiffnessError("the paper-optimized preset is defined for 11 blocks only")
+            values = np.full(n_blocks, values[0])
+        return cls(values, n_blocks=n_blocks)
+
+    @classmethod
+    def parse(cls, text: str, n_blocks: int = _BLOCKS_PER_FINGER) -> Stiffness:
+        """Parse a preset name or a comma-separated list of log E values."""
+        text = text.strip()
+        if "," not in text and not _is_number(text):
+            return cls.preset(text, n_blocks)
+        try:
+            values = [float(v) for v in text.split(",") if v.strip()]
+        except ValueError as exc:
+            raise StiffnessError(f"cannot parse stiffness {text!r}") from exc
+        return cls(values, n_blocks=n_blocks)
+
+    @property
+    def young(self) -> np.ndarray:
+        """Young's modulus [Pa], shape (n_fingers, n_blocks)."""
+        return np.exp(self.log_e)
+
+    @property
+    def n_blocks(self) -> int:
+        """Blocks per finger."""
+        return self.log_e.shape[1]
+
+    def finger(self, i: int) -> np.ndarray:
+        """Young's modulus [Pa] of finger ``i``'s blocks, base to tip, shape (n_blocks,)."""
+        return self.young[i]
+
+    def as_list(self) -> list[float]:
+        """Flat list of the 2·n log E values (finger A then B)."""
+        return [float(v) for v in self.log_e.ravel()]
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Stiffness) and np.array_equal(self.log_e, other.log_e)
+
+    def __hash__(self) -> int:
+        return hash(self.log_e.tobytes())
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
