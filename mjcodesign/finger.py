@@ -205,9 +205,7 @@ class FingerDesign:
         lf = self.flexure_len
         ls = self.segment_length
         if not (lf > 0 and ls > 0):
-            raise DesignError(
-                f"blocks do not fit: flexure {lf * 1e3:.2f} mm, segment {ls * 1e3:.2f} mm"
-            )
+            raise DesignError(f"blocks do not fit: flexure {lf * 1e3:.2f} mm, segment {ls * 1e3:.2f} mm")
         if 2 * self.cut >= ls:
             raise DesignError("trapezoid cut must be shorter than half a segment")
         tops = self.waypoints()[:, 2]

@@ -48,8 +48,7 @@ class Stiffness:
             arr = np.tile(arr, _N_FINGERS)
         if arr.size != _N_FINGERS * n_blocks:
             raise StiffnessError(
-                f"stiffness needs {n_blocks} or {_N_FINGERS * n_blocks} values of log E, "
-                f"got {arr.size}"
+                f"stiffness needs {n_blocks} or {_N_FINGERS * n_blocks} values of log E, got {arr.size}"
             )
         if not np.all(np.isfinite(arr)):
             raise StiffnessError("stiffness contains NaN or inf")
@@ -67,9 +66,7 @@ class Stiffness:
     def preset(cls, name: str, n_blocks: int = _BLOCKS_PER_FINGER) -> Stiffness:
         """A named preset (``soft``, ``semi-rigid``, ``paper-optimized``)."""
         if name not in PRESETS:
-            raise StiffnessError(
-                f"unknown stiffness preset {name!r}; choose from {sorted(PRESETS)}"
-            )
+            raise StiffnessError(f"unknown stiffness preset {name!r}; choose from {sorted(PRESETS)}")
         values = PRESETS[name]
         if n_blocks != _BLOCKS_PER_FINGER:
             if name == "paper-optimized":

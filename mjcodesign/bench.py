@@ -1,0 +1,74 @@
+"""Benchmarks: named cases, one runner, JSON out. Speed goals live here, not in tests."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import mujoco
+
+from mjcodesign.errors import OutputError
+from mjcodesign.finger import FingerDesign
+from mjcodesign.mjcf import FingerModel, build_finger
+from mjcodesign.simulate import check_state
+from mjcodesign.stiffness import Stiffness
+from mjcodesign.tendon import TendonDriver
+
+__all__ = ["bench_finger"]
+
+_BENCH_DESIGN = "semi-rigid"
+_BENCH_TENSION = 2.0
+"""Tendon tension of the free curl [N], ramped over the first 0.2 s."""
+_RAMP = 0.2
+
+
+def _one_thread() -> None:
+    # MuJoCo steps single-threaded; cap BLAS too so numpy glue does not steal the second core.
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+def bench_finger(
+    models=("chain", "flex", "flex-quadratic"),
+    seconds: float = 1.0,
+    out: str | None = None,
+    progress: bool = True,
+) -> dict:
+    """Steps per second of a free tendon curl (native tendon, gravity on) for each model."""
+    _one_thread()
+    design = FingerDesign()
+    stiffness = Stiffness.preset(_BENCH_DESIGN)
+    results: dict[str, dict] = {}
+    from rich.progress import Progress
+
+    with Progress(disable=not progress, transient=True) as bar:
+        task = bar.add_task("bench finger", total=len(models))
+        for name in models:
+            model = FingerModel(name)
+            built = build_finger(design, stiffness, model)
+            m = built.model
+            d = mujoco.MjData(m)
+            drv = TendonDriver(built)
+            n = int(round(seconds / m.opt.timestep))
+            t0 = time.perf_counter()
+            for _ in range(n):
+                drv.set_tension(d, _BENCH_TENSION * min(1.0, d.time / _RAMP))
+                mujoco.mj_step(m, d)
+            wall = time.perf_counter() - t0
+            check_state(d, f"{name}: ")
+            results[name] = {
+                "steps_per_s": n / wall,
+                "steps": n,
+                "wall_s": wall,
+                "nv": int(m.nv),
+                "timestep_s": m.opt.timestep,
+                "solver_iterations": int(m.opt.iterations),
+            }
+            bar.advance(task)
+    if out:
+        try:
+            Path(out).write_text(json.dumps(results, indent=2))
+        except OSError as exc:
+            raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from exc
+    return results

@@ -1,0 +1,322 @@
+"""Soft finger as a MuJoCo flex with interpolated (trilinear or quadratic) dofs.
+
+The flex spans the finger's bounding box with an interpolation grid of ``n x 1 x 1`` cells; the
+finger's real surface (segments, V gaps, flexures) is the collision mesh, carried by the grid.
+MuJoCo computes each cell's stiffness for the whole box cell, and stores it linearly in Young's
+modulus (``m.flex_stiffness``, one ``(3 n_node)^2`` record per cell). Per-block stiffness is written by
+scaling each cell's record to an *effective* modulus:
+
+* **Homogenisation.** A box cell has section ``I_box = w H^3 / 12``, the real finger inside it has
+  ``I(x)`` (a 2 mm flexure, a tapered segment). The cell gets
+  ``E_cell = l_cell / (I_box ∫_cell dx / (E(x) I(x)))``, so its bending compliance equals the real
+  one (series springs). When cells coincide with blocks (the default design) every cell holds exactly
+  one block.
+* **Trilinear calibration.** A trilinear hex cannot bend without parasitic shear, so a coarse grid is
+  too stiff in bending (0.74 of beam theory at 11x1x1, shared/NOTES.md). Every cell has the same
+  shape, so one factor ``r = δ_flex / δ_EB`` measured on a uniform box cantilever of identical cells
+  corrects them all: ``E_cell ← r E_cell``. It is computed, not tuned, and cached per geometry.
+
+Known limit: the homogenised box bends about its mid-height, while the real finger bends about its
+spine, and a flexure cell is softer axially than the real flexure. Tip-load bending matches beam
+theory; tendon curl is cross-checked against FEM separately.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import mujoco
+import numpy as np
+
+from mjcodesign.beam import _integrate
+from mjcodesign.errors import DesignError
+from mjcodesign.finger import FingerDesign
+from mjcodesign.mjcf import CONTYPE_FINGER, CONTYPE_WORLD, FingerHandle, FingerModel, SimOptions
+
+__all__ = [
+    "add_flex_finger",
+    "apply_cell_young",
+    "cell_young",
+    "finger_mesh",
+    "lagrange_weights",
+    "trilinear_locking_factor",
+    "flex_cells",
+    "TipLoad",
+]
+
+_E_REF = 1e6
+"""Modulus the flex is compiled with [Pa]; every cell record is then scaled from it."""
+_FLEX_RADIUS = 5e-4
+"""Collision radius of the flex surface [m]."""
+_NODE_INERTIA = 1e-9
+"""Rotational inertia of node bodies [kg m^2]; they only translate, so it never acts."""
+
+
+def finger_mesh(design: FingerDesign) -> tuple[np.ndarray, np.ndarray]:
+    """Watertight surface of the finger in the finger frame: vertices (n, 3) [m], faces (m, 3)."""
+    import trimesh
+    from shapely.geometry import Polygon
+
+    top = []
+    for b in reversed(design.blocks()):
+        top.extend(b.side_profile()[2:].tolist())
+    pts = [(0.0, 0.0), (design.length, 0.0)] + [tuple(p) for p in top]
+    clean = [pts[0]]
+    for p in pts[1:]:
+        if np.hypot(p[0] - clean[-1][0], p[1] - clean[-1][1]) > 1e-9:
+            clean.append(p)
+    mesh = trimesh.creation.extrude_polygon(Polygon(clean), height=design.width)
+    v = mesh.vertices.copy()
+    verts = np.c_[v[:, 0], v[:, 2] - 0.5 * design.width, v[:, 1]]
+    faces = mesh.faces[:, ::-1].copy()  # swapping y and z mirrors, so flip the winding back
+    return verts, faces
+
+
+def flex_cells(design: FingerDesign, options: SimOptions) -> int:
+    """Cells along the finger: aligned with block boundaries when the design allows."""
+    if options.flex_cells is not None:
+        if options.flex_cells < 1:
+            raise DesignError("flex_cells must be >= 1")
+        return int(options.flex_cells)
+    unit = design.flexure_len
+    n = round(design.length / unit)
+    edges = np.array([b.x1 for b in design.blocks()])
+    if np.allclose(edges / (design.length / n), np.round(edges / (design.length / n)), atol=1e-6):
+        return int(n)
+    return design.n_blocks
+
+
+def cell_young(design: FingerDesign, young: np.ndarray, n_cells: int) -> np.ndarray:
+    """Modulus of each cell [Pa], shape (n_cells,): the block's E when a cell lies in one block.
+
+    A cell that straddles blocks gets the series (compliance-weighted) average
+    ``E_cell = ∫ dx / I(x) / ∫ dx / (E(x) I(x))`` over the real sections inside it.
+    """
+    edges = np.linspace(0.0, design.length, n_cells + 1)
+    out = np.empty(n_cells)
+    blocks = design.blocks()
+    for c in range(n_cells):
+        a, b = edges[c], edges[c + 1]
+        geo = sum(_integrate(blk, a, b, np.ones_like) for blk in blocks)
+        comp = sum(_integrate(blk, a, b, np.ones_like) / e for blk, e in zip(blocks, young, strict=True))
+        out[c] = geo / comp
+    return out
+
+
+def lagrange_weights(xi: np.ndarray, order: int) -> np.ndarray:
+    """1-D Lagrange shape functions on [0, 1] with ``order + 1`` equispaced nodes, shape (len(xi), order+1)."""
+    xi = np.asarray(xi, dtype=float)
+    if order == 1:
+        return np.stack([1 - xi, xi], axis=-1)
+    return np.stack([2 * (xi - 0.5) * (xi - 1), -4 * xi * (xi - 1), 2 * xi * (xi - 0.5)], axis=-1)
+
+
+def _grid_weights(design: FingerDesign, n_cells: int, order: int, points: np.ndarray) -> np.ndarray:
+    """Interpolation weights of finger-frame points onto the node grid, shape (n_points, n_nodes)."""
+    nx, ny, nz = n_cells * order + 1, order + 1, order + 1
+    lo = np.array([0.0, -0.5 * design.width, 0.0])
+    ext = np.array([design.length, design.width, design.height_base])
+    u = (points - lo) / ext
+    W = np.zeros((len(points), nx * ny * nz))
+    cx = np.clip(np.floor(u[:, 0] * n_cells).astype(int), 0, n_cells - 1)
+    lx = u[:, 0] * n_cells - cx
+    wx, wy, wz = (
+        lagrange_weights(lx, order),
+        lagrange_weights(u[:, 1], order),
+        lagrange_weights(u[:, 2], order),
+    )
+    for p in range(len(points)):
+        for a in range(order + 1):
+            gi = cx[p] * order + a
+            for b in range(order + 1):
+                for c in range(order + 1):
+                    W[p, gi * ny * nz + b * nz + c] += wx[p, a] * wy[p, b] * wz[p, c]
+    return W
+
+
+def add_flex_finger(
+    spec: mujoco.MjSpec,
+    parent,
+    design: FingerDesign,
+    young: np.ndarray,
+    prefix: str,
+    options: SimOptions,
+    *,
+    quadratic: bool,
+    locking: float | None = None,
+) -> FingerHandle:
+    """Add a flex finger under ``parent`` (whose frame is the finger frame); base face pinned."""
+    order = 2 if quadratic else 1
+    n_cells = flex_cells(design, options)
+    nx, ny, nz = n_cells * order + 1, order + 1, order + 1
+    lo = np.array([0.0, -0.5 * design.width, 0.0])
+    ext = np.array([design.length, design.width, design.height_base])
+    verts, faces = finger_mesh(design)
+    model = FingerModel.FLEX_QUADRATIC if quadratic else FingerModel.FLEX
+    handle = FingerHandle(
+        prefix=prefix,
+        model=model,
+        base_body=parent.name,
+        waypoint_sites=[],
+        tip_site=f"{prefix}tip",
+        flex=f"{prefix}flex",
+    )
+    # Lumped nodal mass: each cell's real mass split by Simpson (quadratic) or equal (trilinear) weights.
+    edges = np.linspace(0.0, design.length, n_cells + 1)
+    w1 = np.array([0.5, 0.5]) if order == 1 else np.array([1, 4, 1]) / 6.0
+    node_mass = np.zeros((nx, ny, nz))
+    for c in range(n_cells):
+        vol = sum(_overlap_volume(b, edges[c], edges[c + 1]) for b in design.blocks())
+        cell_m = vol * design.density
+        node_mass[c * order : c * order + order + 1] += cell_m * np.einsum("i,j,k->ijk", w1, w1, w1)
+    nodebody, node = [], []
+    for gi in range(nx):
+        for gj in range(ny):
+            for gk in range(nz):
+                p = lo + ext * np.array([gi / (nx - 1), gj / (ny - 1), gk / (nz - 1)])
+                if gi == 0:  # the base face is clamped to the parent body
+                    nodebody.append(parent.name)
+                    node.append(p)
+                    continue
+                b = parent.add_body(name=f"{prefix}n{gi}_{gj}_{gk}", pos=p)
+                b.explicitinertial = True
+                b.mass = float(node_mass[gi, gj, gk])
+                b.inertia = [_NODE_INERTIA] * 3
+                for d in range(3):
+                    ax = np.zeros(3)
+                    ax[d] = 1.0
+                    b.add_joint(type=mujoco.mjtJoint.mjJNT_SLIDE, axis=ax)
+                nodebody.append(b.name)
+                node.append(np.zeros(3))
+                handle.bodies.append(b.name)
+    f = spec.add_flex()
+    f.name = handle.flex
+    f.dim = 2
+    f.order = order
+    f.cellcount = [n_cells, 1, 1]
+    f.nodebody = nodebody
+    f.node = np.asarray(node).ravel().tolist()
+    f.vert = verts.ravel().tolist()
+    f.vertbody = [parent.name] * len(verts)
+    f.elem = faces.ravel().tolist()
+    f.young = _E_REF
+    f.poisson = options.poisson
+    f.damping = options.damping_time
+    f.radius = _FLEX_RADIUS
+    f.selfcollide = mujoco.mjtFlexSelf.mjFLEXSELF_NONE
+    f.contype = CONTYPE_FINGER
+    f.conaffinity = CONTYPE_WORLD
+    f.friction = [options.friction, 0.005, 0.0001]
+    f.rgba = [0.2, 0.6, 0.85, 1]
+    e_cell = cell_young(design, young, n_cells)
+    if not quadratic:
+        r = locking if locking is not None else trilinear_locking_factor(design, n_cells, options.poisson)
+        e_cell = e_cell * r
+    handle.cell_young = e_cell
+    # Tendon waypoints ride on the node nearest in (x, z); trilinear grids have no mid-width node, so
+    # the tendon is split into two half-tension copies on the left and right nodes (symmetric).
+    wps = design.waypoints()
+    sides = [order // 2] if order == 2 else [0, 1]
+    chains = []
+    for gj in sides:
+        chain = []
+        for i, w in enumerate(wps):
+            u = (w - lo) / ext
+            gi = max(1, int(round(u[0] * (nx - 1))))
+            gk = int(round(u[2] * (nz - 1)))
+            body = spec.body(f"{prefix}n{gi}_{gj}_{gk}")
+            p_node = lo + ext * np.array([gi / (nx - 1), gj / (ny - 1), gk / (nz - 1)])
+            s = body.add_site(name=f"{prefix}wp{i}_{gj}", pos=w - p_node, size=[0.0008, 0, 0], group=3)
+            chain.append(s.name)
+        chains.append(chain)
+    handle.waypoint_sites = chains[0]
+    handle.site_chains = chains
+    tip_body = spec.body(f"{prefix}n{nx - 1}_0_0")
+    tip_body.add_site(
+        name=handle.tip_site,
+        pos=[0, 0.5 * design.width, 0.5 * design.flexure_thickness],
+        size=[0.0008, 0, 0],
+        group=3,
+    )
+    handle.grid = (nx, ny, nz, n_cells, order)
+    return handle
+
+
+def _overlap_volume(block, a: float, b: float) -> float:
+    lo, hi = max(a, block.x0), min(b, block.x1)
+    if hi <= lo:
+        return 0.0
+    xg, wg = np.polynomial.legendre.leggauss(16)
+    x = 0.5 * (hi - lo) * xg + 0.5 * (hi + lo)
+    return float(0.5 * (hi - lo) * np.sum(wg * block.height(x)) * block.width)
+
+
+def apply_cell_young(m: mujoco.MjModel, handle: FingerHandle) -> None:
+    """Scale each cell's stiffness record of the compiled flex to the handle's cell moduli."""
+    fid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_FLEX, handle.flex)
+    n_cells = len(handle.cell_young)
+    adr = int(m.flex_stiffnessadr[fid])
+    nxt = [int(m.flex_stiffnessadr[j]) for j in range(m.nflex) if m.flex_stiffnessadr[j] > adr]
+    end = min(nxt) if nxt else m.flex_stiffness.size
+    size = (end - adr) // n_cells
+    if size * n_cells != end - adr:
+        raise DesignError("unexpected flex stiffness layout; cannot write per-cell modulus")
+    rec = m.flex_stiffness[adr:end].reshape(n_cells, size)
+    rec *= (handle.cell_young / _E_REF)[:, None]
+
+
+@functools.lru_cache(maxsize=32)
+def trilinear_locking_factor(design: FingerDesign, n_cells: int, poisson: float) -> float:
+    """δ_flex / δ_EB of a uniform box cantilever made of the same trilinear cells (<1: too stiff).
+
+    Computed by running the flex to rest under a small tip load (linear regime); see the module
+    docstring. Every cell of the finger has this shape, so the factor applies cell by cell.
+    """
+    from mjcodesign.mjcf import new_spec
+    from mjcodesign.validate import run_to_rest
+
+    # A stiff, heavily damped box settles within a few hundred steps; the ratio is independent of E.
+    e_cal, load = 1e8, 0.05
+    opts = SimOptions(gravity=False, damping_time=0.01, flex_cells=n_cells, poisson=poisson)
+    spec = new_spec("locking", opts, flex=True, scene=False)
+    base = spec.worldbody.add_body(name="base")
+    h = add_flex_finger(
+        spec, base, design, np.ones(design.n_blocks), "c_", opts, quadratic=False, locking=1.0
+    )
+    m = spec.compile()
+    h.cell_young = np.full(n_cells, e_cal)
+    apply_cell_young(m, h)
+    d = mujoco.MjData(m)
+    tip = TipLoad(m, h, load)
+    delta = run_to_rest(m, d, tip.apply, tip.position)
+    from mjcodesign.beam import cantilever_tip_deflection
+
+    analytic = cantilever_tip_deflection(design, np.full(design.n_blocks, e_cal), load)
+    return float(delta / analytic)
+
+
+class TipLoad:
+    """Consistent nodal forces of a transverse tip load on a flex's tip face, and its deflection."""
+
+    def __init__(self, m: mujoco.MjModel, handle: FingerHandle, force: float):
+        nx, ny, nz, _, order = handle.grid
+        w1 = np.array([0.5, 0.5]) if order == 1 else np.array([1, 4, 1]) / 6.0
+        self.ids = []
+        self.w = []
+        for gj in range(ny):
+            for gk in range(nz):
+                self.ids.append(
+                    mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"{handle.prefix}n{nx - 1}_{gj}_{gk}")
+                )
+                self.w.append(w1[gj] * w1[gk])
+        self.w = np.array(self.w)
+        self.force = force
+
+    def apply(self, d: mujoco.MjData) -> None:
+        """Write the nodal forces (world +z) into ``xfrc_applied``."""
+        for i, w in zip(self.ids, self.w, strict=True):
+            d.xfrc_applied[i, 2] = self.force * w
+
+    def position(self, d: mujoco.MjData) -> float:
+        """Weighted mean z of the tip face [m]."""
+        return float(np.dot(self.w, d.xpos[self.ids, 2]))
