@@ -30,6 +30,8 @@ __all__ = [
     "new_spec",
     "build_finger",
     "build_gripper",
+    "set_openings",
+    "make_data",
 ]
 
 CONTYPE_WORLD = 1
@@ -39,6 +41,8 @@ CONTYPE_FINGER = 2
 
 # Largest opening of one finger from the palm centre [m]: Franka Hand stroke is 80 mm in total.
 _MAX_OPENING = 0.06
+# Lift servo stiffness [N/m]: 0.05 kg of fingers sag it by 0.02 mm.
+_LIFT_KP = 20000.0
 _PALM_HALF = np.array([0.015, 0.045, 0.01])  # palm box half-sizes [m]
 
 
@@ -176,6 +180,7 @@ class Built:
     finger_model: FingerModel
     tendon_mode: TendonMode
     options: SimOptions
+    openings: tuple[float, float] | None = None
 
 
 def finger_frame_quat(side: int) -> np.ndarray:
@@ -290,9 +295,10 @@ def build_gripper(
     if stiffness.n_blocks != design.n_blocks:
         raise DesignError(f"stiffness has {stiffness.n_blocks} blocks per finger, design {design.n_blocks}")
     spec = new_spec(f"gripper_{model.value}", options, flex=model.is_flex, scene=scene)
-    mount = spec.worldbody.add_body(name="mount", pos=list(pose.position))
+    # The arm holds the palm: gravity-compensate the palm and carriages, not the soft fingers.
+    mount = spec.worldbody.add_body(name="mount", pos=list(pose.position), gravcomp=1.0)
     mount.add_joint(name="lift", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1], damping=50.0)
-    palm = mount.add_body(name="palm", quat=list(pose.quat))
+    palm = mount.add_body(name="palm", quat=list(pose.quat), gravcomp=1.0)
     palm.add_geom(
         name="palm",
         type=mujoco.mjtGeom.mjGEOM_BOX,
@@ -305,12 +311,12 @@ def build_gripper(
     )
     lift = spec.add_actuator(name="lift", target="lift")
     lift.trntype = mujoco.mjtTrn.mjTRN_JOINT
-    lift.set_to_position(kp=2000.0, dampratio=1.0)
+    lift.set_to_position(kp=_LIFT_KP, dampratio=1.0)
     lift.ctrlrange = [-0.5, 0.5]
     lift.ctrllimited = True
     handles = []
     for i, (side, letter) in enumerate(((1, "A"), (-1, "B"))):
-        carriage = palm.add_body(name=f"{letter}_carriage")
+        carriage = palm.add_body(name=f"{letter}_carriage", gravcomp=1.0)
         carriage.add_joint(
             name=f"{letter}_slide",
             type=mujoco.mjtJoint.mjJNT_SLIDE,
@@ -340,22 +346,27 @@ def build_gripper(
     m = _compile(spec)
     _finalise(m, handles, spec)
     built = Built(spec, m, handles, design, stiffness, model, tendon_mode, options)
-    set_openings(built, pose.openings, qpos=True)
+    built.openings = tuple(pose.openings)
     return built
 
 
-def set_openings(built: Built, openings, *, qpos: bool = False, data: mujoco.MjData | None = None) -> None:
-    """Command the two openings [m]; with ``qpos`` also write them into ``qpos0`` (or ``data``)."""
+def set_openings(built: Built, openings, data: mujoco.MjData, *, qpos: bool = False) -> None:
+    """Command the two openings [m] (position actuators); with ``qpos`` also place the fingers there."""
     m = built.model
     for letter, s in zip("AB", openings, strict=True):
-        jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"{letter}_slide")
         if qpos:
-            if data is not None:
-                data.qpos[m.jnt_qposadr[jid]] = s
-            else:
-                m.qpos0[m.jnt_qposadr[jid]] = s
-        if data is not None:
-            data.ctrl[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{letter}_opening")] = s
+            jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"{letter}_slide")
+            data.qpos[m.jnt_qposadr[jid]] = s
+        data.ctrl[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{letter}_opening")] = s
+
+
+def make_data(built: Built) -> mujoco.MjData:
+    """Fresh MjData; for a gripper, fingers placed at the pose's openings."""
+    d = mujoco.MjData(built.model)
+    if built.openings is not None:
+        set_openings(built, built.openings, d, qpos=True)
+    mujoco.mj_forward(built.model, d)
+    return d
 
 
 def _compile(spec: mujoco.MjSpec) -> mujoco.MjModel:

@@ -1,0 +1,73 @@
+import json
+import subprocess
+import sys
+
+import pytest
+
+
+def _run(*args, timeout=300):
+    return subprocess.run(
+        [sys.executable, "-m", "mjcodesign.cli", *args], capture_output=True, text=True, timeout=timeout
+    )
+
+
+def test_validate_beam_json():
+    r = _run("validate", "beam", "--model", "chain", "--design", "paper-optimized", "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert {"tip_deflection_m", "analytic_m", "rel_error"} <= set(out)
+    assert out["rel_error"] <= 0.05
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["validate", "beam", "--design", "bogus"],
+        ["validate", "beam", "--design", "1,2,3"],
+        ["validate", "beam", "--design", "nan," + ",".join(["15"] * 10)],
+        ["validate", "beam", "--design", ",".join(["18"] * 22)],
+        ["validate", "beam", "--model", "fem"],
+        ["validate", "beam", "--force", "-1"],
+        ["finger", "export", "--out", "/proc/forbidden/x"],
+    ],
+)
+def test_bad_input_exits_2_with_one_line(args):
+    r = _run(*args)
+    assert r.returncode == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_finger_export_reloads(tmp_path):
+    import mujoco
+
+    r = _run(
+        "finger",
+        "export",
+        "--design",
+        "soft",
+        "--model",
+        "chain",
+        "--gripper",
+        "--out",
+        str(tmp_path),
+        "--json",
+    )
+    assert r.returncode == 0, r.stderr
+    m = mujoco.MjModel.from_xml_path(str(tmp_path / "model.xml"))
+    assert m.ntendon == 2 and m.nu == 5
+    mb = mujoco.MjModel.from_binary_path(str(tmp_path / "model.mjb"))
+    assert mb.nq == m.nq
+    assert len(list((tmp_path / "blocks").glob("*.stl"))) == 11
+
+
+def test_import_is_light():
+    code = (
+        "import sys, mjcodesign, mjcodesign.cli\n"
+        "heavy = [m for m in ('torch', 'rerun', 'warp', 'franky', 'dynamixel_sdk', 'mujoco_warp', 'ray')"
+        " if m in sys.modules]\n"
+        "print(','.join(heavy))"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0 and r.stdout.strip() == "", r.stdout + r.stderr

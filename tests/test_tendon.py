@@ -1,0 +1,70 @@
+import mujoco
+import numpy as np
+import pytest
+
+from mjcodesign.finger import FingerDesign
+from mjcodesign.mjcf import FingerModel, TendonMode, build_finger
+from mjcodesign.stiffness import Stiffness
+from mjcodesign.tendon import TendonDriver
+from mjcodesign.validate import curl
+
+# Point forces of a frictionless tendon are the native spatial tendon's forces: same rest shape.
+_TOL_NATIVE_VS_POINT_RAD = 1e-4
+
+
+@pytest.fixture(scope="module")
+def curls():
+    s = Stiffness.preset("semi-rigid")
+    out = {}
+    for routing in ("uniform-pressure", "uniform-height"):
+        d = FingerDesign(routing=routing)
+        out[routing] = curl(d, s, "chain", 1.0)
+    return out
+
+
+def test_point_force_equals_native_tendon():
+    s = Stiffness.preset("paper-optimized")
+    d = FingerDesign()
+    a = curl(d, s, "chain", 1.0, tendon_mode=TendonMode.NATIVE)
+    b = curl(d, s, "chain", 1.0, tendon_mode=TendonMode.POINT_FORCE)
+    np.testing.assert_allclose(a["block_angles_rad"], b["block_angles_rad"], atol=_TOL_NATIVE_VS_POINT_RAD)
+
+
+def test_uniform_height_curls_the_tip_uniform_pressure_spreads_from_the_base(curls):
+    up = np.array(curls["uniform-pressure"]["block_angles_rad"])[1::2]  # flexures, base to tip
+    uh = np.array(curls["uniform-height"]["block_angles_rad"])[1::2]
+    assert up.sum() > 0 and uh.sum() > 0  # both curl inwards
+    # Uniform pressure: tendon moment f_T h(x) ~ (L - x)^2 bends the base most, decreasing to the tip.
+    assert np.all(np.diff(up) < 0)
+    # Uniform height: constant moment, so every (identical) flexure bends alike and the tip keeps up.
+    np.testing.assert_allclose(uh, uh.mean(), rtol=0.02)
+    distal_up = up[-2:].sum() / up.sum()
+    distal_uh = uh[-2:].sum() / uh.sum()
+    assert distal_uh > 0.35 and distal_up < 0.15 and distal_uh > 3 * distal_up
+
+
+def test_paper_variant_curls_inwards():
+    s = Stiffness.preset("semi-rigid")
+    res = curl(FingerDesign(), s, "chain", 0.05, tendon_mode=TendonMode.POINT_FORCE, variant="paper")
+    assert res["bend_angle_rad"] > 0
+
+
+def test_curl_is_deterministic():
+    s = Stiffness.preset("paper-optimized")
+    built = build_finger(FingerDesign(), s, FingerModel.CHAIN)
+    runs = []
+    for _ in range(2):
+        d = mujoco.MjData(built.model)
+        drv = TendonDriver(built)
+        drv.set_tension(d, 1.5)
+        for _ in range(300):
+            mujoco.mj_step(built.model, d)
+        runs.append(d.qpos.copy())
+    np.testing.assert_array_equal(runs[0], runs[1])
+
+
+@pytest.mark.slow
+def test_flex_tendon_curls_inwards():
+    s = Stiffness.preset("semi-rigid")
+    res = curl(FingerDesign(), s, FingerModel.FLEX, 1.0)
+    assert res["tip_displacement_m"][2] > 0
