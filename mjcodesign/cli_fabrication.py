@@ -91,9 +91,11 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(report, indent=2))
     else:
-        print(f"wrote {report['files']['prusaslicer_3mf']}, {report['files']['bambu_orca_3mf']}, "
-              f"{len(report['files']['stl'])} STL and the print sheet; "
-              f"largest |error| {report['max_abs_rel_error']:.1%}")  # fmt: skip
+        print(
+            f"wrote {report['files']['prusaslicer_3mf']}, {report['files']['bambu_orca_3mf']}, "
+            f"{len(report['files']['stl'])} STL and the print sheet; "
+            f"largest |error| {report['max_abs_rel_error']:.1%}"
+        )
     return 0
 
 

@@ -133,8 +133,15 @@ def write_prusa_3mf(plan: PrintPlan, path: str | Path) -> Path:
             _cmeta(vol, "volume", "matrix", _IDENTITY_4X4)
             for key, value in bp.settings.items():
                 _cmeta(vol, "volume", SETTINGS[key].prusa, SETTINGS[key].format(value))
-            ET.SubElement(vol, "mesh", edges_fixed="0", degenerate_facets="0", facets_removed="0",
-                          facets_reversed="0", backwards_edges="0")  # fmt: skip
+            ET.SubElement(
+                vol,
+                "mesh",
+                edges_fixed="0",
+                degenerate_facets="0",
+                facets_removed="0",
+                facets_reversed="0",
+                backwards_edges="0",
+            )
     return _zip(
         path,
         {
@@ -189,14 +196,26 @@ def write_bambu_3mf(plan: PrintPlan, path: str | Path) -> Path:
             _bmeta(part, "matrix", _IDENTITY_4X4)
             for key, value in _bambu_settings(bp).items():
                 _bmeta(part, key, value)
-            ET.SubElement(part, "mesh_stat", face_count=str(len(f)), edges_fixed="0", degenerate_facets="0",
-                          facets_removed="0", facets_reversed="0", backwards_edges="0")  # fmt: skip
+            ET.SubElement(
+                part,
+                "mesh_stat",
+                face_count=str(len(f)),
+                edges_fixed="0",
+                degenerate_facets="0",
+                facets_removed="0",
+                facets_reversed="0",
+                backwards_edges="0",
+            )
         ET.SubElement(
             build,
             _q("item"),
-            {"objectid": pid, _p("UUID"): _uuid(name + "/item"), "transform": _transform(place.offset),
-             "printable": "1"},
-        )  # fmt: skip
+            {
+                "objectid": pid,
+                _p("UUID"): _uuid(name + "/item"),
+                "transform": _transform(place.offset),
+                "printable": "1",
+            },
+        )
         parents.append(pid)
     plate = ET.SubElement(config, "plate")
     _bmeta(plate, "plater_id", "1")
@@ -320,10 +339,18 @@ def _xml_bytes(root: ET.Element) -> bytes:
 
 def _content_types() -> ET.Element:
     types = ET.Element("Types", {"xmlns": _CT_NS})
-    ET.SubElement(types, "Default", Extension="rels",
-                  ContentType="application/vnd.openxmlformats-package.relationships+xml")  # fmt: skip
-    ET.SubElement(types, "Default", Extension="model",
-                  ContentType="application/vnd.ms-package.3dmanufacturing-3dmodel+xml")  # fmt: skip
+    ET.SubElement(
+        types,
+        "Default",
+        Extension="rels",
+        ContentType="application/vnd.openxmlformats-package.relationships+xml",
+    )
+    ET.SubElement(
+        types,
+        "Default",
+        Extension="model",
+        ContentType="application/vnd.ms-package.3dmanufacturing-3dmodel+xml",
+    )
     return types
 
 
