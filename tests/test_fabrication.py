@@ -330,10 +330,9 @@ def _slice(plan, tmp_path: Path, name: str) -> str:
     src = write_prusa_3mf(plan, tmp_path / f"{name}.3mf")
     gcode = tmp_path / f"{name}.gcode"
     cal = plan.calibration
-    # The calibration's layer heights; the first layer is a printer setting, so it goes on the command line.
-    heights = ["--layer-height", f"{cal.layer_height * _MM:g}"]
-    heights += ["--first-layer-height", f"{cal.first_layer_height * _MM:g}"]
-    cmd = [PRUSA, "--export-gcode", "--dont-arrange", "--gcode-comments", "--loglevel", "1", *heights]
+    # The 3MF sets layer_height per object; the first layer height is a printer setting (print sheet).
+    first = ["--first-layer-height", f"{cal.first_layer_height * _MM:g}"]
+    cmd = [PRUSA, "--export-gcode", "--dont-arrange", "--gcode-comments", "--loglevel", "1", *first]
     cmd += ["--output", str(gcode), str(src)]
     r = subprocess.run(cmd, capture_output=True, text=True, timeout=180)
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
