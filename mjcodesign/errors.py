@@ -6,6 +6,7 @@ __all__ = [
     "MjcodesignError",
     "DesignError",
     "StiffnessError",
+    "CalibrationError",
     "MeshError",
     "PoseError",
     "SimulationDiverged",
@@ -24,6 +25,10 @@ class DesignError(MjcodesignError, ValueError):
 
 class StiffnessError(DesignError):
     """A stiffness vector has the wrong length, a NaN, or a value outside the printable range."""
+
+
+class CalibrationError(MjcodesignError, ValueError):
+    """A print calibration table is unreadable, incomplete or not monotone, or names an unknown setting."""
 
 
 class MeshError(MjcodesignError):
