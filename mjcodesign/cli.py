@@ -129,6 +129,10 @@ def build_parser() -> argparse.ArgumentParser:
     bf.add_argument("--out", default=None, help="also write the JSON to this file")
     bf.add_argument("--json", action="store_true")
     bf.set_defaults(func=_cmd_bench_finger)
+
+    from mjcodesign import cli_fabrication
+
+    cli_fabrication.add_parser(sub)
     return p
 
 
