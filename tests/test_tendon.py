@@ -63,8 +63,17 @@ def test_curl_is_deterministic():
     np.testing.assert_array_equal(runs[0], runs[1])
 
 
+# Two discretisations of the same finger (lumped hinges vs finite-cell flex) under the same tendon.
+_TOL_FLEX_VS_CHAIN_CURL = 0.10
+
+
 @pytest.mark.slow
-def test_flex_tendon_curls_inwards():
+def test_flex_point_force_curl_agrees_with_chain():
     s = Stiffness.preset("semi-rigid")
-    res = curl(FingerDesign(), s, FingerModel.FLEX, 1.0)
-    assert res["tip_displacement_m"][2] > 0
+    chain = curl(FingerDesign(), s, FingerModel.CHAIN, 1.0, tendon_mode=TendonMode.POINT_FORCE)
+    flex = curl(FingerDesign(), s, FingerModel.FLEX, 1.0, tendon_mode=TendonMode.POINT_FORCE)
+    assert flex["bend_angle_rad"] > 0
+    rel = abs(flex["bend_angle_rad"] - chain["bend_angle_rad"]) / chain["bend_angle_rad"]
+    assert rel < _TOL_FLEX_VS_CHAIN_CURL, (flex["bend_angle_rad"], chain["bend_angle_rad"])
+    tip_c, tip_f = np.array(chain["tip_displacement_m"]), np.array(flex["tip_displacement_m"])
+    assert np.linalg.norm(tip_f - tip_c) < _TOL_FLEX_VS_CHAIN_CURL * np.linalg.norm(tip_c)
