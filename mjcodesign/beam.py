@@ -15,7 +15,7 @@ __all__ = [
     "block_bending_compliance",
     "block_effective_ei",
     "cantilever_tip_deflection",
-    "interval_compliance",
+    "section_compliance",
 ]
 
 # Gauss–Legendre nodes per smooth piece; the integrands are polynomial ratios of low degree, and 24
@@ -50,7 +50,7 @@ def _integrate(block: Block, a: float, b: float, weight) -> float:
 
 def block_bending_compliance(block: Block) -> float:
     """∫ dx / I(x) over the block [m^-3]: its rotation per unit moment, times E."""
-    return _integrate(block, block.x0, block.x1, lambda x: np.ones_like(x))
+    return section_compliance(block, block.x0, block.x1)
 
 
 def block_effective_ei(block: Block, young: float) -> float:
@@ -58,12 +58,9 @@ def block_effective_ei(block: Block, young: float) -> float:
     return young * block.length / block_bending_compliance(block)
 
 
-def interval_compliance(design: FingerDesign, young: np.ndarray, a: float, b: float) -> float:
-    """∫_a^b dx / (E(x) I(x)) over the finger [1/(N m^2) · m]."""
-    total = 0.0
-    for blk, e in zip(design.blocks(), young, strict=True):
-        total += _integrate(blk, a, b, lambda x: np.ones_like(x)) / e
-    return total
+def section_compliance(block: Block, a: float, b: float) -> float:
+    """∫ dx / I(x) over the part of ``block`` inside [a, b] [m^-3] (0 if they do not overlap)."""
+    return _integrate(block, a, b, np.ones_like)
 
 
 def cantilever_tip_deflection(design: FingerDesign, young: np.ndarray, force: float) -> float:

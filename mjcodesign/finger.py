@@ -19,7 +19,7 @@ All lengths are metres.
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -85,6 +85,8 @@ class Block:
     """Trapezoid cut at the distal end, along x [m] (0 at the tip face)."""
     width: float
     """Block width [m]."""
+    spine: float = 0.002
+    """Flexure (spine) thickness that the trapezoid cuts run down to [m]."""
 
     @property
     def length(self) -> float:
@@ -103,7 +105,7 @@ class Block:
         h = self.height0 + (self.height1 - self.height0) * s
         if self.kind is BlockKind.FLEXURE:
             return h
-        t = self._spine
+        t = self.spine
         # Inside a cut, the top falls linearly from the full height to the spine thickness.
         if self.cut0 > 0:
             f0 = np.clip((x - self.x0) / self.cut0, 0.0, 1.0)
@@ -113,15 +115,13 @@ class Block:
             h = np.minimum(h, t + (h - t) * f1)
         return h
 
-    _spine: float = field(default=0.002, repr=False)
-
     def side_profile(self) -> np.ndarray:
         """Convex side-view polygon (x, z) of the block, counter-clockwise, shape (n, 2) [m]."""
         if self.kind is BlockKind.FLEXURE:
             return np.array(
                 [[self.x0, 0.0], [self.x1, 0.0], [self.x1, self.height1], [self.x0, self.height0]]
             )
-        t = self._spine
+        t = self.spine
         pts = [[self.x0, 0.0], [self.x1, 0.0]]
         if self.cut1 > 0:
             pts.append([self.x1, t])
@@ -262,7 +262,7 @@ class FingerDesign:
                 h0 = h1 = t
                 c0 = c1 = 0.0
                 kind = BlockKind.FLEXURE
-            out.append(Block(i, kind, x, x1, h0, h1, c0, c1, self.width, _spine=t))
+            out.append(Block(i, kind, x, x1, h0, h1, c0, c1, self.width, spine=t))
             x = x1
         return out
 

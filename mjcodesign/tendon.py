@@ -72,10 +72,10 @@ class _FingerForces:
         self.exit_site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"{h.prefix}tendon_exit")
         self.base = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, h.base_body)
         if h.model.is_flex:
-            from mjcodesign.flex import _grid_weights
+            from mjcodesign.flex import grid_weights
 
             nx, ny, nz, n_cells, order = h.grid
-            self.W = _grid_weights(built.design, n_cells, order, built.design.waypoints())
+            self.W = grid_weights(built.design, n_cells, order, built.design.waypoints())
             names = []
             for gi in range(nx):
                 for gj in range(ny):
