@@ -11,7 +11,7 @@ import mujoco
 
 from mjcodesign.errors import OutputError
 from mjcodesign.finger import FingerDesign
-from mjcodesign.mjcf import FingerModel, build_finger
+from mjcodesign.mjcf import FingerModel, SimOptions, build_finger
 from mjcodesign.simulate import check_state
 from mjcodesign.stiffness import Stiffness
 from mjcodesign.tendon import TendonDriver
@@ -46,7 +46,7 @@ def bench_finger(
         task = bar.add_task("bench finger", total=len(models))
         for name in models:
             model = FingerModel(name)
-            built = build_finger(design, stiffness, model)
+            built = build_finger(design, stiffness, model, options=SimOptions(flex_cells=flex_cells))
             m = built.model
             d = mujoco.MjData(m)
             drv = TendonDriver(built)

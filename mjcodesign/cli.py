@@ -87,7 +87,9 @@ def _cmd_finger_export(args) -> int:
 def _cmd_bench_finger(args) -> int:
     from mjcodesign.bench import bench_finger
 
-    res = bench_finger(models=args.models.split(","), seconds=args.seconds, out=args.out)
+    res = bench_finger(
+        models=args.models.split(","), seconds=args.seconds, out=args.out, flex_cells=args.flex_cells
+    )
     if args.json:
         print(json.dumps(res))
     else:
@@ -127,6 +129,9 @@ def build_parser() -> argparse.ArgumentParser:
     bf.add_argument("--models", default=",".join(_MODELS))
     bf.add_argument("--seconds", type=float, default=1.0, help="simulated seconds per model")
     bf.add_argument("--out", default=None, help="also write the JSON to this file")
+    bf.add_argument(
+        "--flex-cells", type=int, default=None, help="interpolation cells along the finger (flex)"
+    )
     bf.add_argument("--json", action="store_true")
     bf.set_defaults(func=_cmd_bench_finger)
 
