@@ -34,6 +34,7 @@ def bench_finger(
     seconds: float = 1.0,
     out: str | None = None,
     progress: bool = True,
+    flex_cells: int | None = None,
 ) -> dict:
     """Steps per second of a free tendon curl (native tendon, gravity on) for each model."""
     _one_thread()
