@@ -63,7 +63,7 @@ def _cmd_validate_beam(args) -> int:
     from mjcodesign.validate import validate_beam
 
     stiffness = _design(args.design)
-    res = validate_beam(FingerDesign(), stiffness, args.model, force=args.force)
+    res = validate_beam(FingerDesign(), stiffness, args.model, force=args.force, dynamic=args.dynamic or None)
     res["design"] = args.design
     _emit(res, args.json)
     return 0
@@ -110,6 +110,11 @@ def build_parser() -> argparse.ArgumentParser:
         "--design", default="paper-optimized", help="preset name or 11/22 comma-separated log E"
     )
     beam.add_argument("--force", type=float, default=None, help="tip force [N]; default gives δ = 1%% of L")
+    beam.add_argument(
+        "--dynamic",
+        action="store_true",
+        help="flex: run the dynamics to rest instead of the linear static solve",
+    )
     beam.add_argument("--json", action="store_true")
     beam.set_defaults(func=_cmd_validate_beam)
 

@@ -11,10 +11,14 @@ scaling each cell's record to an *effective* modulus:
   ``E_cell = l_cell / (I_box ∫_cell dx / (E(x) I(x)))``, so its bending compliance equals the real
   one (series springs). When cells coincide with blocks (the default design) every cell holds exactly
   one block.
-* **Trilinear calibration.** A trilinear hex cannot bend without parasitic shear, so a coarse grid is
-  too stiff in bending (0.74 of beam theory at 11x1x1, shared/NOTES.md). Every cell has the same
-  shape, so one factor ``r = δ_flex / δ_EB`` measured on a uniform box cantilever of identical cells
-  corrects them all: ``E_cell ← r E_cell``. It is computed, not tuned, and cached per geometry.
+* **Calibration.** MuJoCo 4.0 integrates each cell's stiffness over the real mesh volume
+  (finite-cell quadrature), so thin flexures are soft as they should be; but a cell-wide interpolation
+  field cannot concentrate bending in a 2 mm flexure (trilinear: parasitic shear) or in the trapezoid
+  cut zones of a segment (quadratic). On the paper's finger the uncalibrated flex is 9.3x (trilinear,
+  17 cells) and 1.6x (quadratic, 17 cells) too stiff. One factor per discretisation, measured as
+  ``r = δ_flex / δ_EB`` on this finger with uniform E (:func:`locking_factor`, a linear static solve,
+  cached), scales every cell: ``E_cell ← r E_cell``. It is computed, not tuned; piecewise designs
+  are then checked against beam theory, not fitted.
 
 Known limit: the homogenised box bends about its mid-height, while the real finger bends about its
 spine, and a flexure cell is softer axially than the real flexure. Tip-load bending matches beam
@@ -39,9 +43,12 @@ __all__ = [
     "cell_young",
     "finger_mesh",
     "lagrange_weights",
-    "trilinear_locking_factor",
+    "locking_factor",
     "flex_cells",
     "TipLoad",
+    "grid_weights",
+    "assemble_stiffness",
+    "static_tip_deflection",
 ]
 
 _E_REF = 1e6
@@ -75,16 +82,14 @@ def finger_mesh(design: FingerDesign) -> tuple[np.ndarray, np.ndarray]:
 def flex_cells(design: FingerDesign, options: SimOptions, *, quadratic: bool = False) -> int:
     """Cells along the finger.
 
-    Trilinear: aligned with block boundaries when the design allows (17 for the paper's finger).
-    Quadratic: one cell per block (11); quadratic cells bend within themselves, and the 17-cell
-    quadratic grid ran at 1.4 steps/s against 14 for 11 cells (M+K solve cost, measured here).
+    Aligned with block boundaries when the design allows (17 for the paper's finger, segments two
+    cells, flexures one), otherwise one cell per block. Misaligned cells mix flexure and segment
+    material under one smooth field: 11 quadratic cells were 11x too stiff against 1.6x for 17.
     """
     if options.flex_cells is not None:
         if options.flex_cells < 1:
             raise DesignError("flex_cells must be >= 1")
         return int(options.flex_cells)
-    if quadratic:
-        return design.n_blocks
     unit = design.flexure_len
     n = round(design.length / unit)
     edges = np.array([b.x1 for b in design.blocks()])
@@ -216,9 +221,8 @@ def add_flex_finger(
     f.friction = [options.friction, 0.005, 0.0001]
     f.rgba = [0.2, 0.6, 0.85, 1]
     e_cell = cell_young(design, young, n_cells)
-    if not quadratic:
-        r = locking if locking is not None else trilinear_locking_factor(design, n_cells, options.poisson)
-        e_cell = e_cell * r
+    r = locking if locking is not None else locking_factor(design, n_cells, options.poisson, order)
+    e_cell = e_cell * r
     handle.cell_young = e_cell
     # Tendon waypoints ride on the node nearest in (x, z); trilinear grids have no mid-width node, so
     # the tendon is split into two half-tension copies on the left and right nodes (symmetric).
@@ -272,34 +276,75 @@ def apply_cell_young(m: mujoco.MjModel, handle: FingerHandle) -> None:
     rec *= (handle.cell_young / _E_REF)[:, None]
 
 
-@functools.lru_cache(maxsize=32)
-def trilinear_locking_factor(design: FingerDesign, n_cells: int, poisson: float) -> float:
-    """δ_flex / δ_EB of a uniform box cantilever made of the same trilinear cells (<1: too stiff).
+def assemble_stiffness(m: mujoco.MjModel, handle: FingerHandle) -> np.ndarray:
+    """Global linear stiffness [N/m] of a flex over its node grid, from the compiled cell records.
 
-    Computed by running the flex to rest under a small tip load (linear regime); see the module
-    docstring. Every cell of the finger has this shape, so the factor applies cell by cell.
+    Dofs are ``3 * node + axis`` with ``node = (gi * ny + gj) * nz + gk`` in the flex's parent frame.
+    A cell's record lists its nodes ``li, lj, lk`` (``lk`` fastest), three dofs each; rigid rotations
+    lie in the null space of the assembled matrix (tested), which pins that ordering.
     """
-    from mjcodesign.mjcf import new_spec
-    from mjcodesign.validate import run_to_rest
+    nx, ny, nz, n_cells, order = handle.grid
+    fid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_FLEX, handle.flex)
+    adr = int(m.flex_stiffnessadr[fid])
+    nd = 3 * (order + 1) ** 3
+    K = np.zeros((3 * nx * ny * nz,) * 2)
+    for c in range(n_cells):
+        Ke = m.flex_stiffness[adr + c * nd * nd : adr + (c + 1) * nd * nd].reshape(nd, nd)
+        idx = []
+        for li in range(order + 1):
+            for lj in range(order + 1):
+                for lk in range(order + 1):
+                    g = ((c * order + li) * ny + lj) * nz + lk
+                    idx += [3 * g, 3 * g + 1, 3 * g + 2]
+        K[np.ix_(idx, idx)] += Ke
+    # MuJoCo stores the records with the sign of the passive force (f = record @ u): negate.
+    return -K
 
-    # A stiff, heavily damped box settles within a few hundred steps; the ratio is independent of E.
-    e_cal, load = 1e8, 0.05
-    opts = SimOptions(gravity=False, damping_time=0.01, flex_cells=n_cells, poisson=poisson)
+
+def static_tip_deflection(m: mujoco.MjModel, handle: FingerHandle, force: float) -> float:
+    """Linear static tip deflection [m] of a base-clamped flex under a transverse tip load [N].
+
+    Solves ``K u = f`` with MuJoCo's compiled stiffness (small-deflection limit of the dynamics);
+    the tip load is spread over the tip face with the consistent weights of :class:`TipLoad`.
+    """
+    nx, ny, nz, _, order = handle.grid
+    K = assemble_stiffness(m, handle)
+    w1 = np.array([0.5, 0.5]) if order == 1 else np.array([1, 4, 1]) / 6.0
+    f = np.zeros(K.shape[0])
+    tip = []
+    for gj in range(ny):
+        for gk in range(nz):
+            g = ((nx - 1) * ny + gj) * nz + gk
+            f[3 * g + 2] = force * w1[gj] * w1[gk]
+            tip.append((3 * g + 2, w1[gj] * w1[gk]))
+    free = np.arange(3 * ny * nz, K.shape[0])  # gi = 0 is clamped
+    u = np.zeros_like(f)
+    u[free] = np.linalg.solve(K[np.ix_(free, free)], f[free])
+    return float(sum(u[i] * w for i, w in tip))
+
+
+@functools.lru_cache(maxsize=32)
+def locking_factor(design: FingerDesign, n_cells: int, poisson: float, order: int = 1) -> float:
+    """δ_flex / δ_EB of the finger's flex (``order`` 1 or 2) with uniform E under a tip load (< 1: too stiff).
+
+    Computed with the linear static solve of the compiled stiffness (:func:`static_tip_deflection`),
+    which a test checks against running the dynamics to rest. Dividing every cell's modulus by it
+    makes the uniform finger match beam theory exactly; piecewise designs are then checked, not fitted.
+    """
+    from mjcodesign.beam import cantilever_tip_deflection
+    from mjcodesign.mjcf import new_spec
+
+    opts = SimOptions(gravity=False, flex_cells=n_cells, poisson=poisson)
     spec = new_spec("locking", opts, flex=True, scene=False)
     base = spec.worldbody.add_body(name="base")
     h = add_flex_finger(
-        spec, base, design, np.ones(design.n_blocks), "c_", opts, quadratic=False, locking=1.0
+        spec, base, design, np.ones(design.n_blocks), "c_", opts, quadratic=order == 2, locking=1.0
     )
     m = spec.compile()
-    h.cell_young = np.full(n_cells, e_cal)
+    h.cell_young = np.full(n_cells, _E_REF)
     apply_cell_young(m, h)
-    d = mujoco.MjData(m)
-    tip = TipLoad(m, h, load)
-    delta = run_to_rest(m, d, tip.apply, tip.position)
-    from mjcodesign.beam import cantilever_tip_deflection
-
-    analytic = cantilever_tip_deflection(design, np.full(design.n_blocks, e_cal), load)
-    return float(delta / analytic)
+    young = np.full(design.n_blocks, _E_REF)
+    return static_tip_deflection(m, h, 1.0) / cantilever_tip_deflection(design, young, 1.0)
 
 
 class TipLoad:
