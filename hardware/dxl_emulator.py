@@ -16,19 +16,22 @@ Pure Python, no dependencies: ``os.openpty`` and a thread. Use it as a context m
 from __future__ import annotations
 
 import math
+import multiprocessing
 import os
 import select
 import struct
 import threading
 import time
 import tty
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 from .xl330 import ADDR, XL330_MODEL_NUMBER
 
 __all__ = [
     "XL330Emulator",
+    "emulator_process",
     "crc16",
     "stuff",
     "unstuff",
@@ -39,6 +42,7 @@ _HEADER = b"\xff\xff\xfd\x00"
 _BROADCAST_ID = 0xFE
 _EEPROM_END = 64  # addresses below this are EEPROM: writable only with torque off
 _TABLE_SIZE = 147  # last item: Present Temperature at 146 (1 byte)
+_CHILD_START_S = 20.0  # spawn start-up budget of `emulator_process` [s]
 _POLL_S = 0.02  # serving thread wake-up period; bounds close() latency
 _EXTENDED_RANGE = 1_048_575  # |goal| limit in extended / current-based position modes [ticks]
 
@@ -415,3 +419,44 @@ class XL330Emulator:
         if err == 0 and self._cut_on_goal_s > 0 and addr <= gp < addr + len(data):
             self._link_down_until = time.monotonic() + self._cut_on_goal_s
             self._cut_on_goal_s = 0.0
+
+
+def _serve_in_child(conn: object, ids: tuple[int, ...], speed: float, position: int) -> None:
+    with XL330Emulator(ids, speed_ticks_s=speed, initial_position=position) as emu:
+        conn.send(emu.port)  # type: ignore[attr-defined]
+        try:
+            conn.recv()  # type: ignore[attr-defined]  # any message, or EOF, stops the child
+        except EOFError:
+            pass
+
+
+@contextmanager
+def emulator_process(
+    ids: Iterable[int] = (1,), *, speed_ticks_s: float = 4000.0, initial_position: int = 2048
+) -> Iterator[str]:
+    """Run an `XL330Emulator` in a child process and yield its port.
+
+    A separate process keeps the emulator's replies prompt when the client process is busy (for
+    example with an in-process simulator), as a real motor's would be. Inspect its state over the
+    bus, as with real motors.
+    """
+    ctx = multiprocessing.get_context("spawn")
+    parent, child = ctx.Pipe()
+    proc = ctx.Process(
+        target=_serve_in_child,
+        args=(child, tuple(ids), speed_ticks_s, initial_position),
+        daemon=True,
+    )
+    proc.start()
+    try:
+        if not parent.poll(_CHILD_START_S):
+            raise RuntimeError("the emulator process did not start")
+        yield parent.recv()
+    finally:
+        try:
+            parent.send(None)
+        except OSError:
+            pass
+        proc.join(timeout=2.0)
+        if proc.is_alive():
+            proc.terminate()

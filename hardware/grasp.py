@@ -47,6 +47,7 @@ class GraspJob:
         motors: Tendon motors, one per finger.
         speed_factor: franky relative dynamics factor in (0, 1].
         grasp_force: Franka Hand grasp force [N].
+        tendon_retries: Attempts per serial transaction before the link counts as lost.
         realtime: Require a realtime kernel for the arm (False for franky-sim).
         dry_run: Plan and report; connect to nothing.
     """
@@ -60,6 +61,7 @@ class GraspJob:
     motors: tuple[FingerMotor, ...] = (FingerMotor(1, "A"), FingerMotor(2, "B"))
     speed_factor: float = 0.1
     grasp_force: float = 20.0
+    tendon_retries: int = 3
     realtime: bool = True
     dry_run: bool = False
 
@@ -71,7 +73,9 @@ class GraspJob:
 
     def tendon_config(self) -> TendonConfig:
         """Tendon configuration (a placeholder port in a dry run, for limit checks only)."""
-        return TendonConfig(port=self.dxl or "(dry run)", motors=self.motors)
+        return TendonConfig(
+            port=self.dxl or "(dry run)", motors=self.motors, retries=self.tendon_retries
+        )
 
     def arm_config(self) -> ArmConfig:
         """Arm configuration."""
@@ -109,8 +113,15 @@ def plan_job(job: GraspJob) -> tuple[np.ndarray, GraspPlan]:
     return cloud, select_candidate(candidates, cloud, job.settings, tendon)
 
 
-def run_job(job: GraspJob, log: Callable[[str], None] = print) -> GraspReport | GraspPlan:
-    """Plan, then (unless a dry run) execute on the arm and tendons. Returns the report or plan."""
+def run_job(
+    job: GraspJob,
+    log: Callable[[str], None] = print,
+    after_lift: Callable[[], object] | None = None,
+) -> GraspReport | GraspPlan:
+    """Plan, then (unless a dry run) execute on the arm and tendons. Returns the report or plan.
+
+    `after_lift` is passed to `pipeline.execute`.
+    """
     _, plan = plan_job(job)
     for line in plan.lines():
         log(("[dry run] " if job.dry_run else "") + line)
@@ -118,4 +129,4 @@ def run_job(job: GraspJob, log: Callable[[str], None] = print) -> GraspReport | 
         return plan
     with raise_on_signals(), TendonMotors(job.tendon_config()) as tendons:
         with FrankaArm(job.arm_config()) as arm:
-            return execute(plan, arm, tendons, log)
+            return execute(plan, arm, tendons, log, after_lift)

@@ -304,8 +304,13 @@ def execute(
     arm: Arm,
     tendons: Tendons,
     log: Callable[[str], None] = lambda line: None,
+    after_lift: Callable[[], object] | None = None,
 ) -> GraspReport:
-    """Run a checked plan on the arm and tendons; report whether the object stays held."""
+    """Run a checked plan on the arm and tendons; report whether the object stays held.
+
+    `after_lift` is called once the object is lifted, while the arm still holds it (the
+    selftest measures the object's height there).
+    """
     records: list[dict] = []
     pulled: dict[int, int] = {}
 
@@ -328,6 +333,8 @@ def execute(
     lift_m = float(arm.pose()[2, 3] - z0)
     width = arm.width()
     held = width > plan.width + HELD_MARGIN_M
+    if after_lift is not None:
+        after_lift()
     run(check, lambda: None)
     records[-1]["held"] = held
     ticks = round(float(np.mean(list(pulled.values())))) if pulled else 0

@@ -22,9 +22,10 @@ import numpy as np
 from mjcodesign.errors import HardwareError
 
 from .camera import save_point_cloud, transform_points
-from .dxl_emulator import XL330Emulator
+from .dxl_emulator import emulator_process
 from .grasp import GraspJob, run_job
 from .pipeline import GraspReport
+from .xl330 import ADDR
 
 __all__ = ["SimScene", "franka_sim", "run_selftest", "sample_box_surface"]
 
@@ -36,6 +37,11 @@ SIM_SPEED_FACTOR = 0.5  # franky dynamics factor in the simulator: fast, and sti
 LIFT_OK_FRACTION = 0.8  # the box may slip a little in the PD-controlled hand
 SETTLE_S = 0.5  # let the box come to rest in the hand before measuring its lift [s]
 _CLOUD_POINTS = 2000
+_IDS = (1, 2)
+# The selftest runs simulator, franky, SDK and emulator on one small machine; a serial reply can
+# miss the SDK's 34 ms timeout when the CPU is oversubscribed, so allow more attempts than on
+# the real bus.
+_SELFTEST_RETRIES = 10
 # A camera 0.6 m above the table looking down at the box, rotated about its optical axis.
 _T_BASE_CAMERA = np.array(
     [
@@ -102,6 +108,28 @@ def sample_box_surface(
     return pts + np.asarray(centre)
 
 
+def torque_over_bus(port: str, ids: tuple[int, ...]) -> dict[int, bool]:
+    """Torque Enable of each motor, read over the serial bus with dynamixel-sdk."""
+    import dynamixel_sdk as sdk
+
+    handler, packets = sdk.PortHandler(port), sdk.PacketHandler(2.0)
+    if not (handler.openPort() and handler.setBaudRate(57600)):
+        raise HardwareError(f"cannot open {port}")
+    try:
+        out = {}
+        for i in ids:
+            for _ in range(_SELFTEST_RETRIES):
+                value, result, _ = packets.read1ByteTxRx(handler, i, ADDR["torque_enable"])
+                if result == sdk.COMM_SUCCESS:
+                    break
+            else:
+                raise HardwareError(f"motor {i} did not answer on {port}")
+            out[i] = value == 1
+        return out
+    finally:
+        handler.closePort()
+
+
 def run_selftest(log: Callable[[str], None] = lambda line: None) -> dict:
     """The whole grasp against franky-sim and the XL330 emulator; a JSON-ready result."""
     t0 = time.monotonic()
@@ -110,22 +138,28 @@ def run_selftest(log: Callable[[str], None] = lambda line: None) -> dict:
         cloud_path, calib_path = Path(tmp) / "cloud.ply", Path(tmp) / "calib.json"
         save_point_cloud(cloud_path, transform_points(cloud_base, np.linalg.inv(_T_BASE_CAMERA)))
         calib_path.write_text(json.dumps({"T_base_camera": _T_BASE_CAMERA.tolist()}))
-        with XL330Emulator(ids=(1, 2)) as emu, franka_sim() as scene:
+        with emulator_process(ids=_IDS) as port, franka_sim() as scene:
             job = GraspJob(
                 robot=scene.host,
-                dxl=emu.port,
+                dxl=port,
                 pose="auto",
                 cloud=cloud_path,
                 calibration=calib_path,
                 speed_factor=SIM_SPEED_FACTOR,
+                tendon_retries=_SELFTEST_RETRIES,
                 realtime=False,
             )
             z0 = scene.box_z()
-            report = run_job(job, log)
-            assert isinstance(report, GraspReport)
-            time.sleep(SETTLE_S)
-            object_lift = scene.box_z() - z0
-            torque_off = not any(emu.torque(i) for i in emu.ids)
+            lifted: list[float] = []
+
+            def measure() -> None:
+                time.sleep(SETTLE_S)
+                lifted.append(scene.box_z() - z0)
+
+            report = run_job(job, log, after_lift=measure)
+            assert isinstance(report, GraspReport) and lifted
+            object_lift = lifted[0]
+            torque_off = not any(torque_over_bus(port, _IDS).values())
     lift_ok = object_lift >= LIFT_OK_FRACTION * job.settings.lift_m
     result = report.as_dict()
     result.update(
