@@ -421,8 +421,12 @@ class XL330Emulator:
             self._cut_on_goal_s = 0.0
 
 
-def _serve_in_child(conn: object, ids: tuple[int, ...], speed: float, position: int) -> None:
+def _serve_in_child(
+    conn: object, ids: tuple[int, ...], speed: float, position: int, cut_s: float
+) -> None:
     with XL330Emulator(ids, speed_ticks_s=speed, initial_position=position) as emu:
+        if cut_s > 0:
+            emu.cut_link_on_goal(cut_s)
         conn.send(emu.port)  # type: ignore[attr-defined]
         try:
             conn.recv()  # type: ignore[attr-defined]  # any message, or EOF, stops the child
@@ -432,9 +436,15 @@ def _serve_in_child(conn: object, ids: tuple[int, ...], speed: float, position: 
 
 @contextmanager
 def emulator_process(
-    ids: Iterable[int] = (1,), *, speed_ticks_s: float = 4000.0, initial_position: int = 2048
+    ids: Iterable[int] = (1,),
+    *,
+    speed_ticks_s: float = 4000.0,
+    initial_position: int = 2048,
+    cut_link_on_goal_s: float = 0.0,
 ) -> Iterator[str]:
     """Run an `XL330Emulator` in a child process and yield its port.
+
+    `cut_link_on_goal_s` > 0 arms `XL330Emulator.cut_link_on_goal` in the child.
 
     A separate process keeps the emulator's replies prompt when the client process is busy (for
     example with an in-process simulator), as a real motor's would be. Inspect its state over the
@@ -444,7 +454,7 @@ def emulator_process(
     parent, child = ctx.Pipe()
     proc = ctx.Process(
         target=_serve_in_child,
-        args=(child, tuple(ids), speed_ticks_s, initial_position),
+        args=(child, tuple(ids), speed_ticks_s, initial_position, cut_link_on_goal_s),
         daemon=True,
     )
     proc.start()
