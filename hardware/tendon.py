@@ -337,7 +337,11 @@ class TendonMotors:
         self._retry(f"write of {item} to {motor.label}", once)
 
     def _try_torque_off(self, motor: FingerMotor) -> bool:
+        # A signal or error may have interrupted a transaction and left the SDK's port marked
+        # busy, which would refuse every later packet: release it and drop stale bytes.
+        self._port.is_using = False
         try:
+            self._port.clearPort()
             result, error = self._ph.write1ByteTxRx(
                 self._port, motor.dxl_id, ADDR["torque_enable"], 0
             )

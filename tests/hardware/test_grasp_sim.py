@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import time
 
@@ -34,6 +35,9 @@ T_BASE_CAMERA = np.array([[1.0, 0, 0, 0.2], [0, -1, 0, 0.1], [0, 0, -1, 0.7], [0
 def scene():
     with franka_sim() as s:
         yield s
+        # franky clients kept alive by reference cycles (e.g. a traceback held by pytest) would
+        # otherwise be destroyed at a random later time, stalling whatever test runs then.
+        gc.collect()
 
 
 @pytest.fixture
