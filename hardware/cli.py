@@ -1,0 +1,213 @@
+"""``mjcodesign hw …``: grasp, tendon, status, emulate-dxl, selftest.
+
+`add_parser(subparsers)` registers the ``hw`` command on the main CLI's subparsers; its handler
+is `run(args) -> int`. Library errors propagate as `MjcodesignError` for the main CLI to map to
+exit 2 and one line. ``python -m hardware.cli hw …`` runs it stand-alone with the same mapping.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from mjcodesign.errors import HardwareError, MjcodesignError
+
+__all__ = ["add_parser", "main", "run"]
+
+_EXIT_REFUSED = 2
+
+
+def _ids(text: str) -> tuple[int, ...]:
+    try:
+        return tuple(int(t) for t in text.split(",") if t.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"motor IDs must be integers, got {text!r}") from None
+
+
+def _box(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(t) for t in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 6:
+        raise argparse.ArgumentTypeError("workspace is xmin,ymin,zmin,xmax,ymax,zmax in metres")
+    return values
+
+
+def _add_motor_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--ids", type=_ids, default=(1, 2), help="tendon motor IDs (default 1,2)")
+    p.add_argument("--min-ticks", type=int, default=-100, help="per-finger lower pull limit")
+    p.add_argument("--max-ticks", type=int, default=1500, help="per-finger upper pull limit")
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register ``hw`` and its sub-commands on `subparsers`; sets ``func=run``."""
+    hw = subparsers.add_parser("hw", help="hardware: Franka arm, XL330 tendon motors, camera")
+    sub = hw.add_subparsers(dest="hw_command", required=True)
+
+    g = sub.add_parser("grasp", help="plan and run one grasp on the robot")
+    g.add_argument("--robot", help="Franka FCI host")
+    g.add_argument("--dxl", help="serial port of the tendon motors")
+    g.add_argument("--pose", default="auto", help="pose file (.npz/.npy of 4x4) or 'auto'")
+    g.add_argument("--cloud", type=Path, help="point cloud file (.ply/.npz/.npy)")
+    g.add_argument("--calib", type=Path, help="camera-to-base calibration (.json/.npz/.npy)")
+    g.add_argument("--ticks", type=int, default=1000, help="tendon pull [ticks of 4096]")
+    g.add_argument("--lift", type=float, default=0.10, help="lift height [m]")
+    g.add_argument("--speed", type=float, default=0.1, help="franky speed factor (0, 1]")
+    g.add_argument("--force", type=float, default=20.0, help="hand grasp force [N]")
+    g.add_argument("--workspace", type=_box, help="xmin,ymin,zmin,xmax,ymax,zmax [m]")
+    g.add_argument("--no-realtime", action="store_true", help="allow a non-realtime kernel")
+    g.add_argument("--dry-run", action="store_true", help="print the plan, touch nothing")
+    g.add_argument("--json", action="store_true", help="print the report as JSON")
+    _add_motor_args(g)
+
+    t = sub.add_parser("tendon", help="pull the tendons by N ticks from slack, then release")
+    t.add_argument("--dxl", required=True, help="serial port of the tendon motors")
+    t.add_argument("--ticks", type=int, required=True, help="pull from slack [ticks]")
+    t.add_argument("--hold", type=float, default=0.0, help="hold time before release [s]")
+    _add_motor_args(t)
+
+    s = sub.add_parser("status", help="report what answers: motors and/or robot")
+    s.add_argument("--robot", help="Franka FCI host")
+    s.add_argument("--dxl", help="serial port of the tendon motors")
+    s.add_argument("--no-realtime", action="store_true", help="allow a non-realtime kernel")
+    _add_motor_args(s)
+
+    e = sub.add_parser("emulate-dxl", help="run the XL330 emulator on a pty; prints the port")
+    e.add_argument("--ids", type=_ids, default=(1, 2), help="emulated motor IDs")
+    e.add_argument("--speed", type=float, default=4000.0, help="follow speed [tick/s]")
+    e.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0: never)")
+
+    st = sub.add_parser("selftest", help="whole grasp against franky-sim and the emulator")
+    st.add_argument("--json", action="store_true", help="print the result as JSON")
+
+    hw.set_defaults(func=run)
+    return hw
+
+
+def _motors(args: argparse.Namespace) -> tuple:
+    from .tendon import FingerMotor
+
+    names = "ABCDEFGH"
+    return tuple(
+        FingerMotor(i, names[k] if k < len(names) else "", args.min_ticks, args.max_ticks)
+        for k, i in enumerate(args.ids)
+    )
+
+
+def _grasp(args: argparse.Namespace) -> int:
+    from .arm import Workspace
+    from .grasp import GraspJob, run_job
+    from .pipeline import GraspReport, GraspSettings
+
+    box = args.workspace
+    ws = Workspace() if box is None else Workspace(box[:3], box[3:])
+    job = GraspJob(
+        robot=args.robot,
+        dxl=args.dxl,
+        pose=args.pose,
+        cloud=args.cloud,
+        calibration=args.calib,
+        settings=GraspSettings(workspace=ws, lift_m=args.lift, tendon_ticks=args.ticks),
+        motors=_motors(args),
+        speed_factor=args.speed,
+        grasp_force=args.force,
+        realtime=not args.no_realtime,
+        dry_run=args.dry_run,
+    )
+    result = run_job(job, log=(lambda line: None) if args.json else print)
+    if isinstance(result, GraspReport):
+        if args.json:
+            print(json.dumps(result.as_dict()))
+        else:
+            print(f"held: {result.held}, lift {result.lift_m:.3f} m, tendon {result.tendon_ticks}")
+        return 0 if result.ok else 1
+    if args.json:
+        print(json.dumps({"dry_run": True, "plan": result.lines()}))
+    return 0
+
+
+def _tendon(args: argparse.Namespace) -> int:
+    from .tendon import TendonConfig, TendonMotors, raise_on_signals
+
+    config = TendonConfig(port=args.dxl, motors=_motors(args))
+    config.check_pull(args.ticks)  # refuse before opening the port
+    with raise_on_signals(), TendonMotors(config) as motors:
+        final = motors.pull(args.ticks)
+        print("displacement [ticks]: " + ", ".join(f"ID {i}: {v}" for i, v in final.items()))
+        time.sleep(args.hold)
+    print("torque off")
+    return 0
+
+
+def _status(args: argparse.Namespace) -> int:
+    if not (args.robot or args.dxl):
+        raise HardwareError("give --robot and/or --dxl")
+    if args.dxl:
+        from .tendon import TendonConfig, TendonMotors
+
+        with TendonMotors(TendonConfig(port=args.dxl, motors=_motors(args))) as motors:
+            pos = motors.slack
+        print("tendon motors: " + ", ".join(f"ID {i} at {p} ticks" for i, p in pos.items()))
+    if args.robot:
+        from .arm import ArmConfig, FrankaArm
+
+        with FrankaArm(ArmConfig(host=args.robot, realtime=not args.no_realtime)) as arm:
+            xyz = ", ".join(f"{v:.3f}" for v in arm.pose()[:3, 3])
+            print(f"arm: end effector at ({xyz}) m, hand {arm.width():.4f} m")
+    return 0
+
+
+def _emulate(args: argparse.Namespace) -> int:
+    from .dxl_emulator import XL330Emulator
+
+    with XL330Emulator(ids=args.ids, speed_ticks_s=args.speed) as emu:
+        print(emu.port, flush=True)
+        try:
+            deadline = time.monotonic() + args.seconds if args.seconds > 0 else float("inf")
+            while time.monotonic() < deadline:
+                time.sleep(0.1)
+        except KeyboardInterrupt:
+            pass
+    return 0
+
+
+def _selftest(args: argparse.Namespace) -> int:
+    from .selftest import run_selftest
+
+    result = run_selftest(log=(lambda line: None) if args.json else print)
+    print(json.dumps(result) if args.json else f"selftest ok: {result['ok']}")
+    return 0 if result["ok"] else 1
+
+
+_HANDLERS = {
+    "grasp": _grasp,
+    "tendon": _tendon,
+    "status": _status,
+    "emulate-dxl": _emulate,
+    "selftest": _selftest,
+}
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run one ``hw`` sub-command; returns the exit code. Raises `MjcodesignError` on refusal."""
+    return _HANDLERS[args.hw_command](args)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Stand-alone entry: ``python -m hardware.cli hw …`` (errors: exit 2 and one line)."""
+    parser = argparse.ArgumentParser(prog="mjcodesign")
+    add_parser(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except MjcodesignError as exc:
+        print(f"error: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return _EXIT_REFUSED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,472 @@
+"""Dynamixel protocol-2.0 emulator of XL330-M288 motors on a pseudo-terminal.
+
+The emulator is a protocol peer, not a mock: it parses the bytes that the real dynamixel-sdk
+writes (header, byte stuffing, CRC-16), answers with status packets, and keeps a control table
+per motor. Several motors share one emulated bus, as on a U2D2. Supported instructions: ping,
+read, write, reboot, sync read and sync write (and broadcast ping). Writes to the EEPROM area
+(addresses below 64) while torque is on return an access error, as on the real motor. The present
+position follows the goal position at a finite speed while torque is on.
+
+Pure Python, no dependencies: ``os.openpty`` and a thread. Use it as a context manager::
+
+    with XL330Emulator(ids=(1, 2)) as emu:
+        port = emu.port  # e.g. /dev/pts/7, opened by dynamixel_sdk.PortHandler
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import os
+import select
+import struct
+import threading
+import time
+import tty
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+from .xl330 import ADDR, XL330_MODEL_NUMBER
+
+__all__ = [
+    "XL330Emulator",
+    "emulator_process",
+    "crc16",
+    "stuff",
+    "unstuff",
+]
+
+_FIRMWARE_VERSION = 52  # any plausible value; reported at address 6
+_HEADER = b"\xff\xff\xfd\x00"
+_BROADCAST_ID = 0xFE
+_EEPROM_END = 64  # addresses below this are EEPROM: writable only with torque off
+_TABLE_SIZE = 147  # last item: Present Temperature at 146 (1 byte)
+_CHILD_START_S = 20.0  # spawn start-up budget of `emulator_process` [s]
+_POLL_S = 0.02  # serving thread wake-up period; bounds close() latency
+_EXTENDED_RANGE = 1_048_575  # |goal| limit in extended / current-based position modes [ticks]
+
+# Instructions (protocol 2.0)
+_INST_PING = 0x01
+_INST_READ = 0x02
+_INST_WRITE = 0x03
+_INST_REBOOT = 0x08
+_INST_STATUS = 0x55
+_INST_SYNC_READ = 0x82
+_INST_SYNC_WRITE = 0x83
+
+# Status error numbers (protocol 2.0, low 7 bits of the error byte)
+_ERR_INSTRUCTION = 2
+_ERR_CRC = 3
+_ERR_DATA_RANGE = 4
+_ERR_DATA_LENGTH = 5
+_ERR_DATA_LIMIT = 6
+_ERR_ACCESS = 7
+
+
+# (address, size, default). Items not listed read as zero.
+_ITEMS: tuple[tuple[int, int, int], ...] = (
+    (0, 2, XL330_MODEL_NUMBER),
+    (6, 1, _FIRMWARE_VERSION),
+    (8, 1, 1),  # baud rate index 1 = 57600 bps (factory default)
+    (9, 1, 250),  # return delay 500 us (factory default; the emulator answers at once)
+    (11, 1, 3),  # operating mode 3 = position control (factory default)
+    (13, 1, 2),  # protocol 2.0
+    (24, 4, 10),  # moving threshold [0.229 rev/min]
+    (31, 1, 70),  # temperature limit [deg C]
+    (32, 2, 70),  # max voltage limit [0.1 V]
+    (34, 2, 35),  # min voltage limit [0.1 V]
+    (36, 2, 885),  # PWM limit
+    (38, 2, 1750),  # current limit [mA]
+    (44, 4, 445),  # velocity limit [0.229 rev/min]
+    (48, 4, 4095),  # max position limit [tick]
+    (52, 4, 0),  # min position limit [tick]
+    (63, 1, 52),  # shutdown conditions
+    (68, 1, 2),  # status return level: answer every instruction
+    (84, 2, 400),  # position P gain
+    (102, 2, 1750),  # goal current [mA]
+    (144, 2, 50),  # present input voltage [0.1 V]
+    (146, 1, 30),  # present temperature [deg C]
+)
+_READ_ONLY = (range(0, 7), range(70, 71), range(120, _TABLE_SIZE))
+
+
+def crc16(data: bytes | bytearray) -> int:
+    """CRC-16 of a Dynamixel 2.0 packet (polynomial 0x8005, MSB first, initial value 0)."""
+    crc = 0
+    for byte in data:
+        crc ^= byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x8005) if crc & 0x8000 else (crc << 1)
+            crc &= 0xFFFF
+    return crc
+
+
+def stuff(payload: bytes) -> bytes:
+    """Insert 0xFD after every FF FF FD inside instruction + parameters (byte stuffing)."""
+    out = bytearray()
+    for byte in payload:
+        out.append(byte)
+        if out[-3:] == b"\xff\xff\xfd":
+            out.append(0xFD)
+    return bytes(out)
+
+
+def unstuff(payload: bytes) -> bytes:
+    """Remove the stuffed 0xFD that follows every FF FF FD (inverse of `stuff`)."""
+    out = bytearray()
+    i = 0
+    while i < len(payload):
+        out.append(payload[i])
+        if out[-3:] == b"\xff\xff\xfd" and i + 1 < len(payload) and payload[i + 1] == 0xFD:
+            i += 1
+        i += 1
+    return bytes(out)
+
+
+def _packet(dxl_id: int, instruction: int, params: bytes) -> bytes:
+    body = stuff(bytes([instruction]) + params)
+    head = _HEADER + bytes([dxl_id]) + struct.pack("<H", len(body) + 2)
+    pkt = head + body
+    return pkt + struct.pack("<H", crc16(pkt))
+
+
+@dataclass
+class _Motor:
+    """One emulated XL330: its control table and the state of its position follower."""
+
+    dxl_id: int
+    speed_ticks_s: float
+    table: bytearray
+    position: float = 0.0  # present position [tick], continuous
+    stamp: float = 0.0  # time of the last position update [s, monotonic]
+
+    @classmethod
+    def new(cls, dxl_id: int, speed_ticks_s: float, position: int) -> _Motor:
+        motor = cls(dxl_id, speed_ticks_s, bytearray(_TABLE_SIZE))
+        motor.factory_ram()
+        for addr, size, value in _ITEMS:
+            if addr < _EEPROM_END:
+                motor.put(addr, size, value)
+        motor.put(ADDR["id"], 1, dxl_id)
+        motor.position = float(position)
+        motor.stamp = time.monotonic()
+        motor.put(ADDR["goal_position"], 4, position)
+        motor.sync()
+        return motor
+
+    def factory_ram(self) -> None:
+        self.table[_EEPROM_END:] = bytes(_TABLE_SIZE - _EEPROM_END)
+        for addr, size, value in _ITEMS:
+            if addr >= _EEPROM_END:
+                self.put(addr, size, value)
+
+    def get(self, addr: int, size: int, signed: bool = False) -> int:
+        return int.from_bytes(self.table[addr : addr + size], "little", signed=signed)
+
+    def put(self, addr: int, size: int, value: int) -> None:
+        self.table[addr : addr + size] = (value & ((1 << (8 * size)) - 1)).to_bytes(size, "little")
+
+    @property
+    def torque(self) -> bool:
+        return self.table[ADDR["torque_enable"]] == 1
+
+    def sync(self) -> None:
+        """Advance the present position toward the goal and refresh the read-only items."""
+        now = time.monotonic()
+        goal = self.get(ADDR["goal_position"], 4, signed=True)
+        if self.torque:
+            step = self.speed_ticks_s * (now - self.stamp)
+            delta = goal - self.position
+            if abs(delta) <= step:
+                self.position = float(goal)
+            else:
+                self.position += math.copysign(step, delta)
+        self.stamp = now
+        present = round(self.position)
+        moving = self.torque and present != goal
+        self.put(ADDR["present_position"], 4, present)
+        self.put(ADDR["present_velocity"], 4, round(self.speed_ticks_s / 15.6) if moving else 0)
+        self.put(ADDR["moving"], 1, int(moving))
+
+    def check_write(self, addr: int, data: bytes) -> int:
+        """Protocol error number that a write of `data` at `addr` would cause (0: allowed)."""
+        end = addr + len(data)
+        if not data or end > _TABLE_SIZE:
+            return _ERR_ACCESS
+        if any(a in r for a in range(addr, end) for r in _READ_ONLY):
+            return _ERR_ACCESS
+        if addr < _EEPROM_END and self.torque:
+            return _ERR_ACCESS  # EEPROM is locked while torque is on
+        if addr <= ADDR["operating_mode"] < end:
+            if data[ADDR["operating_mode"] - addr] not in (0, 1, 3, 4, 5, 16):
+                return _ERR_DATA_RANGE
+        if addr <= ADDR["torque_enable"] < end and data[ADDR["torque_enable"] - addr] > 1:
+            return _ERR_DATA_RANGE
+        gp = ADDR["goal_position"]
+        if addr <= gp and gp + 4 <= end:
+            goal = int.from_bytes(data[gp - addr : gp - addr + 4], "little", signed=True)
+            mode = self.table[ADDR["operating_mode"]]
+            if mode == 3:
+                lo = self.get(ADDR["min_position_limit"], 4)
+                hi = self.get(ADDR["max_position_limit"], 4)
+                if not lo <= goal <= hi:
+                    return _ERR_DATA_LIMIT
+            elif abs(goal) > _EXTENDED_RANGE:
+                return _ERR_DATA_LIMIT
+        return 0
+
+    def write(self, addr: int, data: bytes) -> int:
+        self.sync()
+        err = self.check_write(addr, data)
+        if err == 0:
+            self.table[addr : addr + len(data)] = data
+            if addr <= ADDR["torque_enable"] < addr + len(data) and not self.torque:
+                # Torque off: the goal snaps to where the shaft is, as on the real motor.
+                self.put(ADDR["goal_position"], 4, round(self.position))
+            self.sync()
+        return err
+
+    def read(self, addr: int, size: int) -> tuple[int, bytes]:
+        if size <= 0 or addr + size > _TABLE_SIZE:
+            return _ERR_ACCESS, b""
+        self.sync()
+        return 0, bytes(self.table[addr : addr + size])
+
+
+class XL330Emulator:
+    """A bus of emulated XL330-M288 motors behind a pseudo-terminal.
+
+    Args:
+        ids: Motor IDs on the bus.
+        speed_ticks_s: Speed at which the present position follows the goal [tick/s].
+            The real XL330-M288 does about 7,000 tick/s unloaded at 5 V (103 rev/min).
+        initial_position: Present position of every motor at start [tick].
+    """
+
+    def __init__(
+        self,
+        ids: Iterable[int] = (1,),
+        *,
+        speed_ticks_s: float = 4000.0,
+        initial_position: int = 2048,
+    ) -> None:
+        ids = tuple(int(i) for i in ids)
+        if not ids or any(not 0 <= i < _BROADCAST_ID for i in ids) or len(set(ids)) != len(ids):
+            raise ValueError(f"motor IDs must be distinct and in 0..252, got {ids}")
+        if speed_ticks_s <= 0:
+            raise ValueError(f"speed_ticks_s must be positive, got {speed_ticks_s}")
+        self._motors = {i: _Motor.new(i, speed_ticks_s, initial_position) for i in ids}
+        self._lock = threading.Lock()
+        self._link_down_until = 0.0
+        self._cut_on_goal_s = 0.0
+        self.packets = 0
+        """Instruction packets received with a valid CRC (including ones for absent IDs)."""
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)  # no echo, no line discipline: bytes pass unchanged
+        self.port = os.ttyname(self._slave)
+        """Path of the pseudo-terminal that a client opens (e.g. ``/dev/pts/7``)."""
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._serve, name="xl330-emulator", daemon=True)
+        self._thread.start()
+
+    # ---- inspection and fault injection (for tests and manual trials) ----
+
+    @property
+    def ids(self) -> tuple[int, ...]:
+        """Motor IDs on the bus."""
+        return tuple(self._motors)
+
+    def value(self, dxl_id: int, item: str, size: int = 4, signed: bool = True) -> int:
+        """Read a control-table item of one motor directly (not over the bus)."""
+        with self._lock:
+            motor = self._motors[dxl_id]
+            motor.sync()
+            return motor.get(ADDR[item], size, signed)
+
+    def torque(self, dxl_id: int) -> bool:
+        """Whether torque is enabled on one motor."""
+        return self.value(dxl_id, "torque_enable", 1) == 1
+
+    def cut_link(self, duration_s: float) -> None:
+        """Drop every byte from now on for `duration_s` seconds, as an unplugged cable would."""
+        with self._lock:
+            self._link_down_until = time.monotonic() + duration_s
+
+    def cut_link_on_goal(self, duration_s: float) -> None:
+        """Cut the link for `duration_s` right after the next goal-position write is applied."""
+        with self._lock:
+            self._cut_on_goal_s = duration_s
+
+    # ---- lifecycle ----
+
+    def close(self) -> None:
+        """Stop serving and close the pseudo-terminal."""
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        for fd in (self._master, self._slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+    def __enter__(self) -> XL330Emulator:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---- serving ----
+
+    def _serve(self) -> None:
+        buf = bytearray()
+        while not self._stop.is_set():
+            try:
+                ready, _, _ = select.select([self._master], [], [], _POLL_S)
+                if not ready:
+                    continue
+                chunk = os.read(self._master, 4096)
+            except OSError:
+                return
+            with self._lock:
+                if time.monotonic() < self._link_down_until:
+                    buf.clear()
+                    continue
+                buf += chunk
+                replies = self._consume(buf)
+            for reply in replies:
+                try:
+                    os.write(self._master, reply)
+                except OSError:
+                    return
+
+    def _consume(self, buf: bytearray) -> list[bytes]:
+        """Parse every complete packet at the head of `buf`; return the status packets."""
+        replies: list[bytes] = []
+        while True:
+            start = buf.find(_HEADER)
+            if start < 0:
+                del buf[: max(0, len(buf) - 3)]  # keep a possible partial header
+                return replies
+            del buf[:start]
+            if len(buf) < 7:
+                return replies
+            length = struct.unpack_from("<H", buf, 5)[0]
+            if len(buf) < 7 + length:
+                return replies
+            pkt = bytes(buf[: 7 + length])
+            del buf[: 7 + length]
+            if length < 3:
+                continue
+            dxl_id = pkt[4]
+            if crc16(pkt[:-2]) != struct.unpack_from("<H", pkt, len(pkt) - 2)[0]:
+                if dxl_id in self._motors:
+                    replies.append(_packet(dxl_id, _INST_STATUS, bytes([_ERR_CRC])))
+                continue
+            self.packets += 1
+            body = unstuff(pkt[7:-2])
+            replies += self._execute(dxl_id, body[0], body[1:])
+
+    def _status(self, dxl_id: int, error: int, data: bytes = b"") -> bytes:
+        return _packet(dxl_id, _INST_STATUS, bytes([error]) + data)
+
+    def _execute(self, dxl_id: int, inst: int, params: bytes) -> list[bytes]:
+        motors = self._motors
+        targets = list(motors) if dxl_id == _BROADCAST_ID else [dxl_id] if dxl_id in motors else []
+        if inst == _INST_PING:
+            data = struct.pack("<HB", XL330_MODEL_NUMBER, _FIRMWARE_VERSION)
+            return [self._status(i, 0, data) for i in targets]
+        if inst == _INST_READ and dxl_id in motors:
+            if len(params) != 4:
+                return [self._status(dxl_id, _ERR_DATA_LENGTH)]
+            addr, size = struct.unpack("<HH", params)
+            err, data = motors[dxl_id].read(addr, size)
+            return [self._status(dxl_id, err, data)]
+        if inst == _INST_WRITE and dxl_id in motors:
+            if len(params) < 3:
+                return [self._status(dxl_id, _ERR_DATA_LENGTH)]
+            addr = struct.unpack_from("<H", params)[0]
+            err = motors[dxl_id].write(addr, params[2:])
+            self._after_write(addr, params[2:], err)
+            return [self._status(dxl_id, err)]
+        if inst == _INST_REBOOT and dxl_id in motors:
+            motors[dxl_id].factory_ram()
+            motors[dxl_id].put(ADDR["goal_position"], 4, round(motors[dxl_id].position))
+            motors[dxl_id].sync()
+            return [self._status(dxl_id, 0)]
+        if inst == _INST_SYNC_READ and dxl_id == _BROADCAST_ID and len(params) >= 4:
+            addr, size = struct.unpack_from("<HH", params)
+            replies = []
+            for i in params[4:]:
+                if i in motors:
+                    err, data = motors[i].read(addr, size)
+                    replies.append(self._status(i, err, data))
+            return replies
+        if inst == _INST_SYNC_WRITE and dxl_id == _BROADCAST_ID and len(params) >= 4:
+            addr, size = struct.unpack_from("<HH", params)
+            records = params[4:]
+            for k in range(0, len(records) - size, size + 1):
+                i, data = records[k], records[k + 1 : k + 1 + size]
+                if i in motors and len(data) == size:
+                    self._after_write(addr, data, motors[i].write(addr, data))
+            return []  # sync write has no status packet
+        if dxl_id in motors:
+            return [self._status(dxl_id, _ERR_INSTRUCTION)]
+        return []
+
+    def _after_write(self, addr: int, data: bytes, err: int) -> None:
+        gp = ADDR["goal_position"]
+        if err == 0 and self._cut_on_goal_s > 0 and addr <= gp < addr + len(data):
+            self._link_down_until = time.monotonic() + self._cut_on_goal_s
+            self._cut_on_goal_s = 0.0
+
+
+def _serve_in_child(
+    conn: object, ids: tuple[int, ...], speed: float, position: int, cut_s: float
+) -> None:
+    with XL330Emulator(ids, speed_ticks_s=speed, initial_position=position) as emu:
+        if cut_s > 0:
+            emu.cut_link_on_goal(cut_s)
+        conn.send(emu.port)  # type: ignore[attr-defined]
+        try:
+            conn.recv()  # type: ignore[attr-defined]  # any message, or EOF, stops the child
+        except EOFError:
+            pass
+
+
+@contextmanager
+def emulator_process(
+    ids: Iterable[int] = (1,),
+    *,
+    speed_ticks_s: float = 4000.0,
+    initial_position: int = 2048,
+    cut_link_on_goal_s: float = 0.0,
+) -> Iterator[str]:
+    """Run an `XL330Emulator` in a child process and yield its port.
+
+    `cut_link_on_goal_s` > 0 arms `XL330Emulator.cut_link_on_goal` in the child.
+
+    A separate process keeps the emulator's replies prompt when the client process is busy (for
+    example with an in-process simulator), as a real motor's would be. Inspect its state over the
+    bus, as with real motors.
+    """
+    ctx = multiprocessing.get_context("spawn")
+    parent, child = ctx.Pipe()
+    proc = ctx.Process(
+        target=_serve_in_child,
+        args=(child, tuple(ids), speed_ticks_s, initial_position, cut_link_on_goal_s),
+        daemon=True,
+    )
+    proc.start()
+    try:
+        if not parent.poll(_CHILD_START_S):
+            raise RuntimeError("the emulator process did not start")
+        yield parent.recv()
+    finally:
+        try:
+            parent.send(None)
+        except OSError:
+            pass
+        proc.join(timeout=2.0)
+        if proc.is_alive():
+            proc.terminate()

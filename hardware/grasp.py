@@ -1,0 +1,132 @@
+"""``hw grasp`` end to end: build the drivers from a `GraspJob` and run the pipeline.
+
+The tendon motors are opened first and closed last, so that torque goes off on every exit path,
+including a failure to reach the arm; SIGTERM and SIGHUP are turned into `SystemExit` for the
+duration (`tendon.raise_on_signals`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mjcodesign.errors import HardwareError, PoseError
+
+from .arm import ArmConfig, FrankaArm
+from .camera import FileCamera, RealSenseCamera, load_calibration
+from .pipeline import (
+    GraspPlan,
+    GraspReport,
+    GraspSettings,
+    auto_candidate,
+    execute,
+    load_candidates,
+    select_candidate,
+)
+from .tendon import FingerMotor, TendonConfig, TendonMotors, raise_on_signals
+
+__all__ = ["GraspJob", "plan_job", "run_job"]
+
+AUTO = "auto"
+
+
+@dataclass(frozen=True)
+class GraspJob:
+    """One `hw grasp` request.
+
+    Args:
+        robot: Robot FCI host (None only for a dry run).
+        dxl: Serial port of the tendon motors (None only for a dry run).
+        pose: Path of a candidate-pose file, or ``"auto"``.
+        cloud: Recorded point cloud (PLY/NPZ/NPY); None to capture from a RealSense.
+        calibration: Camera-to-base transform file; None means the cloud is in the base frame.
+        settings: Grasp parameters and limits.
+        motors: Tendon motors, one per finger.
+        speed_factor: franky relative dynamics factor in (0, 1].
+        grasp_force: Franka Hand grasp force [N].
+        tendon_retries: Attempts per serial transaction before the link counts as lost.
+        realtime: Require a realtime kernel for the arm (False for franky-sim).
+        dry_run: Plan and report; connect to nothing.
+    """
+
+    robot: str | None
+    dxl: str | None
+    pose: str = AUTO
+    cloud: Path | None = None
+    calibration: Path | None = None
+    settings: GraspSettings = GraspSettings()
+    motors: tuple[FingerMotor, ...] = (FingerMotor(1, "A"), FingerMotor(2, "B"))
+    speed_factor: float = 0.1
+    grasp_force: float = 20.0
+    tendon_retries: int = 3
+    realtime: bool = True
+    dry_run: bool = False
+
+    def __post_init__(self) -> None:
+        if not self.dry_run and not (self.robot and self.dxl):
+            raise HardwareError("a grasp needs --robot and --dxl (or --dry-run)")
+        if self.cloud is None and self.calibration is None:
+            raise HardwareError("give a point cloud file, or a calibration file for the camera")
+
+    def tendon_config(self) -> TendonConfig:
+        """Tendon configuration (a placeholder port in a dry run, for limit checks only)."""
+        return TendonConfig(
+            port=self.dxl or "(dry run)", motors=self.motors, retries=self.tendon_retries
+        )
+
+    def arm_config(self) -> ArmConfig:
+        """Arm configuration."""
+        return ArmConfig(
+            host=self.robot or "(dry run)",
+            speed_factor=self.speed_factor,
+            grasp_force=self.grasp_force,
+            workspace=self.settings.workspace,
+            realtime=self.realtime,
+        )
+
+
+def _capture(job: GraspJob) -> np.ndarray:
+    T = None if job.calibration is None else load_calibration(job.calibration)
+    if job.cloud is not None:
+        return FileCamera(job.cloud, T).capture()
+    assert T is not None  # checked in GraspJob
+    return RealSenseCamera(T).capture()
+
+
+def plan_job(job: GraspJob) -> tuple[np.ndarray, GraspPlan]:
+    """Steps 1-3 and the plan: cloud, candidates, selection. Moves nothing."""
+    tendon = job.tendon_config()
+    tendon.check_pull(job.settings.tendon_ticks)  # refuse a bad tick count before anything
+    arm = job.arm_config()  # validates the speed factor
+    del arm
+    cloud = _capture(job)
+    geometry = job.settings.geometry
+    if job.pose == AUTO:
+        candidates = [auto_candidate(cloud, geometry)]
+    else:
+        candidates = load_candidates(job.pose, geometry)
+    if not candidates:
+        raise PoseError("no candidate poses")
+    return cloud, select_candidate(candidates, cloud, job.settings, tendon)
+
+
+def run_job(
+    job: GraspJob,
+    log: Callable[[str], None] = print,
+    after_lift: Callable[[], object] | None = None,
+) -> GraspReport | GraspPlan:
+    """Plan, then (unless a dry run) execute on the arm and tendons. Returns the report or plan.
+
+    `after_lift` is passed to `pipeline.execute`.
+    """
+    _, plan = plan_job(job)
+    for line in plan.lines():
+        log(("[dry run] " if job.dry_run else "") + line)
+    if job.dry_run:
+        return plan
+    with raise_on_signals(), TendonMotors(job.tendon_config()) as tendons:
+        with FrankaArm(job.arm_config()) as arm:
+            return execute(plan, arm, tendons, log, after_lift)

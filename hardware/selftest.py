@@ -1,0 +1,172 @@
+"""Protocol peers for `hw selftest` and the tests: franky-sim with a box, and the XL330 emulator.
+
+`franka_sim` runs franky-sim's MuJoCo simulator and `SimulationServer` in this process, bound to
+127.0.0.1 only; franky then speaks the libfranka protocol to it over loopback. `run_selftest`
+performs the whole ``hw grasp`` code path against both peers, starting from a recorded point
+cloud in a camera frame plus a calibration file.
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mjcodesign.errors import HardwareError
+
+from .camera import save_point_cloud, transform_points
+from .dxl_emulator import emulator_process
+from .grasp import GraspJob, run_job
+from .pipeline import GraspReport
+from .xl330 import ADDR
+
+__all__ = ["SimScene", "franka_sim", "run_selftest", "sample_box_surface"]
+
+LOOPBACK = "127.0.0.1"
+BOX_SIZE = (0.06, 0.04, 0.05)  # full extents x, y, z [m]: narrow along y, the closing axis
+BOX_CENTRE = (0.5, 0.0, 0.025)  # resting on the ground in front of the robot [m]
+BOX_MASS = 0.05  # [kg]
+SIM_SPEED_FACTOR = 0.5  # franky dynamics factor in the simulator: fast, and still holds the box
+LIFT_OK_FRACTION = 0.8  # the box may slip a little in the PD-controlled hand
+SETTLE_S = 0.5  # let the box come to rest in the hand before measuring its lift [s]
+_CLOUD_POINTS = 2000
+_IDS = (1, 2)
+# The selftest runs simulator, franky, SDK and emulator on one small machine; a serial reply can
+# miss the SDK's 34 ms timeout when the CPU is oversubscribed, so allow more attempts than on
+# the real bus.
+_SELFTEST_RETRIES = 10
+# A camera 0.6 m above the table looking down at the box, rotated about its optical axis.
+_T_BASE_CAMERA = np.array(
+    [
+        [0.0, -1.0, 0.0, 0.5],
+        [-1.0, 0.0, 0.0, 0.0],
+        [0.0, 0.0, -1.0, 0.6],
+        [0.0, 0.0, 0.0, 1.0],
+    ]
+)
+
+
+@dataclass
+class SimScene:
+    """A running franky-sim: host to connect to, and ground-truth reads of the box."""
+
+    host: str
+    sim: Any
+
+    def box_z(self) -> float:
+        """Height of the box centre in the world [m]."""
+        return float(self.sim.data.xpos[self.sim.model.body("box").id][2])
+
+
+@contextmanager
+def franka_sim(box: bool = True) -> Iterator[SimScene]:
+    """Run franky-sim (MuJoCo) with one FR3 and optionally a box, serving on 127.0.0.1."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        import franky_sim
+        from franky_sim.mujoco_simulator import MujocoSimulator
+    except ImportError:
+        raise HardwareError("franky-sim is not installed (needed for the selftest)") from None
+    sim = MujocoSimulator()
+    sim.init()
+    sim.add_robot()
+    if box:
+        body = ET.SubElement(sim.worldbody, "body", name="box", pos=" ".join(map(str, BOX_CENTRE)))
+        ET.SubElement(body, "freejoint", name="box_joint")
+        half = " ".join(str(s / 2) for s in BOX_SIZE)
+        ET.SubElement(body, "geom", type="box", size=half, mass=str(BOX_MASS))
+    server = franky_sim.SimulationServer(sim, hostname_candidates=[LOOPBACK])
+    try:
+        server.init()
+        server.run_async()
+        yield SimScene(LOOPBACK, sim)
+    finally:
+        server.cleanup()
+        sim.cleanup()
+
+
+def sample_box_surface(
+    size: tuple[float, float, float], centre: tuple[float, float, float], n: int, seed: int = 0
+) -> np.ndarray:
+    """`n` points on the visible faces (top and sides) of a box, shape (n, 3) [m]."""
+    rng = np.random.default_rng(seed)
+    half = np.asarray(size) / 2
+    pts = rng.uniform(-half, half, size=(n, 3))
+    # Snap each point to one of five faces (not the bottom, which rests on the table).
+    face = rng.integers(0, 5, size=n)
+    axis = np.array([2, 0, 0, 1, 1])[face]
+    sign = np.array([1, 1, -1, 1, -1])[face]
+    pts[np.arange(n), axis] = sign * half[axis]
+    return pts + np.asarray(centre)
+
+
+def torque_over_bus(port: str, ids: tuple[int, ...]) -> dict[int, bool]:
+    """Torque Enable of each motor, read over the serial bus with dynamixel-sdk."""
+    import dynamixel_sdk as sdk
+
+    handler, packets = sdk.PortHandler(port), sdk.PacketHandler(2.0)
+    if not (handler.openPort() and handler.setBaudRate(57600)):
+        raise HardwareError(f"cannot open {port}")
+    try:
+        out = {}
+        for i in ids:
+            for _ in range(_SELFTEST_RETRIES):
+                value, result, _ = packets.read1ByteTxRx(handler, i, ADDR["torque_enable"])
+                if result == sdk.COMM_SUCCESS:
+                    break
+            else:
+                raise HardwareError(f"motor {i} did not answer on {port}")
+            out[i] = value == 1
+        return out
+    finally:
+        handler.closePort()
+
+
+def run_selftest(log: Callable[[str], None] = lambda line: None) -> dict:
+    """The whole grasp against franky-sim and the XL330 emulator; a JSON-ready result."""
+    t0 = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix="mjcodesign-selftest-") as tmp:
+        cloud_base = sample_box_surface(BOX_SIZE, BOX_CENTRE, _CLOUD_POINTS)
+        cloud_path, calib_path = Path(tmp) / "cloud.ply", Path(tmp) / "calib.json"
+        save_point_cloud(cloud_path, transform_points(cloud_base, np.linalg.inv(_T_BASE_CAMERA)))
+        calib_path.write_text(json.dumps({"T_base_camera": _T_BASE_CAMERA.tolist()}))
+        with emulator_process(ids=_IDS) as port, franka_sim() as scene:
+            job = GraspJob(
+                robot=scene.host,
+                dxl=port,
+                pose="auto",
+                cloud=cloud_path,
+                calibration=calib_path,
+                speed_factor=SIM_SPEED_FACTOR,
+                tendon_retries=_SELFTEST_RETRIES,
+                realtime=False,
+            )
+            z0 = scene.box_z()
+            lifted: list[float] = []
+
+            def measure() -> None:
+                time.sleep(SETTLE_S)
+                lifted.append(scene.box_z() - z0)
+
+            report = run_job(job, log, after_lift=measure)
+            assert isinstance(report, GraspReport) and lifted
+            object_lift = lifted[0]
+            torque_off = not any(torque_over_bus(port, _IDS).values())
+    lift_ok = object_lift >= LIFT_OK_FRACTION * job.settings.lift_m
+    result = report.as_dict()
+    result.update(
+        ok=bool(report.held and lift_ok and torque_off),
+        lift_m=round(float(object_lift), 5),
+        arm_lift_m=round(report.lift_m, 5),
+        torque_off_after=torque_off,
+        seconds=round(time.monotonic() - t0, 2),
+    )
+    return result

@@ -1,0 +1,378 @@
+"""Tendon motors: Dynamixel XL330-M288 on protocol 2.0 through dynamixel-sdk.
+
+One motor per finger pulls that finger's tendon. Positions are in encoder ticks (4096 per turn).
+A pull is a displacement from the *slack* position, which is the present position read when the
+motors are opened; each finger has its own displacement limits, and a command outside them is
+refused before anything is written. Every exit path (normal, exception, SIGINT/SIGTERM through
+`raise_on_signals`) leaves the motors with torque off.
+
+``dynamixel_sdk`` is imported lazily, inside `TendonMotors.open`.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+from mjcodesign.errors import HardwareError
+
+from .xl330 import ADDR, XL330_MODEL_NUMBER
+
+__all__ = [
+    "FingerMotor",
+    "TendonConfig",
+    "TendonMotors",
+    "raise_on_signals",
+    "PAPER_PULL_TICKS",
+]
+
+TICKS_PER_REV = 4096
+PAPER_PULL_TICKS = 1000  # the paper's hardware tendon pull, of 4096 ticks per turn
+OPERATING_MODE_CURRENT_POSITION = 5  # current-based position control: limits the tendon force
+_PROTOCOL = 2.0
+_COMM_SUCCESS = 0  # dynamixel_sdk.COMM_SUCCESS
+_T = TypeVar("_T")
+
+
+@dataclass(frozen=True)
+class FingerMotor:
+    """The tendon motor of one finger.
+
+    Args:
+        dxl_id: Dynamixel ID on the bus (0..252).
+        name: Finger name, used in messages.
+        min_ticks: Smallest allowed displacement from the slack position [tick]; negative
+            values let the spool pay out.
+        max_ticks: Largest allowed pull from the slack position [tick].
+    """
+
+    dxl_id: int
+    name: str = ""
+    min_ticks: int = -100
+    max_ticks: int = 1500
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.dxl_id <= 252:
+            raise HardwareError(f"Dynamixel ID must be in 0..252, got {self.dxl_id}")
+        if not self.min_ticks <= 0 <= self.max_ticks:
+            raise HardwareError(
+                f"finger {self.label}: limits [{self.min_ticks}, {self.max_ticks}] must contain 0"
+            )
+        if self.max_ticks - self.min_ticks > 4 * TICKS_PER_REV:
+            raise HardwareError(f"finger {self.label}: limits span more than 4 turns")
+
+    @property
+    def label(self) -> str:
+        """Name for messages: the finger name, else the ID."""
+        return self.name or f"ID {self.dxl_id}"
+
+    def check(self, ticks: int) -> None:
+        """Raise `HardwareError` if a displacement of `ticks` is outside this finger's limits."""
+        if not self.min_ticks <= ticks <= self.max_ticks:
+            raise HardwareError(
+                f"tendon {self.label}: {ticks} ticks is outside the limits "
+                f"[{self.min_ticks}, {self.max_ticks}]"
+            )
+
+
+@dataclass(frozen=True)
+class TendonConfig:
+    """Serial bus and motors of the tendon drive.
+
+    Args:
+        port: Serial device of the U2D2 (or of the emulator), e.g. ``/dev/ttyUSB0``.
+        motors: One `FingerMotor` per finger.
+        baudrate: Bus speed [bit/s]; the paper's set-up and the XL330 default are 57600.
+        retries: Attempts per transaction before a serial timeout becomes a failure.
+        move_timeout_s: Longest wait for a pull to reach its goal [s].
+        tolerance_ticks: A motor within this many ticks of its goal has arrived [tick].
+        safe_stop_s: How long to keep trying to switch torque off after a failure [s].
+    """
+
+    port: str
+    motors: tuple[FingerMotor, ...] = (FingerMotor(1, "A"), FingerMotor(2, "B"))
+    baudrate: int = 57600
+    retries: int = 3
+    move_timeout_s: float = 3.0
+    tolerance_ticks: int = 10
+    safe_stop_s: float = 2.0
+    poll_s: float = field(default=0.01, repr=False)
+
+    def __post_init__(self) -> None:
+        if not self.port:
+            raise HardwareError("no serial port given for the tendon motors")
+        if not self.motors:
+            raise HardwareError("no tendon motors configured")
+        ids = [m.dxl_id for m in self.motors]
+        if len(set(ids)) != len(ids):
+            raise HardwareError(f"duplicate Dynamixel IDs: {ids}")
+        if self.retries < 1 or self.move_timeout_s <= 0 or self.tolerance_ticks < 0:
+            raise HardwareError("retries, move_timeout_s and tolerance_ticks must be positive")
+        if self.safe_stop_s < 0 or self.poll_s <= 0:
+            raise HardwareError("safe_stop_s and poll_s must be positive")
+
+    def check_pull(self, ticks: int) -> None:
+        """Raise `HardwareError` if pulling every tendon by `ticks` is outside any limit."""
+        for motor in self.motors:
+            motor.check(ticks)
+
+
+def _signed32(value: int) -> int:
+    """Two's-complement reading of an unsigned 4-byte value (the SDK returns it unsigned)."""
+    return value - (1 << 32) if value & 0x80000000 else value
+
+
+def _le32(value: int) -> list[int]:
+    return list((value & 0xFFFFFFFF).to_bytes(4, "little"))
+
+
+class TendonMotors:
+    """Driver of the tendon motors. Use as a context manager; it opens in `__enter__`.
+
+    Opening pings every ID and checks the model number (XL330-M288 = 1200), switches torque off,
+    sets the operating mode (an EEPROM item, so only with torque off), switches torque on and
+    reads the slack positions. Closing switches torque off on every motor and closes the port.
+    """
+
+    def __init__(self, config: TendonConfig) -> None:
+        self.config = config
+        self._sdk: Any = None
+        self._port: Any = None
+        self._ph: Any = None
+        self._slack: dict[int, int] = {}
+        self._torque_on = False
+        self._found: list[FingerMotor] = []  # motors that answered a ping
+
+    # ---- lifecycle ----
+
+    def __enter__(self) -> TendonMotors:
+        self.open()
+        return self
+
+    def __exit__(self, exc_type: object, exc: BaseException | None, tb: object) -> None:
+        try:
+            self.close()
+        except HardwareError as close_error:
+            if exc is None:
+                raise
+            exc.add_note(str(close_error))  # keep the first failure as the one-line message
+
+    def open(self) -> None:
+        """Connect, check every motor and switch torque on in current-based position mode."""
+        import dynamixel_sdk as sdk
+
+        self._sdk = sdk
+        self._port = sdk.PortHandler(self.config.port)
+        try:
+            opened = self._port.openPort() and self._port.setBaudRate(self.config.baudrate)
+        except Exception as exc:  # pyserial raises SerialException (an OSError) or ValueError
+            raise HardwareError(f"cannot open serial port {self.config.port}: {exc}") from exc
+        if not opened:
+            raise HardwareError(f"cannot open serial port {self.config.port}")
+        self._ph = sdk.PacketHandler(_PROTOCOL)
+        self._found = []
+        try:
+            for motor in self.config.motors:
+                model = self._ping(motor)
+                self._found.append(motor)
+                if model != XL330_MODEL_NUMBER:
+                    raise HardwareError(
+                        f"tendon {motor.label}: model number {model}, expected "
+                        f"{XL330_MODEL_NUMBER} (XL330-M288)"
+                    )
+            self.torque(False)
+            for motor in self.config.motors:
+                self._write(motor, "operating_mode", 1, OPERATING_MODE_CURRENT_POSITION)
+            self.torque(True)
+            self._slack = self.present()
+        except BaseException as exc:
+            self.__exit__(type(exc), exc, None)
+            raise
+
+    def close(self) -> None:
+        """Switch torque off (retrying for up to `safe_stop_s`) and close the port.
+
+        Raises `HardwareError` if torque-off could not be confirmed on every motor.
+        """
+        if self._port is None:
+            return
+        try:
+            deadline = time.monotonic() + self.config.safe_stop_s
+            pending = list(self._found)
+            while pending:
+                pending = [m for m in pending if not self._try_torque_off(m)]
+                if not pending or time.monotonic() > deadline:
+                    break
+                time.sleep(self.config.poll_s)
+            self._torque_on = bool(pending)
+        finally:
+            self._port.closePort()
+            self._port = None
+        if pending:
+            names = ", ".join(m.label for m in pending)
+            raise HardwareError(f"could not confirm torque off on tendon {names}")
+
+    # ---- commands ----
+
+    @property
+    def slack(self) -> dict[int, int]:
+        """Present position of each motor when opened, by ID [tick]."""
+        return dict(self._slack)
+
+    def torque(self, on: bool) -> None:
+        """Switch torque on or off on every motor."""
+        for motor in self.config.motors:
+            self._write(motor, "torque_enable", 1, int(on))
+        self._torque_on = on
+
+    def present(self) -> dict[int, int]:
+        """Present position of every motor by ID, with one sync read [tick]."""
+        sdk = self._sdk
+        group = sdk.GroupSyncRead(self._port, self._ph, ADDR["present_position"], 4)
+        for motor in self.config.motors:
+            group.addParam(motor.dxl_id)
+
+        def once() -> dict[int, int]:
+            result = group.txRxPacket()
+            if result != _COMM_SUCCESS:
+                raise _Comm(self._ph.getTxRxResult(result))
+            out = {}
+            for motor in self.config.motors:
+                if not group.isAvailable(motor.dxl_id, ADDR["present_position"], 4):
+                    raise _Comm(f"no data from {motor.label}")
+                raw = group.getData(motor.dxl_id, ADDR["present_position"], 4)
+                out[motor.dxl_id] = _signed32(raw)
+            return out
+
+        return self._retry("sync read of present position", once)
+
+    def set_goal(self, goals: Mapping[int, int]) -> None:
+        """Write absolute goal positions by ID with one sync write [tick]; no limit check."""
+        group = self._sdk.GroupSyncWrite(self._port, self._ph, ADDR["goal_position"], 4)
+        for dxl_id, goal in goals.items():
+            group.addParam(dxl_id, _le32(int(goal)))
+
+        def once() -> None:
+            result = group.txPacket()
+            if result != _COMM_SUCCESS:
+                raise _Comm(self._ph.getTxRxResult(result))
+
+        self._retry("sync write of goal position", once)
+
+    def pull(self, ticks: int) -> dict[int, int]:
+        """Pull every tendon `ticks` from its slack position and wait until it arrives.
+
+        Returns the final displacement of each motor by ID [tick]. A displacement outside a
+        finger's limits is refused before anything is written.
+        """
+        self.config.check_pull(ticks)
+        if not self._torque_on:
+            raise HardwareError("tendon motors are not torqued on")
+        goals = {m.dxl_id: self._slack[m.dxl_id] + ticks for m in self.config.motors}
+        self.set_goal(goals)
+        deadline = time.monotonic() + self.config.move_timeout_s
+        while True:
+            now = self.present()
+            if all(abs(now[i] - g) <= self.config.tolerance_ticks for i, g in goals.items()):
+                return {i: now[i] - self._slack[i] for i in goals}
+            if time.monotonic() > deadline:
+                raise HardwareError(
+                    f"tendon pull of {ticks} ticks did not arrive within "
+                    f"{self.config.move_timeout_s} s (positions {now})"
+                )
+            time.sleep(self.config.poll_s)
+
+    def displacement(self) -> dict[int, int]:
+        """Present displacement from the slack position by ID [tick]."""
+        now = self.present()
+        return {i: now[i] - self._slack[i] for i in now}
+
+    # ---- transactions ----
+
+    def _retry(self, what: str, once: Callable[[], _T]) -> _T:
+        last = ""
+        for _ in range(self.config.retries):
+            try:
+                return once()
+            except _Comm as exc:
+                last = str(exc)
+        raise HardwareError(
+            f"serial link to the tendon motors lost: {what} failed {self.config.retries} times "
+            f"({last})"
+        )
+
+    def _ping(self, motor: FingerMotor) -> int:
+        def once() -> int:
+            model, result, error = self._ph.ping(self._port, motor.dxl_id)
+            if result != _COMM_SUCCESS:
+                raise _Comm(self._ph.getTxRxResult(result))
+            return int(model)
+
+        try:
+            return self._retry(f"ping of {motor.label}", once)
+        except HardwareError:
+            raise HardwareError(
+                f"tendon motor {motor.label} (ID {motor.dxl_id}) did not answer on "
+                f"{self.config.port}"
+            ) from None
+
+    def _write(self, motor: FingerMotor, item: str, size: int, value: int) -> None:
+        writer = {1: self._ph.write1ByteTxRx, 4: self._ph.write4ByteTxRx}[size]
+
+        def once() -> None:
+            result, error = writer(self._port, motor.dxl_id, ADDR[item], value)
+            if result != _COMM_SUCCESS:
+                raise _Comm(self._ph.getTxRxResult(result))
+            if error:
+                raise HardwareError(
+                    f"tendon {motor.label}: writing {item}={value} refused: "
+                    f"{self._ph.getRxPacketError(error)}"
+                )
+
+        self._retry(f"write of {item} to {motor.label}", once)
+
+    def _try_torque_off(self, motor: FingerMotor) -> bool:
+        # A signal or error may have interrupted a transaction and left the SDK's port marked
+        # busy, which would refuse every later packet: release it and drop stale bytes.
+        self._port.is_using = False
+        try:
+            self._port.clearPort()
+            result, error = self._ph.write1ByteTxRx(
+                self._port, motor.dxl_id, ADDR["torque_enable"], 0
+            )
+        except Exception:
+            return False
+        return result == _COMM_SUCCESS and not error
+
+
+class _Comm(Exception):
+    """One failed serial transaction (timeout, corrupt packet); retried by `_retry`."""
+
+
+@contextmanager
+def raise_on_signals(
+    signals: tuple[int, ...] = (signal.SIGTERM, signal.SIGHUP),
+) -> Iterator[None]:
+    """Turn the given signals into `SystemExit` inside the block, so `with` exits run.
+
+    SIGINT already raises `KeyboardInterrupt`. Outside the main thread this does nothing
+    (Python only delivers signals to the main thread).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: object) -> None:
+        raise SystemExit(128 + signum)
+
+    previous = {s: signal.signal(s, handler) for s in signals}
+    try:
+        yield
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)

@@ -1,0 +1,144 @@
+"""`python -m hardware.cli hw …` end to end, in a subprocess, against the protocol peers.
+
+Each refusal exits 2 with one line on stderr, and nothing moves; motors end with torque off.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from hardware.dxl_emulator import XL330Emulator
+from hardware.selftest import BOX_CENTRE, BOX_SIZE, sample_box_surface
+
+ROOT = Path(__file__).resolve().parents[2]
+pytest.importorskip("dynamixel_sdk")
+
+
+def cli(*args, timeout=120):
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.run(
+        [sys.executable, "-m", "hardware.cli", "hw", *args],
+        capture_output=True, text=True, timeout=timeout, env=env, cwd=ROOT,
+    )  # fmt: skip
+
+
+def refused(proc):
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), proc.stderr
+    return lines[0]
+
+
+def untouched(emu):
+    for i in emu.ids:
+        assert not emu.torque(i)
+        assert emu.value(i, "present_position") == 2048
+        assert emu.value(i, "goal_position") == 2048
+
+
+def test_tendon_pull_and_release():
+    with XL330Emulator(ids=(1, 2), speed_ticks_s=20_000) as emu:
+        proc = cli("tendon", "--dxl", emu.port, "--ticks", "1000")
+        assert proc.returncode == 0, proc.stderr
+        assert "ID 1: 1000" in proc.stdout and "ID 2: 1000" in proc.stdout
+        assert emu.value(1, "present_position") == 3048
+        assert not emu.torque(1) and not emu.torque(2)
+
+
+def test_ticks_beyond_limits_refused_before_any_byte():
+    with XL330Emulator(ids=(1, 2)) as emu:
+        line = refused(cli("tendon", "--dxl", emu.port, "--ticks", "5000"))
+        assert "outside the limits" in line
+        assert emu.packets == 0
+        untouched(emu)
+
+
+def test_missing_motor_id_refused():
+    with XL330Emulator(ids=(1, 2)) as emu:
+        line = refused(cli("tendon", "--dxl", emu.port, "--ids", "1,7", "--ticks", "100"))
+        assert "ID 7" in line and "did not answer" in line
+        untouched(emu)
+
+
+def test_lost_link_mid_move_refused_torque_off():
+    # 1000 ticks take 1 s at 1000 tick/s; the link is back after 0.4 s, when torque goes off.
+    with XL330Emulator(ids=(1, 2), speed_ticks_s=1000) as emu:
+        emu.cut_link_on_goal(0.4)
+        line = refused(cli("tendon", "--dxl", emu.port, "--ticks", "1000"))
+        assert "serial link to the tendon motors lost" in line
+        assert not emu.torque(1) and not emu.torque(2)
+        # Torque went off mid-move: the shaft stopped short of the goal.
+        assert emu.value(1, "present_position") < 3048
+
+
+def test_pose_outside_workspace_refused(tmp_path):
+    np.save(tmp_path / "cloud.npy", sample_box_surface(BOX_SIZE, BOX_CENTRE, 500))
+    far = np.diag([1.0, -1.0, -1.0, 1.0])
+    far[:3, 3] = [1.5, 0.0, 0.2]
+    np.savez(tmp_path / "poses.npz", poses=far[None])
+    with XL330Emulator(ids=(1, 2)) as emu:
+        # No robot listens at this loopback address: a refusal must come before connecting.
+        line = refused(
+            cli("grasp", "--robot", "127.0.0.1", "--dxl", emu.port, "--no-realtime",
+                "--pose", str(tmp_path / "poses.npz"), "--cloud", str(tmp_path / "cloud.npy"))
+        )  # fmt: skip
+        assert "outside the workspace" in line
+        assert emu.packets == 0
+        untouched(emu)
+
+
+def test_grasp_dry_run_touches_nothing(tmp_path):
+    np.save(tmp_path / "cloud.npy", sample_box_surface(BOX_SIZE, BOX_CENTRE, 500))
+    with XL330Emulator(ids=(1, 2)) as emu:
+        proc = cli("grasp", "--robot", "127.0.0.1", "--dxl", emu.port, "--pose", "auto",
+                   "--cloud", str(tmp_path / "cloud.npy"), "--dry-run")  # fmt: skip
+        assert proc.returncode == 0, proc.stderr
+        assert "[dry run] 6. arm: lift 0.100 m" in proc.stdout
+        assert emu.packets == 0
+
+
+def test_bad_arguments_refused():
+    line = refused(cli("grasp", "--cloud", "/nonexistent.ply", "--dry-run"))
+    assert "not found" in line
+
+
+def test_emulate_dxl_prints_port():
+    import dynamixel_sdk as sdk
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "hardware.cli", "hw", "emulate-dxl", "--seconds", "20"],
+        stdout=subprocess.PIPE, text=True, env=env, cwd=ROOT,
+    )  # fmt: skip
+    try:
+        port = proc.stdout.readline().strip()
+        assert port.startswith("/dev/")
+        handler = sdk.PortHandler(port)
+        assert handler.openPort() and handler.setBaudRate(57600)
+        model, result, _ = sdk.PacketHandler(2.0).ping(handler, 2)
+        handler.closePort()
+        assert (model, result) == (1200, sdk.COMM_SUCCESS)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def test_selftest_json():
+    pytest.importorskip("franky_sim")
+    proc = cli("selftest", "--json", timeout=180)
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout.strip().splitlines()[-1])
+    print(result)
+    assert {"ok", "lift_m", "tendon_ticks", "steps"} <= result.keys()
+    assert result["ok"] is True
+    assert result["lift_m"] > 0.075 and result["tendon_ticks"] == pytest.approx(1000, abs=10)
+    assert [s["action"] for s in result["steps"]] == [
+        "hand", "arm", "arm", "hand", "tendon", "arm", "check",
+    ]  # fmt: skip

@@ -1,0 +1,164 @@
+"""The real dynamixel-sdk against the XL330 emulator: bytes over a pseudo-terminal."""
+
+from __future__ import annotations
+
+import os
+import time
+
+import pytest
+
+from hardware.dxl_emulator import XL330Emulator, crc16, stuff, unstuff
+from hardware.xl330 import ADDR, XL330_MODEL_NUMBER
+
+dxl = pytest.importorskip("dynamixel_sdk")
+
+
+def test_crc_matches_sdk_table():
+    # The SDK computes CRC-16 (poly 0x8005) from a lookup table; ours is bitwise.
+    ph = dxl.PacketHandler(2.0)
+    for n in (1, 7, 100, 255):
+        data = os.urandom(n)
+        assert crc16(data) == ph.updateCRC(0, list(data), n)
+
+
+def test_byte_stuffing_round_trip():
+    payload = b"\x03\x74\x00\xff\xff\xfd\xff"
+    stuffed = stuff(payload)
+    assert stuffed == b"\x03\x74\x00\xff\xff\xfd\xfd\xff"
+    assert unstuff(stuffed) == payload
+
+
+def test_ping_model_and_missing_id(sdk_port):
+    port, ph = sdk_port
+    model, result, error = ph.ping(port, 1)
+    assert (model, result, error) == (XL330_MODEL_NUMBER, dxl.COMM_SUCCESS, 0)
+    t0 = time.monotonic()
+    _, result, _ = ph.ping(port, 7)
+    assert result == dxl.COMM_RX_TIMEOUT
+    assert time.monotonic() - t0 < 0.2  # SDK timeout is 2*16+2 = 34 ms for a ping
+
+
+def test_broadcast_ping_lists_both(sdk_port):
+    port, ph = sdk_port
+    found, result = ph.broadcastPing(port)
+    assert result == dxl.COMM_SUCCESS
+    assert {i: v[0] for i, v in found.items()} == {1: XL330_MODEL_NUMBER, 2: XL330_MODEL_NUMBER}
+
+
+def test_eeprom_locked_while_torque_on(sdk_port):
+    port, ph = sdk_port
+    assert ph.write1ByteTxRx(port, 1, ADDR["operating_mode"], 5) == (dxl.COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 1, ADDR["torque_enable"], 1) == (dxl.COMM_SUCCESS, 0)
+    _, error = ph.write1ByteTxRx(port, 1, ADDR["operating_mode"], 3)
+    assert error == dxl.ERRNUM_ACCESS
+    assert ph.read1ByteTxRx(port, 1, ADDR["operating_mode"])[0] == 5
+    # Read-only items refuse writes too.
+    assert ph.write2ByteTxRx(port, 1, ADDR["model_number"], 1)[1] == dxl.ERRNUM_ACCESS
+
+
+def test_position_follows_goal_at_finite_speed(sdk_port):
+    port, ph = sdk_port
+    speed = 20_000.0  # conftest.FAST_TICKS_S [tick/s]
+    ph.write1ByteTxRx(port, 1, ADDR["torque_enable"], 1)
+    start = ph.read4ByteTxRx(port, 1, ADDR["present_position"])[0]
+    t0 = time.monotonic()
+    ph.write4ByteTxRx(port, 1, ADDR["goal_position"], start + 2000)
+    mid = ph.read4ByteTxRx(port, 1, ADDR["present_position"])[0]
+    elapsed = time.monotonic() - t0
+    # position(t) = start + v*t until the goal: 2000 ticks take 0.1 s at 20k tick/s.
+    assert start <= mid <= start + speed * elapsed + 1
+    assert mid < start + 2000
+    time.sleep(0.15)
+    assert ph.read4ByteTxRx(port, 1, ADDR["present_position"])[0] == start + 2000
+
+
+def test_no_motion_without_torque(sdk_port):
+    port, ph = sdk_port
+    start = ph.read4ByteTxRx(port, 2, ADDR["present_position"])[0]
+    ph.write4ByteTxRx(port, 2, ADDR["goal_position"], start + 500)
+    time.sleep(0.05)
+    assert ph.read4ByteTxRx(port, 2, ADDR["present_position"])[0] == start
+
+
+def test_sync_write_and_sync_read(sdk_port):
+    port, ph = sdk_port
+    for i in (1, 2):
+        ph.write1ByteTxRx(port, i, ADDR["torque_enable"], 1)
+    write = dxl.GroupSyncWrite(port, ph, ADDR["goal_position"], 4)
+    write.addParam(1, list((1000).to_bytes(4, "little")))
+    write.addParam(2, list((3000).to_bytes(4, "little")))
+    assert write.txPacket() == dxl.COMM_SUCCESS
+    time.sleep(0.1)
+    read = dxl.GroupSyncRead(port, ph, ADDR["present_position"], 4)
+    read.addParam(1)
+    read.addParam(2)
+    assert read.txRxPacket() == dxl.COMM_SUCCESS
+    assert read.getData(1, ADDR["present_position"], 4) == 1000
+    assert read.getData(2, ADDR["present_position"], 4) == 3000
+
+
+def test_stuffed_negative_goal_round_trip(sdk_port):
+    # -131073 = 0xFFFDFFFF: its little-endian bytes FF FF FD FF need stuffing both ways, and
+    # 4-byte reads come back unsigned.
+    port, ph = sdk_port
+    assert ph.write1ByteTxRx(port, 1, ADDR["operating_mode"], 5)[1] == 0
+    assert ph.write4ByteTxRx(port, 1, ADDR["goal_position"], -131073 & 0xFFFFFFFF)[1] == 0
+    value, result, _ = ph.read4ByteTxRx(port, 1, ADDR["goal_position"])
+    assert result == dxl.COMM_SUCCESS
+    assert value == 0xFFFDFFFF
+
+
+def test_position_mode_enforces_limits(sdk_port):
+    port, ph = sdk_port
+    _, error = ph.write4ByteTxRx(port, 1, ADDR["goal_position"], 5000)  # limit is 4095
+    assert error == dxl.ERRNUM_DATA_LIMIT
+
+
+def test_reboot_clears_ram_keeps_eeprom(sdk_port):
+    port, ph = sdk_port
+    ph.write1ByteTxRx(port, 1, ADDR["operating_mode"], 5)
+    ph.write1ByteTxRx(port, 1, ADDR["torque_enable"], 1)
+    assert ph.reboot(port, 1) == (dxl.COMM_SUCCESS, 0)
+    assert ph.read1ByteTxRx(port, 1, ADDR["torque_enable"])[0] == 0
+    assert ph.read1ByteTxRx(port, 1, ADDR["operating_mode"])[0] == 5
+
+
+def test_corrupt_crc_gets_crc_error(emulator):
+    serial = pytest.importorskip("serial")
+    with serial.Serial(emulator.port, 57600, timeout=0.5) as s:
+        # A ping to ID 1 with a wrong CRC: FF FF FD 00 | 01 | 03 00 | 01 | CRC
+        s.write(b"\xff\xff\xfd\x00\x01\x03\x00\x01\x00\x00")
+        reply = s.read(11)
+    assert reply[:5] == b"\xff\xff\xfd\x00\x01" and reply[7] == 0x55
+    assert reply[8] == dxl.ERRNUM_CRC
+
+
+def test_link_cut_times_out_then_recovers(sdk_port, emulator):
+    port, ph = sdk_port
+    emulator.cut_link(0.2)
+    assert ph.ping(port, 1)[1] == dxl.COMM_RX_TIMEOUT
+    time.sleep(0.25)
+    assert ph.ping(port, 1)[1] == dxl.COMM_SUCCESS
+
+
+def test_round_trip_time(sdk_port):
+    port, ph = sdk_port
+    n = 50
+    t0 = time.perf_counter()
+    for _ in range(n):
+        assert ph.read4ByteTxRx(port, 1, ADDR["present_position"])[1] == dxl.COMM_SUCCESS
+    per = (time.perf_counter() - t0) / n
+    print(f"emulator read round trip: {per * 1e3:.2f} ms")
+    assert per < 0.02  # the real bus at 57600 baud takes ~3 ms; in-process GIL sharing adds some
+
+
+def test_close_is_prompt():
+    emu = XL330Emulator(ids=(3,))
+    t0 = time.monotonic()
+    emu.close()
+    assert time.monotonic() - t0 < 0.5
+
+
+def test_rejects_bad_ids():
+    with pytest.raises(ValueError):
+        XL330Emulator(ids=(1, 1))
