@@ -143,6 +143,10 @@ def build_parser() -> argparse.ArgumentParser:
     from mjcodesign import cli_fabrication
 
     cli_fabrication.add_parser(sub)
+
+    from hardware.cli import add_parser as add_hardware
+
+    add_hardware(sub)
     return p
 
 
