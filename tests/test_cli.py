@@ -71,3 +71,11 @@ def test_import_is_light():
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0 and r.stdout.strip() == "", r.stdout + r.stderr
+
+
+def test_bench_finger_writes_json(tmp_path):
+    out = tmp_path / "bench.json"
+    r = _run("bench", "finger", "--models", "chain", "--seconds", "0.05", "--json", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    assert res["chain"]["steps_per_s"] > 0 and json.loads(out.read_text()) == res
