@@ -85,7 +85,10 @@ def franka_sim(box: bool = True) -> Iterator[SimScene]:
         ET.SubElement(body, "geom", type="box", size=half, mass=str(BOX_MASS))
     server = franky_sim.SimulationServer(sim, hostname_candidates=[LOOPBACK])
     try:
-        server.init()
+        try:
+            server.init()
+        except OSError as exc:  # libfranka's fixed ports are taken (another simulator running?)
+            raise HardwareError(f"franky-sim cannot serve on {LOOPBACK}: {exc}") from exc
         server.run_async()
         yield SimScene(LOOPBACK, sim)
     finally:
