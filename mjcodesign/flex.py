@@ -192,6 +192,7 @@ def add_flex_finger(
                     continue
                 b = parent.add_body(name=f"{prefix}n{gi}_{gj}_{gk}", pos=p)
                 b.explicitinertial = True
+                b.ipos = [0.0, 0.0, 0.0]  # without it, MjSpec.to_xml drops the inertial element
                 b.mass = float(node_mass[gi, gj, gk])
                 b.inertia = [_NODE_INERTIA] * 3
                 for d in range(3):

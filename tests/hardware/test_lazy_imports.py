@@ -15,7 +15,5 @@ def test_import_is_light():
         "import sys, hardware, hardware.cli, hardware.selftest; "
         f"print([m for m in {HEAVY!r} if m in sys.modules])"
     )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True
-    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)
     assert out.stdout.strip() == "[]"
