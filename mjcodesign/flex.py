@@ -115,6 +115,11 @@ def cell_young(design: FingerDesign, young: np.ndarray, n_cells: int) -> np.ndar
     return out
 
 
+def node_weights(order: int) -> np.ndarray:
+    """Consistent 1-D nodal weights of a uniform load over one cell: (1/2, 1/2) or Simpson (1, 4, 1)/6."""
+    return np.array([0.5, 0.5]) if order == 1 else np.array([1.0, 4.0, 1.0]) / 6.0
+
+
 def lagrange_weights(xi: np.ndarray, order: int) -> np.ndarray:
     """1-D Lagrange shape functions on [0, 1] with ``order + 1`` equispaced nodes, shape (len(xi), order+1)."""
     xi = np.asarray(xi, dtype=float)
@@ -175,7 +180,7 @@ def add_flex_finger(
     )
     # Lumped nodal mass: each cell's real mass split by Simpson (quadratic) or equal (trilinear) weights.
     edges = np.linspace(0.0, design.length, n_cells + 1)
-    w1 = np.array([0.5, 0.5]) if order == 1 else np.array([1, 4, 1]) / 6.0
+    w1 = node_weights(order)
     node_mass = np.zeros((nx, ny, nz))
     for c in range(n_cells):
         vol = sum(_overlap_volume(b, edges[c], edges[c + 1]) for b in design.blocks())
@@ -310,7 +315,7 @@ def static_tip_deflection(m: mujoco.MjModel, handle: FingerHandle, force: float)
     """
     nx, ny, nz, _, order = handle.grid
     K = assemble_stiffness(m, handle)
-    w1 = np.array([0.5, 0.5]) if order == 1 else np.array([1, 4, 1]) / 6.0
+    w1 = node_weights(order)
     f = np.zeros(K.shape[0])
     tip = []
     for gj in range(ny):
@@ -353,7 +358,7 @@ class TipLoad:
 
     def __init__(self, m: mujoco.MjModel, handle: FingerHandle, force: float):
         nx, ny, nz, _, order = handle.grid
-        w1 = np.array([0.5, 0.5]) if order == 1 else np.array([1, 4, 1]) / 6.0
+        w1 = node_weights(order)
         self.ids = []
         self.w = []
         for gj in range(ny):
