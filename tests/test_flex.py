@@ -1,3 +1,4 @@
+import mujoco
 import numpy as np
 import pytest
 
@@ -93,3 +94,19 @@ def test_assembled_stiffness_has_rigid_modes_in_its_null_space():
         # positive definite once the base is clamped
         free = np.arange(3 * ny * nz, K.shape[0])
         assert np.linalg.eigvalsh(K[np.ix_(free, free)]).min() > 0
+
+
+def test_under_converged_flex_raises_not_ignored():
+    from mjcodesign.errors import SimulationDiverged
+    from mjcodesign.mjcf import build_finger
+    from mjcodesign.simulate import check_state
+
+    # Too few solver iterations for the quadratic flex's M+K solve: MuJoCo warns, we must refuse.
+    opts = SimOptions(flex_quadratic_iterations=20)
+    built = build_finger(FingerDesign(), Stiffness.preset("semi-rigid"), "flex-quadratic", options=opts)
+    d = mujoco.MjData(built.model)
+    d.ctrl[:] = 2.0
+    with pytest.raises(SimulationDiverged, match="INERTIA"):
+        for _ in range(20):
+            mujoco.mj_step(built.model, d)
+            check_state(d)
