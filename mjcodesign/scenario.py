@@ -352,32 +352,32 @@ def _finger_wrench(scene: GraspScene, d: mujoco.MjData) -> tuple[np.ndarray, boo
     """(wrench on the object by the fingers [torque about COM, force] in world, finger contact, ground)."""
     m = scene.model
     ob = scene.object_body
-    com = d.xipos[ob]
     wrench = np.zeros(6)
+    if d.ncon == 0:
+        return wrench, False, False
+    con = d.contact
+    g1, g2 = np.asarray(con.geom1), np.asarray(con.geom2)
+    b1, b2 = m.geom_bodyid[g1], m.geom_bodyid[g2]
+    on_obj = (b1 == ob) | (b2 == ob)
+    ground = bool(np.any(on_obj & ((g1 == scene.ground_geom) | (g2 == scene.ground_geom))))
+    other = np.where(b1 == ob, b2, b1)
+    sel = np.flatnonzero(on_obj & np.isin(other, scene.finger_bodies))
+    if sel.size == 0:
+        return wrench, False, ground
     f6 = np.zeros(6)
-    finger, ground = False, False
-    fingers = scene.finger_bodies
-    for i in range(d.ncon):
-        c = d.contact[i]
-        b1, b2 = int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2])
-        if ob not in (b1, b2):
-            continue
-        other = b2 if b1 == ob else b1
-        if c.geom1 == scene.ground_geom or c.geom2 == scene.ground_geom:
-            ground = True
-            continue
-        if other not in fingers:
-            continue
-        finger = True
-        mujoco.mj_contactForce(m, d, i, f6)
-        frame = c.frame.reshape(3, 3)
-        # mj_contactForce gives the force of geom1 on geom2 in the contact frame (rows = axes).
-        sign = 1.0 if b2 == ob else -1.0
-        F = sign * frame.T @ f6[:3]
-        T = sign * frame.T @ f6[3:]
-        wrench[3:] += F
-        wrench[:3] += np.cross(c.pos - com, F) + T
-    return wrench, finger, ground
+    local = np.empty((sel.size, 6))
+    for k, i in enumerate(sel):
+        mujoco.mj_contactForce(m, d, int(i), f6)
+        local[k] = f6
+    # mj_contactForce gives the force of geom1 on geom2 in the contact frame (rows = axes).
+    frames = np.asarray(con.frame)[sel].reshape(-1, 3, 3)
+    sign = np.where(b2[sel] == ob, 1.0, -1.0)[:, None]
+    F = sign * np.einsum("kji,kj->ki", frames, local[:, :3])
+    T = sign * np.einsum("kji,kj->ki", frames, local[:, 3:])
+    r = np.asarray(con.pos)[sel] - d.xipos[ob]
+    wrench[3:] = F.sum(axis=0)
+    wrench[:3] = np.cross(r, F).sum(axis=0) + T.sum(axis=0)
+    return wrench, True, ground
 
 
 def _palm_frame(scene: GraspScene, d: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:

@@ -3,16 +3,19 @@
 from __future__ import annotations
 
 import copy
+import functools
 import os
 import time
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
-from mjcodesign.chain import contact_solref, hinge_stiffness
+from mjcodesign.beam import block_bending_compliance
+from mjcodesign.chain import contact_solref
 from mjcodesign.errors import SimulationDiverged
+from mjcodesign.finger import FingerDesign
 from mjcodesign.mjcf import make_data
 from mjcodesign.scenario import (
     STATE_SPEC,
@@ -45,12 +48,30 @@ class GraspBackend(Protocol):
         ...
 
 
+class _BlockFacts(NamedTuple):
+    """What the chain's stiffness and contact formulas read from a block (computed once per design)."""
+
+    length: float
+    width: float
+    volume: float
+    compliance: float
+    """∫ dx / I(x) over the block [m^-3]."""
+
+
+@functools.lru_cache(maxsize=8)
+def _block_facts(design: FingerDesign) -> tuple[_BlockFacts, ...]:
+    return tuple(
+        _BlockFacts(b.length, b.width, b.volume, block_bending_compliance(b)) for b in design.blocks()
+    )
+
+
 def with_stiffness(scene: GraspScene, stiffness: Stiffness) -> mujoco.MjModel:
     """A copy of the scene's model with another design's stiffness.
 
-    Chain: hinge stiffness k = E I / l, damping ``damping_time`` k and the blocks' contact solref are
-    rewritten in place of a recompile (the test checks that they equal a recompiled model). Flex: the
-    scene is rebuilt (its cell moduli are compiled into the flex).
+    Chain: hinge stiffness k = E I / l (the arithmetic of :func:`mjcodesign.chain.hinge_stiffness`),
+    damping ``damping_time`` k and the blocks' contact solref (:func:`mjcodesign.chain.contact_solref`)
+    are rewritten instead of a recompile; the test checks they equal a recompiled model bitwise. Flex:
+    the scene is rebuilt (its cell moduli are compiled into the flex).
     """
     built = scene.built
     if built.finger_model.is_flex:
@@ -59,21 +80,34 @@ def with_stiffness(scene: GraspScene, stiffness: Stiffness) -> mujoco.MjModel:
         ).model
     m = copy.copy(scene.model)
     design, opts = built.design, built.options
-    blocks = design.blocks()
-    for i, h in enumerate(built.fingers):
-        young = stiffness.finger(i)
-        k = hinge_stiffness(design, young)
-        for j, name in enumerate(h.joints):
-            jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
-            m.jnt_stiffness[jid] = k[j]
-            m.dof_damping[m.jnt_dofadr[jid]] = opts.damping_time * k[j]
-        for j, (blk, e) in enumerate(zip(blocks, young, strict=True)):
-            solref = contact_solref(blk, e, design.density, opts.timestep)
-            for part in ("p", "d"):
-                gid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"{h.prefix}b{j}_{part}")
-                if gid >= 0:
-                    m.geom_solref[gid] = solref
+    facts = _block_facts(design)
+    ids = _chain_ids(scene)
+    for i, young in enumerate(stiffness.young):
+        for j, (f, e) in enumerate(zip(facts, young, strict=True)):
+            k = float(e) * f.length / f.compliance / f.length  # == block_effective_ei(b, e) / b.length
+            jid, gids = ids[i][j]
+            m.jnt_stiffness[jid] = k
+            m.dof_damping[m.jnt_dofadr[jid]] = opts.damping_time * k
+            solref = contact_solref(f, float(e), design.density, opts.timestep)
+            for gid in gids:
+                m.geom_solref[gid] = solref
     return m
+
+
+def _chain_ids(scene: GraspScene) -> list[list[tuple[int, list[int]]]]:
+    """Per finger, per block: (hinge joint id, ids of the geoms carrying the block's contact solref)."""
+    m = scene.model
+    out = []
+    for h in scene.built.fingers:
+        rows = []
+        for j, name in enumerate(h.joints):
+            gids = [
+                mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"{h.prefix}b{j}_{part}")
+                for part in ("p", "d")
+            ]
+            rows.append((mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name), [g for g in gids if g >= 0]))
+        out.append(rows)
+    return out
 
 
 def _initial_state(scene: GraspScene) -> np.ndarray:
