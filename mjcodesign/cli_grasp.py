@@ -165,11 +165,7 @@ def run(args: argparse.Namespace) -> int:
         allow_open=args.allow_open,
         cache_dir=user_cache_dir(),
     )
-    if args.json:
-        print(json.dumps(out))
-    else:
-        for k, v in out.items():
-            print(f"{k:15s} {v}")
+    _print(out, args.json)
     return 0
 
 
@@ -184,12 +180,17 @@ def run_bench(args: argparse.Namespace) -> int:
         seed=args.seed,
         cache_dir=user_cache_dir(),
     )
-    if args.json:
-        print(json.dumps(res))
-    else:
-        for k, v in res.items():
-            print(f"{k:24s} {v}")
+    _print(res, args.json)
     return 0
+
+
+def _print(result: dict, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(result))
+        return
+    width = max(len(k) for k in result)
+    for k, v in result.items():
+        print(f"{k:{width}s} {v}")
 
 
 def main(argv: list[str] | None = None) -> int:
