@@ -76,3 +76,26 @@ def test_pose_below_ground_is_refused(box_scene):
 def test_object_too_wide_is_refused():
     with pytest.raises(PoseError, match="too big"):
         auto_pose(box_object((0.05, 0.13, 0.05), _RHO))  # 130 mm along the closing axis
+
+
+def test_impulse_is_one_step_of_force(box_scene):
+    # xfrc_applied for one step of dt: ∫ F dt = -J ẑ on the object, nothing else pushed.
+    from mjcodesign.scenario import phase_controls
+
+    scenario = GraspScenario(impulse=0.2)
+    ctrl, starts = phase_controls(box_scene, scenario)
+    m = box_scene.model
+    xfrc = ctrl[:, m.nu :].reshape(len(ctrl), m.nbody, 6)
+    assert xfrc.sum(axis=0)[box_scene.object_body, 2] * m.opt.timestep == pytest.approx(-0.2, rel=1e-12)
+    assert np.count_nonzero(xfrc) == 1 and xfrc[starts["impulse"], box_scene.object_body, 2] != 0
+
+
+def test_bench_grasp_smoke(tmp_path):
+    import trimesh
+
+    from mjcodesign.bench_grasp import bench_grasp
+
+    path = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(path)
+    res = bench_grasp("chain", str(path), rollouts=2, cache_dir=tmp_path)
+    assert res["raw_rollouts_per_s"] > 0 and res["rollouts_per_s"] > 0 and res["rollouts"] == 2
