@@ -49,6 +49,7 @@ __all__ = [
     "phase_controls",
     "control_spec",
     "outcome_from_states",
+    "outcome_steps",
     "failed_outcome",
 ]
 
@@ -148,6 +149,8 @@ class Outcome:
     finger_contact: bool = False
     lift_height: float = 0.0
     """Rise of the object's COM from t=0 to the end [m] (world z)."""
+    object_path: np.ndarray | None = None
+    """Object COM in the world at the steps of :func:`outcome_steps`, in order [m], shape (k, 3)."""
 
     def as_dict(self) -> dict:
         """JSON-ready dict."""
@@ -384,6 +387,16 @@ def _palm_frame(scene: GraspScene, d: mujoco.MjData) -> tuple[np.ndarray, np.nda
     return d.xpos[scene.palm_body].copy(), d.xmat[scene.palm_body].reshape(3, 3).copy()
 
 
+def _hold_steps(starts: dict[str, int]) -> np.ndarray:
+    h0, h1 = starts["hold"], starts["impulse"]
+    return np.unique(np.linspace(h0 + (h1 - h0) // 2, h1 - 1, _HOLD_SAMPLES).astype(int))
+
+
+def outcome_steps(starts: dict[str, int]) -> set[int]:
+    """Steps whose states :func:`outcome_from_states` reads (a backend may record only these)."""
+    return {int(t) for t in _hold_steps(starts)} | {starts["lift"] - 1, starts["end"] - 1}
+
+
 def outcome_from_states(
     scene: GraspScene,
     scenario: GraspScenario,
@@ -411,11 +424,12 @@ def outcome_from_states(
     load(x0)
     z0 = float(d.xipos[ob][2])
     # Body force: mean over the second half of the first hold (before the impulse).
-    h0, h1 = starts["hold"], starts["impulse"]
-    idx = np.unique(np.linspace(h0 + (h1 - h0) // 2, h1 - 1, _HOLD_SAMPLES).astype(int))
+    idx = _hold_steps(starts)
     acc = np.zeros(6)
+    path: dict[int, np.ndarray] = {}
     for t in idx:
         load(states[t], t)
+        path[int(t)] = d.xipos[ob].copy()
         w, _, _ = _finger_wrench(scene, d)
         _, R = _palm_frame(scene, d)
         acc[:3] += R.T @ w[:3]
@@ -425,6 +439,7 @@ def outcome_from_states(
     rel = []
     for t in (starts["lift"] - 1, starts["end"] - 1):
         load(states[t], t)
+        path[int(t)] = d.xipos[ob].copy()
         p, R = _palm_frame(scene, d)
         rel.append(R.T @ (d.xipos[ob] - p))
     displacement = rel[1] - rel[0]
@@ -451,4 +466,5 @@ def outcome_from_states(
         reason="; ".join(reasons) if reasons else "ok",
         finger_contact=finger,
         lift_height=rise,
+        object_path=np.array([path[t] for t in sorted(path)]),
     )
