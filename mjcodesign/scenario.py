@@ -61,6 +61,7 @@ _START_CLEARANCE = 0.01  # start openings this far outside the object [m]
 _SQUEEZE = 0.003  # auto pose: closing target inside the object's half-width [m]
 _REST_GAP = 5e-4  # object's lowest point above the ground at t=0 [m]
 _FORCE_EPS = 1e-6  # a finger wrench below this is "no force" [N]
+_MIN_HOLD_STEPS = 4  # the hold-force samples need a few steps before the impulse
 _HOLD_SAMPLES = 10  # body force: mean over this many states in the second half of the first hold
 _OBJECT_FRICTION = (1.0, 0.005, 0.0001)  # paper: mu = 1
 STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -101,7 +102,7 @@ class GraspScenario:
     def phase_steps(self, dt: float) -> dict[str, int]:
         """Steps per phase, in order; the impulse phase is one step."""
         n = {k: int(round(getattr(self, f"{k}_s") / dt)) for k in ("settle", "close", "tighten", "lift")}
-        n["hold"] = max(2, int(round(self.hold_s / dt)))
+        n["hold"] = max(_MIN_HOLD_STEPS, int(round(self.hold_s / dt)))
         n["impulse"] = 1
         n["post_hold"] = int(round(self.post_hold_s / dt))
         return n
@@ -388,8 +389,11 @@ def _palm_frame(scene: GraspScene, d: mujoco.MjData) -> tuple[np.ndarray, np.nda
 
 
 def _hold_steps(starts: dict[str, int]) -> np.ndarray:
+    # States are evaluated under the control of the following step, so the last sample is h1 - 2: the
+    # state after h1 - 1 would be evaluated with the impulse force applied.
     h0, h1 = starts["hold"], starts["impulse"]
-    return np.unique(np.linspace(h0 + (h1 - h0) // 2, h1 - 1, _HOLD_SAMPLES).astype(int))
+    last = h1 - 2
+    return np.unique(np.linspace(min(h0 + (h1 - h0) // 2, last), last, _HOLD_SAMPLES).astype(int))
 
 
 def outcome_steps(starts: dict[str, int]) -> set[int]:
