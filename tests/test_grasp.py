@@ -106,3 +106,16 @@ def test_hold_force_is_measured_before_the_impulse(box_scene):
     quiet = MujocoBackend().run(box_scene, GraspScenario(impulse=0.0))
     kicked = MujocoBackend().run(box_scene, GraspScenario(impulse=0.4))
     assert_array_equal(quiet.body_force, kicked.body_force)
+
+
+@pytest.mark.slow
+def test_flex_grasp_smoke():
+    # Flex fingers are ~100x slower than the chain: a 0.2-s scenario only checks that it runs clean.
+    obj = box_object((_BOX,) * 3, _RHO)
+    scene = build_scene(obj, FingerDesign(), Stiffness.preset("semi-rigid"), FingerModel.FLEX, auto_pose(obj))
+    scenario = GraspScenario(
+        settle_s=0.02, close_s=0.06, tighten_s=0.04, lift_s=0.04, hold_s=0.02, impulse=0.0, post_hold_s=0.02
+    )
+    out = MujocoBackend().run(scene, scenario)
+    assert not out.reason.startswith("diverged"), out.reason
+    assert np.all(np.isfinite(out.body_force)) and np.all(np.isfinite(out.displacement))
