@@ -1,0 +1,84 @@
+"""``grasp`` command: JSON output and bad input (exit 2, one line, no traceback).
+
+Until ``cli_grasp`` is wired into ``mjcodesign.cli`` these run ``python -m mjcodesign.cli_grasp``.
+"""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+_KEYS = {"success", "body_force", "displacement", "ground_contact", "reason", "wall_time_s"}
+
+
+def _run(tmp_path, *args, timeout=120):
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache")}
+    return subprocess.run(
+        [sys.executable, "-m", "mjcodesign.cli_grasp", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env,
+        cwd=Path(__file__).resolve().parents[1],
+    )
+
+
+def _mesh(tmp_path, name, mesh):
+    path = tmp_path / name
+    mesh.export(path)
+    return str(path)
+
+
+def test_grasp_box_json(tmp_path):
+    box = _mesh(tmp_path, "box.stl", trimesh.creation.box(extents=(0.05, 0.05, 0.05)))
+    r = _run(tmp_path, "--object", box, "--density", "heavy", "--impulse", "0", "--json")
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert _KEYS <= set(out)
+    assert out["success"], out["reason"]
+    assert len(out["body_force"]) == 6 and len(out["displacement"]) == 3
+    assert np.all(np.isfinite(out["body_force"]))
+
+
+@pytest.mark.parametrize(
+    "case",
+    ["missing", "broken", "open", "too_big", "bad_design", "below_ground", "bad_density", "folder"],
+)
+def test_bad_input_exits_2_with_one_line(tmp_path, case):
+    box = _mesh(tmp_path, "box.obj", trimesh.creation.box(extents=(0.04, 0.04, 0.04)))
+    args = ["--object", box]
+    if case == "missing":
+        args = ["--object", str(tmp_path / "missing.stl")]
+    elif case == "broken":
+        bad = tmp_path / "broken.ply"
+        bad.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n")
+        args = ["--object", str(bad)]
+    elif case == "open":
+        sheet = trimesh.Trimesh(
+            [[0, 0, 0], [0.05, 0, 0], [0, 0.05, 0], [0.05, 0.05, 0.01]], [[0, 1, 2], [1, 3, 2]]
+        )
+        args = ["--object", _mesh(tmp_path, "sheet.stl", sheet)]
+    elif case == "too_big":
+        args = ["--object", _mesh(tmp_path, "big.stl", trimesh.creation.box(extents=(0.04, 0.2, 0.04)))]
+    elif case == "bad_design":
+        args += ["--design", "1,2,3"]
+    elif case == "below_ground":
+        pose = tmp_path / "pose.json"
+        T = np.eye(4)
+        T[2, 3] = 0.05
+        pose.write_text(json.dumps({"pose": T.tolist(), "openings": [0.03, 0.03]}))
+        args += ["--pose", str(pose)]
+    elif case == "bad_density":
+        args += ["--density", "feather"]
+    elif case == "folder":
+        args = ["--object", str(tmp_path)]
+    r = _run(tmp_path, *args, "--json")
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, r.stderr
+    assert "Traceback" not in r.stderr

@@ -1,0 +1,121 @@
+"""Grasp scenario on the chain model: static hold force, determinism, batched rollouts."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+
+from mjcodesign.backends import MujocoBackend, with_stiffness
+from mjcodesign.errors import PoseError
+from mjcodesign.finger import FingerDesign
+from mjcodesign.mjcf import FingerModel, GripperPose
+from mjcodesign.objects import box_object
+from mjcodesign.scenario import GraspScenario, auto_pose, build_scene
+from mjcodesign.stiffness import Stiffness
+
+_G = 9.81
+_TOL_HOLD = 0.05  # issue: vertical finger force during the hold equals m g within 5%
+_BOX = 0.05  # box side [m]
+_RHO = 400.0  # heavy preset [kg/m³]: 50 g box
+
+
+@pytest.fixture(scope="module")
+def box_scene():
+    obj = box_object((_BOX,) * 3, _RHO)
+    design = FingerDesign()
+    return build_scene(obj, design, Stiffness.preset("paper-optimized"), FingerModel.CHAIN, auto_pose(obj))
+
+
+def test_hold_force_equals_weight(box_scene):
+    # Static equilibrium of the lifted box with no ground contact (the palm does not touch it):
+    #   sum_i F_z,i (finger contacts) = m g
+    scenario = GraspScenario(tension=10.0, impulse=0.0, hold_s=0.3)
+    out = MujocoBackend().run(box_scene, scenario)
+    assert out.success, out.reason
+    assert not out.ground_contact
+    mg = box_scene.obj.mass * _G
+    assert out.body_force[5] == pytest.approx(mg, rel=_TOL_HOLD)
+    assert abs(out.body_force[3]) < _TOL_HOLD * mg  # no net push along the palm's x
+
+
+def test_single_rollout_is_deterministic(box_scene):
+    scenario = GraspScenario()
+    a = MujocoBackend().run(box_scene, scenario)
+    b = MujocoBackend().run(box_scene, scenario)
+    assert_array_equal(a.body_force, b.body_force)
+    assert_array_equal(a.displacement, b.displacement)
+    assert a.reason == b.reason
+    assert np.all(np.isfinite(a.body_force)) and np.all(np.isfinite(a.displacement))
+
+
+def test_batched_rollout_equals_single_bitwise(box_scene):
+    scenario = GraspScenario(impulse=0.0, hold_s=0.1, post_hold_s=0.05)
+    designs = [Stiffness.preset("paper-optimized"), Stiffness.preset("soft")]
+    outs = MujocoBackend(nthread=2).run_batch(box_scene, scenario, designs)
+    single = MujocoBackend().run(box_scene, scenario)
+    assert_array_equal(outs[0].body_force, single.body_force)
+    assert_array_equal(outs[0].displacement, single.displacement)
+    soft_scene = build_scene(box_scene.obj, FingerDesign(), designs[1], FingerModel.CHAIN, box_scene.pose)
+    soft = MujocoBackend().run(soft_scene, scenario)
+    assert_array_equal(outs[1].body_force, soft.body_force)
+
+
+def test_with_stiffness_equals_recompile(box_scene):
+    soft = Stiffness.preset("soft")
+    m = with_stiffness(box_scene, soft)
+    ref = build_scene(box_scene.obj, FingerDesign(), soft, FingerModel.CHAIN, box_scene.pose).model
+    for name in ("jnt_stiffness", "dof_damping", "geom_solref", "body_mass", "body_inertia"):
+        assert_array_equal(getattr(m, name), getattr(ref, name), err_msg=name)
+
+
+def test_pose_below_ground_is_refused(box_scene):
+    pose = GripperPose((0.0, 0.0, 0.1), (1.0, 0.0, 0.0, 0.0), (0.02, 0.02))
+    with pytest.raises(PoseError, match="below the ground"):
+        build_scene(box_scene.obj, FingerDesign(), Stiffness.preset("soft"), FingerModel.CHAIN, pose)
+
+
+def test_object_too_wide_is_refused():
+    with pytest.raises(PoseError, match="too big"):
+        auto_pose(box_object((0.05, 0.13, 0.05), _RHO))  # 130 mm along the closing axis
+
+
+def test_impulse_is_one_step_of_force(box_scene):
+    # xfrc_applied for one step of dt: ∫ F dt = -J ẑ on the object, nothing else pushed.
+    from mjcodesign.scenario import phase_controls
+
+    scenario = GraspScenario(impulse=0.2)
+    ctrl, starts = phase_controls(box_scene, scenario)
+    m = box_scene.model
+    xfrc = ctrl[:, m.nu :].reshape(len(ctrl), m.nbody, 6)
+    assert xfrc.sum(axis=0)[box_scene.object_body, 2] * m.opt.timestep == pytest.approx(-0.2, rel=1e-12)
+    assert np.count_nonzero(xfrc) == 1 and xfrc[starts["impulse"], box_scene.object_body, 2] != 0
+
+
+def test_bench_grasp_smoke(tmp_path):
+    import trimesh
+
+    from mjcodesign.bench_grasp import bench_grasp
+
+    path = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(path)
+    res = bench_grasp("chain", str(path), rollouts=2, cache_dir=tmp_path)
+    assert res["raw_rollouts_per_s"] > 0 and res["rollouts_per_s"] > 0 and res["rollouts"] == 2
+
+
+def test_hold_force_is_measured_before_the_impulse(box_scene):
+    # Everything before the impulse step is identical, so the hold-phase wrench must be bitwise equal.
+    quiet = MujocoBackend().run(box_scene, GraspScenario(impulse=0.0))
+    kicked = MujocoBackend().run(box_scene, GraspScenario(impulse=0.4))
+    assert_array_equal(quiet.body_force, kicked.body_force)
+
+
+@pytest.mark.slow
+def test_flex_grasp_smoke():
+    # Flex fingers are ~100x slower than the chain: a 0.2-s scenario only checks that it runs clean.
+    obj = box_object((_BOX,) * 3, _RHO)
+    scene = build_scene(obj, FingerDesign(), Stiffness.preset("semi-rigid"), FingerModel.FLEX, auto_pose(obj))
+    scenario = GraspScenario(
+        settle_s=0.02, close_s=0.06, tighten_s=0.04, lift_s=0.04, hold_s=0.02, impulse=0.0, post_hold_s=0.02
+    )
+    out = MujocoBackend().run(scene, scenario)
+    assert not out.reason.startswith("diverged"), out.reason
+    assert np.all(np.isfinite(out.body_force)) and np.all(np.isfinite(out.displacement))
