@@ -63,7 +63,7 @@ class FingerMesh:
     waypoint_weights: np.ndarray
     """Tendon waypoints as combinations of vertices, shape (n_blocks, n_vertices): P = W @ x."""
     h: float
-    """Target cell size along x and z [m]."""
+    """Smallest target cell size along x [m]."""
 
     @property
     def n_vertices(self) -> int:
@@ -81,10 +81,12 @@ class FingerMesh:
         return np.einsum("ij,ij->i", np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), x[:, 3] - x[:, 0]) / 6.0
 
 
-def _subdivide(breaks: list[float], h: float) -> np.ndarray:
+def _subdivide(breaks: list[float], h, size=None) -> np.ndarray:
+    """Grid over ``breaks`` with pieces of at most ``h`` (or ``size(a, b)`` for the piece a..b)."""
     pts = [breaks[0]]
     for a, b in itertools.pairwise(breaks):
-        n = max(1, int(np.ceil((b - a) / h - 1e-9)))
+        hp = h if size is None else size(a, b)
+        n = max(1, int(np.ceil((b - a) / hp - 1e-9)))
         pts.extend(np.linspace(a, b, n + 1)[1:])
     return np.array(pts)
 
@@ -108,10 +110,19 @@ for _perm in itertools.permutations(range(3)):
     _KUHN.append(_path)
 
 
-def mesh_finger(design: FingerDesign, h: float = 1e-3, *, spine_layers: int = 4, ny: int = 2) -> FingerMesh:
+def mesh_finger(
+    design: FingerDesign,
+    h: float = 1e-3,
+    *,
+    spine_layers: int = 4,
+    ny: int = 2,
+    h_flexure: float | None = None,
+) -> FingerMesh:
     """Mesh ``design`` with cells of at most ``h`` [m] along x and z.
 
-    ``spine_layers`` (even) layers run through the spine and ``ny`` (even) cells across the width.
+    ``spine_layers`` (even) layers run through the spine and ``ny`` (even) cells across the width. Along
+    the flexures and the trapezoid cuts, where bending concentrates, x cells are at most ``h_flexure``
+    (default: the spine layer thickness, i.e. cubic-ish cells in the spine).
     """
     if not (np.isfinite(h) and 0 < h <= 0.01):
         raise DesignError(f"mesh size h must be in (0, 10 mm], got {h}")
@@ -123,7 +134,18 @@ def mesh_finger(design: FingerDesign, h: float = 1e-3, *, spine_layers: int = 4,
     breaks = _unique(
         [0.0, design.length] + [v for b in blocks for v in (b.x0, b.x1, b.mid, b.x0 + b.cut0, b.x1 - b.cut1)]
     )
-    xs = _subdivide(breaks, h)
+    if h_flexure is None:
+        h_flexure = t / spine_layers
+
+    def size(a: float, b: float) -> float:
+        xm = 0.5 * (a + b)
+        for blk in blocks:
+            if blk.x0 <= xm <= blk.x1:
+                bent = blk.kind is BlockKind.FLEXURE or xm < blk.x0 + blk.cut0 or xm > blk.x1 - blk.cut1
+                return min(h, h_flexure) if bent else h
+        return h
+
+    xs = _subdivide(breaks, h, size)
     ys = np.linspace(-0.5 * design.width, 0.5 * design.width, ny + 1)
     nx = len(xs)
 
@@ -222,7 +244,7 @@ def mesh_finger(design: FingerDesign, h: float = 1e-3, *, spine_layers: int = 4,
     tip_face = np.flatnonzero(np.abs(vertices[:, 0] - design.length) <= _COINCIDENT)
     tip = int(remap[grid_s[nx - 1, ny // 2, k_tip]])
     weight = _face_weights(vertices, tets, tip_face, design.length)
-    return FingerMesh(vertices, tets, tet_block, base, tip_face, weight, tip, W, float(h))
+    return FingerMesh(vertices, tets, tet_block, base, tip_face, weight, tip, W, float(min(h, h_flexure)))
 
 
 def _face_weights(vertices: np.ndarray, tets: np.ndarray, face: np.ndarray, x_face: float) -> np.ndarray:
