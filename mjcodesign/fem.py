@@ -50,7 +50,7 @@ from mjcodesign.femmesh import FingerMesh, mesh_finger
 from mjcodesign.finger import FingerDesign
 from mjcodesign.stiffness import Stiffness
 
-__all__ = ["FemOptions", "FemFinger", "tendon_forces", "TENDON_VARIANTS"]
+__all__ = ["FemOptions", "FemDynamics", "FemFinger", "tendon_forces", "TENDON_VARIANTS"]
 
 TENDON_VARIANTS = ("frictionless", "paper")
 _POISSON = 0.45
@@ -90,6 +90,30 @@ class FemOptions:
     def __post_init__(self) -> None:
         if not 0.0 <= self.poisson < 0.5:
             raise DesignError(f"Poisson's ratio must be in [0, 0.5), got {self.poisson}")
+
+
+@dataclass(frozen=True)
+class FemDynamics:
+    """Explicit dynamics options; defaults are the paper's (shared/NOTES.md)."""
+
+    dt: float = 2.5e-6
+    """Substep [s] (4000 fps × 100 substeps in the paper)."""
+    mass_damping: float = 0.5
+    """Rayleigh α [1/s] (the paper's damping 0.5)."""
+    stiffness_damping: float = 0.0
+    """Rayleigh β [s]; explicit stability needs β well below dt·(h/c)⁻¹ scale, 0 by default."""
+    contact_ke: float = 1e3 / 1e-4
+    """Ground penalty stiffness [Pa/m]: the paper's ke = 1e3 N/m per vertex over a 1 cm² patch."""
+    contact_kd: float = 10.0 / 1e-4
+    """Ground penalty damping [Pa·s/m] (the paper's kd = 10 per vertex over 1 cm²)."""
+    friction: float = 1.0
+    """Coulomb coefficient (the paper's μ = 1)."""
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    """Gravity in the world frame [m/s²]."""
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.dt) and self.dt > 0):
+            raise DesignError(f"dt must be positive, got {self.dt}")
 
 
 def _warp():
@@ -394,16 +418,113 @@ class FemFinger:
             "positions": x,
         }
 
-    # -- gradients --------------------------------------------------------------------------------
-    def static_gradient(self, x: np.ndarray, K_free, dmetric_dx: np.ndarray) -> np.ndarray:
-        """d(metric)/d(ln E) (22,) at the equilibrium ``x`` with free tangent ``K_free``.
+    # -- dynamics ---------------------------------------------------------------------------------
+    def rollout(
+        self,
+        duration: float,
+        *,
+        dynamics: FemDynamics | None = None,
+        rotation: np.ndarray | None = None,
+        position=(0.0, 0.0, 0.0),
+        base_velocity=(0.0, 0.0, 0.0),
+        frames: int = 10,
+    ) -> np.ndarray:
+        """Explicit dynamics from rest; the finger frame placed at ``rotation``/``position`` in the world.
 
-        Adjoint: K^T λ = ∂m/∂x on the free DOFs, then dm/dθ = λ·∂f_int/∂θ through ``wp.Tape``.
+        The base face moves at ``base_velocity`` [m/s] (lift); the ground is the plane z = 0. Returns the
+        tip vertex's world position [m] at ``frames + 1`` evenly spaced times, shape (frames + 1, 3).
+        """
+        wp = self.wp
+        k = _kernels()
+        dyn = dynamics or FemDynamics()
+        dev = self.options.device
+        R = np.eye(3) if rotation is None else np.asarray(rotation, dtype=float)
+        x0 = self.mesh.vertices @ R.T + np.asarray(position, dtype=float)
+        n = self.mesh.n_vertices
+        pinned = np.zeros(n, dtype=np.int32)
+        pinned[self.mesh.base] = 1
+        area = np.cbrt(self.mass / self.design.density) ** 2  # lumped contact patch per vertex [m²]
+        xa = wp.array(x0, dtype=wp.vec3d, device=dev)
+        xb = wp.zeros_like(xa)
+        va = wp.zeros_like(xa)
+        vb = wp.zeros_like(xa)
+        f = wp.zeros_like(xa)
+        rest = wp.array(x0, dtype=wp.vec3d, device=dev)
+        mass = wp.array(self.mass, dtype=wp.float64, device=dev)
+        area_w = wp.array(area, dtype=wp.float64, device=dev)
+        pin = wp.array(pinned, dtype=wp.int32, device=dev)
+        n_steps = max(1, int(round(duration / dyn.dt)))
+        per_frame = max(1, n_steps // frames)
+        vel = np.asarray(base_velocity, dtype=float)
+        out = [x0[self.mesh.tip].copy()]
+        f64 = wp.float64
+        for s in range(1, n_steps + 1):
+            f.zero_()
+            self._launch_forces(xa, f)
+            if dyn.stiffness_damping > 0:
+                wp.launch(
+                    k.damping_forces,
+                    dim=self.mesh.n_tets,
+                    inputs=[
+                        va,
+                        self.tets,
+                        self.dm_inv,
+                        self.vol,
+                        self.mu,
+                        self.lam,
+                        f64(dyn.stiffness_damping),
+                    ],
+                    outputs=[f],
+                    device=dev,
+                )
+            off = vel * s * dyn.dt
+            wp.launch(
+                k.integrate,
+                dim=n,
+                inputs=[
+                    xa,
+                    va,
+                    f,
+                    mass,
+                    area_w,
+                    pin,
+                    rest,
+                    wp.vec3d(*off),
+                    wp.vec3d(*dyn.gravity),
+                    f64(dyn.mass_damping),
+                    f64(dyn.contact_ke),
+                    f64(dyn.contact_kd),
+                    f64(dyn.friction),
+                    f64(dyn.dt),
+                ],
+                outputs=[xb, vb],
+                device=dev,
+            )
+            xa, xb = xb, xa
+            va, vb = vb, va
+            if s % per_frame == 0:
+                tip = xa.numpy()[self.mesh.tip].copy()
+                if not np.isfinite(tip).all():
+                    raise SimulationDiverged(f"FEM dynamics diverged at t = {s * dyn.dt:.2e} s; lower dt")
+                out.append(tip)
+        return np.array(out)
+
+    # -- gradients --------------------------------------------------------------------------------
+    def static_gradient(self, x: np.ndarray, load: Callable, dmetric_dx: np.ndarray) -> np.ndarray:
+        """d(metric)/d(ln E), shape (22,), at the equilibrium ``x`` (n, 3) under the full ``load``.
+
+        Adjoint of r(x, θ) = f_int + f_ext = 0: K^T λ = ∂m/∂x on the free DOFs with K = −∂r/∂x, then
+        dm/dθ = λ·∂f_int/∂θ, taken through ``wp.Tape`` over the material and force kernels.
         """
         wp = self.wp
         free = self.free_dof
+        K = self.tangent(x)
+        _, J = load(x)
+        if J is not None:
+            K = K - J
+        K = K.tocsr()[free][:, free]
         lam = np.zeros(3 * self.mesh.n_vertices)
-        lam[free] = spla.spsolve(K_free.T.tocsc(), np.asarray(dmetric_dx, dtype=float).ravel()[free])
+        lam[free] = spla.spsolve(K.T.tocsc(), np.asarray(dmetric_dx, dtype=float).ravel()[free])
         dev = self.options.device
         xw = wp.array(x, dtype=wp.vec3d, device=dev)
         f = wp.zeros(self.mesh.n_vertices, dtype=wp.vec3d, device=dev, requires_grad=True)

@@ -229,6 +229,7 @@ def integrate(
     area_in: wp.array(dtype=wp.float64),
     pinned_in: wp.array(dtype=wp.int32),
     x_pinned_in: wp.array(dtype=wp.vec3d),
+    offset_in: wp.vec3d,
     gravity_in: wp.vec3d,
     alpha_in: wp.float64,
     ke_in: wp.float64,
@@ -242,11 +243,11 @@ def integrate(
 
     Ground z = 0: a penalty pressure ke·depth + kd·(approach speed) [Pa] on the vertex's lumped area,
     and Coulomb friction of coefficient μ, regularised by the tangential speed. Pinned vertices follow
-    ``x_pinned_in`` (clamped base, driven for lift).
+    ``x_pinned_in + offset_in`` (clamped base, driven for lift).
     """
     i = wp.tid()
     if pinned_in[i] != 0:
-        x_new = x_pinned_in[i]
+        x_new = x_pinned_in[i] + offset_in
         v_out[i] = (x_new - x_in[i]) / dt_in
         x_out[i] = x_new
         return
