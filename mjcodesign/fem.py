@@ -418,6 +418,23 @@ class FemFinger:
             "positions": x,
         }
 
+    def stable_dt(self) -> float:
+        """CFL estimate of the largest stable explicit step [s]: min over tets of altitude / P-wave speed."""
+        x = self.mesh.vertices[self.mesh.tets]
+        faces = [(1, 2, 3), (0, 2, 3), (0, 1, 3), (0, 1, 2)]
+        area = np.max(
+            [
+                0.5 * np.linalg.norm(np.cross(x[:, b] - x[:, a], x[:, c] - x[:, a]), axis=1)
+                for a, b, c in faces
+            ],
+            axis=0,
+        )
+        altitude = 3.0 * self._vol / area
+        mu = 0.75 * self.mu.numpy()
+        lam = self.lam.numpy() - 5.0 / 6.0 * mu
+        speed = np.sqrt((lam + 2.0 * mu) / self.design.density)
+        return float(np.min(altitude / speed))
+
     # -- dynamics ---------------------------------------------------------------------------------
     def rollout(
         self,
