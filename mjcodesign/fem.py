@@ -26,11 +26,16 @@ Convergence against Euler–Bernoulli (`mjcodesign.beam.cantilever_tip_deflectio
     12            3 mm       22,500    0.933          0.904
     16            3 mm       34,338    0.946          0.917
 
-    same, ν = 0.3:  4 layers 0.965, 8 layers 1.064 (2 mm)
+    same, ν = 0.3:  4 layers 0.965, 8 layers 1.064 (2 mm), 12 layers 1.085 (3 mm)
+    prismatic 136×20×4.1 mm bar (no cuts), h = layer thickness everywhere:
+        ν = 0.3:  4 layers 0.781, 8 layers 0.881;  ν = 0.45: 4 layers 0.581, 8 layers 0.744
 
-The error falls roughly like h^1 (not h^2) in this range: linear tets lock at ν = 0.45 (volumetric
-locking; at ν = 0.3 the same meshes overshoot EB instead). The 5% target of the issue is not reached
-with meshes that solve in under a minute here; see the tests, which record this as an expected failure.
+The error falls roughly like h^1 (not h^2) in this range: linear tets are too stiff in bending (shear
+locking, see the prismatic bar) and at ν = 0.45 also lock volumetrically. At ν = 0.3 the finger passes
+EB and is still rising at 1.085, so the converged 3D finger is likely softer than EB by more than 5%
+(cut tapers and section steps that EB treats as fully effective); this is not settled here. The 5%
+target of the issue is not reached with meshes that solve in about a minute on this machine; the tests
+record it as an expected failure. Quadratic tets would be the next step.
 
 Warp is imported lazily: ``import mjcodesign.fem`` does not import it, building a `FemFinger` does.
 """
@@ -137,6 +142,13 @@ def tendon_forces(
     F_tip = f_T u(P_{n−2} − P_{n−1}). ``paper``: the first waypoint carries nothing, middle ones keep the
     part tangent to the surface (normal ``normals[i]`` removed), the tip takes f_T·n (inwards, i.e.
     −f_T times the spine's outward normal).
+
+    `FemFinger.tendon_load` takes ``normals`` as each block's deformed section axis (spine top minus
+    bottom at the block's middle, y = 0), the FEM counterpart of the chain's block z axis. Where this
+    differs from the authors' code: they take the normal of the mesh surface face at the waypoint, and
+    their waypoints are particles of a coarse mesh; here segment waypoints are vertices and flexure
+    waypoints are carried by the flexure's mid-section (`mjcodesign.femmesh`). The ``frictionless``
+    default is not the authors' model; it is the exact statics of a frictionless tendon.
     """
     if variant not in TENDON_VARIANTS:
         raise DesignError(f"unknown tendon variant {variant!r}; choose from {TENDON_VARIANTS}")
