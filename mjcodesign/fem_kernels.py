@@ -268,3 +268,169 @@ def integrate(
     v_new = v + dt_in * f / m
     v_out[i] = v_new
     x_out[i] = x + dt_in * v_new
+
+
+# -- quadratic (10-node) tetrahedra -------------------------------------------------------------------
+# Node order: corners 0..3, then edge midpoints (0,1), (1,2), (0,2), (0,3), (1,3), (2,3).
+# Quadrature: 4-point rule of degree 2, barycentric (a, b, b, b) and permutations, weights 1/4.
+_QA = 0.5854101966249685
+_QB = 0.1381966011250105
+
+
+@wp.func
+def _bary(q: int) -> wp.vec4d:
+    a = _f64(_QA)
+    b = _f64(_QB)
+    if q == 0:
+        return wp.vec4d(a, b, b, b)
+    if q == 1:
+        return wp.vec4d(b, a, b, b)
+    if q == 2:
+        return wp.vec4d(b, b, a, b)
+    return wp.vec4d(b, b, b, a)
+
+
+@wp.func
+def _edge(k: int) -> wp.vec2i:
+    if k == 0:
+        return wp.vec2i(0, 1)
+    if k == 1:
+        return wp.vec2i(1, 2)
+    if k == 2:
+        return wp.vec2i(0, 2)
+    if k == 3:
+        return wp.vec2i(0, 3)
+    if k == 4:
+        return wp.vec2i(1, 3)
+    return wp.vec2i(2, 3)
+
+
+@wp.func
+def _grad_l(dm_inv: wp.mat33d, i: int) -> wp.vec3d:
+    """Material gradient of barycentric coordinate i (rows of Dm⁻¹; L0 = 1 − L1 − L2 − L3)."""
+    if i == 0:
+        return -(dm_inv[0] + dm_inv[1] + dm_inv[2])
+    return dm_inv[i - 1]
+
+
+@wp.func
+def _grad_n(dm_inv: wp.mat33d, lq: wp.vec4d, a: int) -> wp.vec3d:
+    """Material gradient of the quadratic shape function of node a at barycentric point lq."""
+    if a < 4:
+        return (_f64(4.0) * lq[a] - _f64(1.0)) * _grad_l(dm_inv, a)
+    e = _edge(a - 4)
+    return _f64(4.0) * (lq[e[0]] * _grad_l(dm_inv, e[1]) + lq[e[1]] * _grad_l(dm_inv, e[0]))
+
+
+@wp.func
+def _p2_node(
+    x_in: wp.array(dtype=wp.vec3d),
+    tets_in: wp.array2d(dtype=wp.int32),
+    e: int,
+    a: int,
+    pert: int,
+    d: wp.vec3d,
+) -> wp.vec3d:
+    x = x_in[tets_in[e, a]]
+    if a == pert:
+        x = x + d
+    return x
+
+
+@wp.func
+def _p2_def(
+    x_in: wp.array(dtype=wp.vec3d),
+    tets_in: wp.array2d(dtype=wp.int32),
+    e: int,
+    dm_inv: wp.mat33d,
+    lq: wp.vec4d,
+    pert: int,
+    d: wp.vec3d,
+) -> wp.mat33d:
+    f = wp.mat33d()
+    for a in range(10):
+        f += wp.outer(_p2_node(x_in, tets_in, e, a, pert, d), _grad_n(dm_inv, lq, a))
+    return f
+
+
+@wp.func
+def _p2_stress(
+    x_in: wp.array(dtype=wp.vec3d),
+    tets_in: wp.array2d(dtype=wp.int32),
+    e: int,
+    dm_inv: wp.mat33d,
+    mu: wp.float64,
+    lam: wp.float64,
+    q: int,
+    pert: int,
+    d: wp.vec3d,
+) -> wp.mat33d:
+    return _snh_pk1(_p2_def(x_in, tets_in, e, dm_inv, _bary(q), pert, d), mu, lam)
+
+
+@wp.kernel
+def p2_elastic_forces(
+    x_in: wp.array(dtype=wp.vec3d),
+    tets_in: wp.array2d(dtype=wp.int32),
+    dm_inv_in: wp.array(dtype=wp.mat33d),
+    vol_in: wp.array(dtype=wp.float64),
+    mu_in: wp.array(dtype=wp.float64),
+    lam_in: wp.array(dtype=wp.float64),
+    f_out: wp.array(dtype=wp.vec3d),
+):
+    """Quadratic tets: accumulate elastic node forces [N] into ``f_out`` (zero it first)."""
+    e, q = wp.tid()
+    dm_inv = dm_inv_in[e]
+    p = _p2_stress(x_in, tets_in, e, dm_inv, mu_in[e], lam_in[e], q, -1, wp.vec3d())
+    w = _f64(0.25) * vol_in[e]
+    lq = _bary(q)
+    for a in range(10):
+        wp.atomic_sub(f_out, tets_in[e, a], w * (p @ _grad_n(dm_inv, lq, a)))
+
+
+@wp.kernel
+def p2_elastic_energy(
+    x_in: wp.array(dtype=wp.vec3d),
+    tets_in: wp.array2d(dtype=wp.int32),
+    dm_inv_in: wp.array(dtype=wp.mat33d),
+    vol_in: wp.array(dtype=wp.float64),
+    mu_in: wp.array(dtype=wp.float64),
+    lam_in: wp.array(dtype=wp.float64),
+    energy_out: wp.array(dtype=wp.float64),
+):
+    """Quadratic tets: accumulate the elastic energy [J] into ``energy_out[0]``."""
+    e, q = wp.tid()
+    f = _p2_def(x_in, tets_in, e, dm_inv_in[e], _bary(q), -1, wp.vec3d())
+    wp.atomic_add(energy_out, 0, _f64(0.25) * vol_in[e] * _snh_energy(f, mu_in[e], lam_in[e]))
+
+
+@wp.kernel
+def p2_elastic_hessian_fd(
+    x_in: wp.array(dtype=wp.vec3d),
+    tets_in: wp.array2d(dtype=wp.int32),
+    dm_inv_in: wp.array(dtype=wp.mat33d),
+    vol_in: wp.array(dtype=wp.float64),
+    mu_in: wp.array(dtype=wp.float64),
+    lam_in: wp.array(dtype=wp.float64),
+    eps_in: wp.float64,
+    k_out: wp.array3d(dtype=wp.float64),
+):
+    """Quadratic tets: K = −∂f/∂x [N/m], shape (n_tets, 30, 30), by central differences per column."""
+    e, col = wp.tid()
+    v = col // 3
+    d = wp.vec3d()
+    d[col - 3 * v] = eps_in
+    dm_inv = dm_inv_in[e]
+    w = _f64(0.25) * vol_in[e] / (_f64(2.0) * eps_in)
+    for a in range(10):
+        for k in range(3):
+            k_out[e, 3 * a + k, col] = _f64(0.0)
+    for q in range(4):
+        dp = _p2_stress(x_in, tets_in, e, dm_inv, mu_in[e], lam_in[e], q, v, d) - _p2_stress(
+            x_in, tets_in, e, dm_inv, mu_in[e], lam_in[e], q, v, -d
+        )
+        lq = _bary(q)
+        for a in range(10):
+            g = w * (dp @ _grad_n(dm_inv, lq, a))
+            for k in range(3):
+                k_out[e, 3 * a + k, col] = k_out[e, 3 * a + k, col] + g[k]

@@ -34,7 +34,7 @@ import numpy as np
 from mjcodesign.errors import DesignError
 from mjcodesign.finger import BlockKind, FingerDesign
 
-__all__ = ["FingerMesh", "mesh_finger"]
+__all__ = ["FingerMesh", "mesh_finger", "to_quadratic"]
 
 _DEGENERATE = 1e-9
 """Tets below this fraction of a cell's volume are collapsed wedges (dropped)."""
@@ -49,7 +49,8 @@ class FingerMesh:
     vertices: np.ndarray
     """Rest positions [m], shape (n_vertices, 3)."""
     tets: np.ndarray
-    """Vertex indices, positively oriented, shape (n_tets, 4)."""
+    """Node indices, corners positively oriented, shape (n_tets, 4), or (n_tets, 10) for quadratic tets
+    (corners, then the midpoints of edges 01, 12, 02, 03, 13, 23)."""
     tet_block: np.ndarray
     """Block index of every tet, base to tip, shape (n_tets,)."""
     base: np.ndarray
@@ -77,7 +78,7 @@ class FingerMesh:
 
     def volumes(self) -> np.ndarray:
         """Rest volume of every tet [m^3], shape (n_tets,)."""
-        x = self.vertices[self.tets]
+        x = self.vertices[self.tets[:, :4]]
         return np.einsum("ij,ij->i", np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), x[:, 3] - x[:, 0]) / 6.0
 
 
@@ -260,3 +261,37 @@ def _face_weights(vertices: np.ndarray, tets: np.ndarray, face: np.ndarray, x_fa
             area[tri] += a / 3.0
     w = area[face]
     return w / w.sum()
+
+
+_P2_EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
+
+
+def to_quadratic(mesh: FingerMesh, length: float) -> FingerMesh:
+    """The same mesh with 10-node tets: edge midpoints appended after the corner vertices.
+
+    Corner indices, waypoints, the tip vertex and the base set keep their meaning; base and tip face
+    gain their midpoints. Tip-face weights become the consistent loads of a uniform traction on
+    quadratic triangles (corners 0, each edge midpoint a third of its triangles' area).
+    """
+    n = mesh.n_vertices
+    edges = np.sort(mesh.tets[:, list(_P2_EDGES)].reshape(-1, 2), axis=1)
+    uniq, inv = np.unique(edges, axis=0, return_inverse=True)
+    mids = 0.5 * (mesh.vertices[uniq[:, 0]] + mesh.vertices[uniq[:, 1]])
+    vertices = np.vstack([mesh.vertices, mids])
+    tets = np.hstack([mesh.tets, n + inv.reshape(-1, 6)])
+    base = np.flatnonzero(np.abs(vertices[:, 0]) <= _COINCIDENT)
+    tip_face = np.flatnonzero(np.abs(vertices[:, 0] - length) <= _COINCIDENT)
+    on = np.zeros(len(vertices), dtype=bool)
+    on[tip_face] = True
+    load = np.zeros(len(vertices))
+    corner_on = on[tets[:, :4]]
+    for e in np.flatnonzero(corner_on.sum(axis=1) == 3):
+        tri = [k for k in range(4) if corner_on[e, k]]
+        p = vertices[tets[e, tri]]
+        area = 0.5 * np.linalg.norm(np.cross(p[1] - p[0], p[2] - p[0]))
+        for j, (a, b) in enumerate(_P2_EDGES):
+            if a in tri and b in tri:
+                load[tets[e, 4 + j]] += area / 3.0
+    w = load[tip_face]
+    W = np.hstack([mesh.waypoint_weights, np.zeros((len(mesh.waypoint_weights), len(mids)))])
+    return FingerMesh(vertices, tets, mesh.tet_block, base, tip_face, w / w.sum(), mesh.tip, W, mesh.h)
