@@ -234,7 +234,7 @@ def add_bench_parser(bench_subparsers) -> None:
     p = bench_subparsers.add_parser(
         "fem", help="Warp FEM steps/s on the CPU and static solve + gradient time"
     )
-    _fem_flags(p)
+    _fem_flags(p, h=3e-3, layers=4, order=1)
     p.add_argument("--steps", type=int, default=2000, help="explicit substeps to time")
     p.add_argument("--out", default=None, help="also write the JSON to this file")
     p.add_argument("--json", action="store_true")

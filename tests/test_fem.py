@@ -155,6 +155,9 @@ def test_crosscheck_cli_json(wp, capsys):
     p = argparse.ArgumentParser()
     sub = p.add_subparsers(dest="command")
     cli_crosscheck.add_parser(sub)
+    bench = sub.add_parser("bench").add_subparsers(dest="what")
+    cli_crosscheck.add_bench_parser(bench)
+    assert p.parse_args(["bench", "fem", "--json"]).fem_order == 1
     args = p.parse_args(
         "crosscheck --scenario cantilever --models chain,fem --design soft --fem-h 4e-3 --fem-layers 2 --json".split()
     )
