@@ -52,6 +52,7 @@ Warp is imported lazily: ``import mjcodesign.fem`` does not import it, building 
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -138,7 +139,8 @@ class FemDynamics:
 def _warp():
     import warp as wp
 
-    wp.config.quiet = True
+    # Keep stdout clean for ``--json``: Warp logs its banner and module loads at INFO level.
+    wp.config.log_level = logging.WARNING
     wp.init()
     return wp
 

@@ -162,7 +162,7 @@ def test_crosscheck_cli_json(wp, capsys):
         "crosscheck --scenario cantilever --models chain,fem --design soft --fem-h 4e-3 --fem-layers 2 --json".split()
     )
     assert args.func(args) == 0
-    rows = json.loads(capsys.readouterr().out)
+    rows = json.loads(capsys.readouterr().out)  # nothing but the JSON on stdout
     assert [r["model"] for r in rows] == ["chain", "fem"]
     for r in rows:
         assert set(r) == {"scenario", "model", "design", "metric", "value", "reference", "rel_diff"}
