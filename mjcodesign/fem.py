@@ -5,8 +5,8 @@ its base face clamped. Two solvers share the Warp kernels of `mjcodesign.fem_ker
 
 * `FemFinger.solve_static`: Newton on the free vertices with load stepping. The tangent is assembled from
   per-tet 12×12 blocks (central differences of the analytic forces in a Warp kernel, float64) plus the
-  Jacobian of configuration-dependent (tendon) loads, and factorised by SuperLU (scipy). A line search
-  on the residual keeps large tendon curls on track.
+  Jacobian of configuration-dependent (tendon) loads, and factorised by SuperLU (scipy). A trust region
+  on the step (at most 5 mm per vertex) keeps large tendon curls on track.
 * `FemFinger.simulate`: explicit semi-implicit Euler with substeps, gravity, Rayleigh damping and ground
   penalty contact with friction (`fem_kernels.integrate`), the clamped base driven along a path.
 
@@ -367,7 +367,7 @@ class FemFinger:
         """Equilibrium positions [m] (n, 3) under ``load`` and the free-DOF tangent there.
 
         The load is ramped in ``steps`` equal increments; each is solved by Newton to
-        ``_NEWTON_RTOL`` with a residual line search. Raises `SimulationDiverged` otherwise.
+        ``_NEWTON_RTOL`` (or a step below ``_STEP_TOL``·L) with a trust region on the step. Raises `SimulationDiverged` otherwise.
         """
         x = self.mesh.vertices.copy() if x0 is None else np.array(x0, dtype=float)
         free = self.free_dof
