@@ -1,0 +1,169 @@
+"""Warp FEM finger: mesh, material, statics against Euler–Bernoulli and the chain, adjoint gradient."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from mjcodesign.femmesh import mesh_finger
+from mjcodesign.finger import FingerDesign, Routing
+from mjcodesign.stiffness import Stiffness
+
+_TOL_BEAM = 0.05  # FEM vs Euler–Bernoulli tip deflection (issue 4)
+_TOL_CURL = 0.10  # chain vs FEM bend angle and tip displacement (issue 4)
+_TOL_GRAD = 1e-4  # adjoint gradient vs central differences (FD step 1e-4 in ln E: error ~1e-8 rel)
+
+
+def test_import_does_not_import_warp():
+    code = "import sys, mjcodesign, mjcodesign.fem, mjcodesign.femmesh, mjcodesign.cli_crosscheck; "
+    code += "assert 'warp' not in sys.modules"
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+@pytest.mark.parametrize("routing", list(Routing))
+def test_mesh_volume_waypoints_tags(routing):
+    design = FingerDesign(routing=routing)
+    m = mesh_finger(design, 2e-3)
+    vol = m.volumes()
+    assert (vol > 0).all()
+    # The mesh follows the side profile exactly: total volume = sum of the block prisms.
+    assert vol.sum() == pytest.approx(sum(b.volume for b in design.blocks()), rel=1e-12)
+    np.testing.assert_allclose(m.waypoint_weights @ m.vertices, design.waypoints(), atol=1e-15)
+    for b in design.blocks():  # segment waypoints are single vertices
+        row = m.waypoint_weights[b.index]
+        if b.kind.value == "segment":
+            assert np.count_nonzero(row) == 1
+    assert set(np.unique(m.tet_block)) == set(range(design.n_blocks))
+    np.testing.assert_allclose(m.vertices[m.tip], [design.length, 0, 0.5 * design.flexure_thickness])
+    assert np.all(m.vertices[m.base, 0] == 0) and len(m.base) > 0
+
+
+@pytest.fixture(scope="module")
+def wp():
+    return pytest.importorskip("warp")
+
+
+@pytest.fixture(scope="module")
+def coarse(wp):
+    from mjcodesign.fem import FemFinger, FemOptions
+
+    return FemFinger(
+        FingerDesign(), Stiffness.preset("paper-optimized"), options=FemOptions(h=4e-3, spine_layers=2)
+    )
+
+
+def test_rest_state_and_forces_are_energy_gradient(coarse):
+    x0 = coarse.mesh.vertices
+    assert np.abs(coarse.internal_forces(x0)).max() < 1e-9
+    rng = np.random.default_rng(0)
+    x = x0 + 1e-4 * rng.standard_normal(x0.shape)
+    f = coarse.internal_forces(x)
+    eps = 1e-8
+    for i, k in [(5, 0), (40, 2), (300, 1)]:
+        xp, xm = x.copy(), x.copy()
+        xp[i, k] += eps
+        xm[i, k] -= eps
+        # f = −∂E/∂x
+        assert f[i, k] == pytest.approx(-(coarse.energy(xp) - coarse.energy(xm)) / (2 * eps), rel=1e-5)
+
+
+@pytest.mark.parametrize("preset", ["soft", "paper-optimized"])
+def test_quadratic_fem_cantilever_matches_beam_theory(wp, preset):
+    from mjcodesign.fem import FemFinger, FemOptions
+
+    fem = FemFinger(
+        FingerDesign(), Stiffness.preset(preset), options=FemOptions(h=4e-3, spine_layers=2, order=2)
+    )
+    r = fem.cantilever()
+    # δ_EB = F ∫ (L − x)² / (E(x) I(x)) dx over the real sections (mjcodesign.beam).
+    assert r["tip_deflection_m"] == pytest.approx(r["analytic_m"], rel=_TOL_BEAM)
+
+
+def test_static_gradient_matches_central_differences(coarse):
+    load = coarse.tendon_load(0.1)
+    x, _ = coarse.solve_static(load, steps=2)
+    dm = np.zeros_like(x)
+    dm[coarse.mesh.tip, 2] = 1.0  # metric: tip height z_tip
+    grad = coarse.static_gradient(x, load, dm)
+    assert np.all(grad[11:] == 0.0)  # finger B does not touch finger A
+    base = Stiffness.preset("paper-optimized").log_e.ravel()
+    eps = 1e-4
+    try:
+        for i in (1, 4, 9):
+            vals = []
+            for s in (1, -1):
+                le = base.copy()
+                le[i] += s * eps
+                coarse.set_log_e(le)
+                vals.append(coarse.solve_static(load, steps=2, x0=x)[0][coarse.mesh.tip, 2])
+            fd = (vals[0] - vals[1]) / (2 * eps)
+            assert grad[i] == pytest.approx(fd, rel=_TOL_GRAD)
+    finally:
+        coarse.set_log_e(base)
+
+
+def test_explicit_dynamics_free_fall_start(coarse):
+    from mjcodesign.fem import FemDynamics
+
+    dyn = FemDynamics(dt=0.5 * coarse.stable_dt(), mass_damping=0.0)
+    t = 5e-4
+    tip = coarse.rollout(t, dynamics=dyn, position=(0.0, 0.0, 0.05), frames=1)
+    # Before the bending wave from the clamp reaches it, the tip falls freely: Δz = −g t² / 2.
+    assert tip[-1, 2] - tip[0, 2] == pytest.approx(-0.5 * 9.81 * t**2, rel=0.02)
+
+
+@pytest.fixture(scope="module")
+def soft_curl(wp):
+    from mjcodesign.fem import FemFinger, FemOptions
+    from mjcodesign.mjcf import TendonMode
+    from mjcodesign.validate import curl
+
+    stiffness = Stiffness.preset("soft")
+    # Linear tets keep this under 20 s; the quadratic FEM curl takes minutes here (numbers in the xfail).
+    fem = FemFinger(FingerDesign(), stiffness, options=FemOptions(h=3e-3, spine_layers=4))
+    r = fem.curl(0.05)
+    c = curl(FingerDesign(), stiffness, "chain", 0.05, tendon_mode=TendonMode.POINT_FORCE)
+    return r, c
+
+
+def test_fem_curl_bends_inwards(soft_curl):
+    r, c = soft_curl
+    assert r["bend_angle_rad"] > 0.3 and c["bend_angle_rad"] > 0.3
+    assert np.all(np.array(r["block_angles_rad"])[1::2] > 0)  # every flexure closes
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="chain misses the FEM by >10%: soft, 0.05 N, bend chain 0.685 rad vs linear-tet FEM 0.60 "
+    "and quadratic FEM 0.81 (rel 0.15; 0.087 at 0.02 N, 0.23 at 0.08 N)",
+)
+def test_chain_curl_within_tolerance_of_fem(soft_curl):
+    r, c = soft_curl
+    assert c["bend_angle_rad"] == pytest.approx(r["bend_angle_rad"], rel=_TOL_CURL)
+    assert np.linalg.norm(c["tip_displacement_m"]) == pytest.approx(
+        np.linalg.norm(r["tip_displacement_m"]), rel=_TOL_CURL
+    )
+
+
+def test_crosscheck_cli_json(wp, capsys):
+    import argparse
+    import json
+
+    from mjcodesign import cli_crosscheck
+
+    p = argparse.ArgumentParser()
+    sub = p.add_subparsers(dest="command")
+    cli_crosscheck.add_parser(sub)
+    bench = sub.add_parser("bench").add_subparsers(dest="what")
+    cli_crosscheck.add_bench_parser(bench)
+    assert p.parse_args(["bench", "fem", "--json"]).fem_order == 1
+    args = p.parse_args(
+        "crosscheck --scenario cantilever --models chain,fem --design soft --fem-h 4e-3 --fem-layers 2 --json".split()
+    )
+    assert args.func(args) == 0
+    rows = json.loads(capsys.readouterr().out)  # nothing but the JSON on stdout
+    assert [r["model"] for r in rows] == ["chain", "fem"]
+    for r in rows:
+        assert set(r) == {"scenario", "model", "design", "metric", "value", "reference", "rel_diff"}
+    assert rows[0]["rel_diff"] < _TOL_BEAM  # the chain is built from beam theory
