@@ -296,7 +296,10 @@ class TendonMotors:
 
     def _retry(self, what: str, once: Callable[[], _T]) -> _T:
         last = ""
-        for _ in range(self.config.retries):
+        for attempt in range(self.config.retries):
+            if attempt:
+                # A late answer to the failed attempt would be read as the reply to the next one.
+                self._port.clearPort()
             try:
                 return once()
             except _Comm as exc:
