@@ -264,6 +264,15 @@ def _add_finger(spec, parent, design, young, model, prefix, tendon_mode, options
     return handle
 
 
+def _model_spec(
+    kind, design, stiffness, model: FingerModel, options: SimOptions, scene: bool
+) -> mujoco.MjSpec:
+    if stiffness.n_blocks != design.n_blocks:
+        raise DesignError(f"stiffness has {stiffness.n_blocks} blocks per finger, design {design.n_blocks}")
+    quadratic = model is FingerModel.FLEX_QUADRATIC
+    return new_spec(f"{kind}_{model.value}", options, flex=model.is_flex, scene=scene, quadratic=quadratic)
+
+
 def build_finger(
     design: FingerDesign,
     stiffness: Stiffness,
@@ -277,15 +286,7 @@ def build_finger(
     """One finger clamped at its base, lying along world +x and bending towards world +z."""
     options = options or SimOptions()
     model = FingerModel(model)
-    if stiffness.n_blocks != design.n_blocks:
-        raise DesignError(f"stiffness has {stiffness.n_blocks} blocks per finger, design {design.n_blocks}")
-    spec = new_spec(
-        f"finger_{model.value}",
-        options,
-        flex=model.is_flex,
-        scene=scene,
-        quadratic=model is FingerModel.FLEX_QUADRATIC,
-    )
+    spec = _model_spec("finger", design, stiffness, model, options, scene)
     base = spec.worldbody.add_body(name="A_base", pos=[0, 0, 0.2 if scene else 0.0])
     handle = _add_finger(spec, base, design, stiffness.finger(finger), model, "A_", tendon_mode, options)
     m = _compile(spec)
@@ -307,15 +308,7 @@ def build_gripper(
     options = options or SimOptions()
     model = FingerModel(model)
     pose = pose or GripperPose()
-    if stiffness.n_blocks != design.n_blocks:
-        raise DesignError(f"stiffness has {stiffness.n_blocks} blocks per finger, design {design.n_blocks}")
-    spec = new_spec(
-        f"gripper_{model.value}",
-        options,
-        flex=model.is_flex,
-        scene=scene,
-        quadratic=model is FingerModel.FLEX_QUADRATIC,
-    )
+    spec = _model_spec("gripper", design, stiffness, model, options, scene)
     # The arm holds the palm: gravity-compensate the palm and carriages, not the soft fingers.
     mount = spec.worldbody.add_body(name="mount", pos=list(pose.position), gravcomp=1.0)
     mount.add_joint(name="lift", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1], damping=50.0)
