@@ -1,0 +1,1 @@
+"""PointNet + MLP surrogate of grasp outcomes (to come; nothing is implemented yet)."""
