@@ -51,10 +51,16 @@ def _emit(obj, as_json: bool) -> None:
 
 
 def _fmt(v) -> str:
+    from rich.markup import escape
+
+    return escape(_plain(v))
+
+
+def _plain(v) -> str:
     if isinstance(v, float):
         return f"{v:.4g}"
     if isinstance(v, list):
-        return "[" + ", ".join(_fmt(x) for x in v[:6]) + (", …]" if len(v) > 6 else "]")
+        return "[" + ", ".join(_plain(x) for x in v[:6]) + (", …]" if len(v) > 6 else "]")
     return str(v)
 
 
