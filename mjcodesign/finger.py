@@ -266,10 +266,6 @@ class FingerDesign:
             x = x1
         return out
 
-    def block_kinds(self) -> np.ndarray:
-        """Boolean mask, shape (n_blocks,): True for segment blocks."""
-        return np.array([i % 2 == 0 for i in range(self.n_blocks)])
-
     # -- tendon ---------------------------------------------------------------------------------
     def waypoint_heights(self) -> np.ndarray:
         """Tendon height above the flexures' neutral plane at each block midpoint [m], (n_blocks,)."""

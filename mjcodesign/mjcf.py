@@ -290,7 +290,7 @@ def build_finger(
     base = spec.worldbody.add_body(name="A_base", pos=[0, 0, 0.2 if scene else 0.0])
     handle = _add_finger(spec, base, design, stiffness.finger(finger), model, "A_", tendon_mode, options)
     m = _compile(spec)
-    _finalise(m, [handle], spec)
+    _finalise(m, [handle])
     return Built(spec, m, [handle], design, stiffness, model, tendon_mode, options)
 
 
@@ -358,7 +358,7 @@ def build_gripper(
         act.ctrlrange = [0, _MAX_OPENING]
         act.ctrllimited = True
     m = _compile(spec)
-    _finalise(m, handles, spec)
+    _finalise(m, handles)
     built = Built(spec, m, handles, design, stiffness, model, tendon_mode, options)
     built.openings = tuple(pose.openings)
     return built
@@ -390,7 +390,7 @@ def _compile(spec: mujoco.MjSpec) -> mujoco.MjModel:
         raise DesignError(f"MuJoCo could not compile the model: {exc}") from exc
 
 
-def _finalise(m: mujoco.MjModel, handles: list[FingerHandle], spec: mujoco.MjSpec) -> None:
+def _finalise(m: mujoco.MjModel, handles: list[FingerHandle]) -> None:
     for h in handles:
         if h.model.is_flex:
             from mjcodesign.flex import apply_cell_young
