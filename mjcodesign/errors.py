@@ -12,6 +12,7 @@ __all__ = [
     "SimulationDiverged",
     "OutputError",
     "HardwareError",
+    "ObserverError",
 ]
 
 
@@ -49,3 +50,7 @@ class OutputError(MjcodesignError, OSError):
 
 class HardwareError(MjcodesignError, RuntimeError):
     """A robot, motor or camera refused a command, timed out or is missing."""
+
+
+class ObserverError(MjcodesignError, RuntimeError):
+    """A rollout observer (e.g. the Rerun recorder) is unknown, not installed, or cannot write."""

@@ -178,8 +178,12 @@ def curl(
     tendon_mode: TendonMode = TendonMode.NATIVE,
     variant: str = "frictionless",
     options: SimOptions | None = None,
+    observe=None,
 ) -> dict:
-    """Free tendon curl of finger A to rest at ``tension`` [N]: tip position and per-block bend."""
+    """Free tendon curl of finger A to rest at ``tension`` [N]: tip position and per-block bend.
+
+    ``observe(built, data)``, if given, is called with the model and its data at rest.
+    """
     from mjcodesign.tendon import TendonDriver
 
     model = FingerModel(model)
@@ -197,6 +201,8 @@ def curl(
         max_time=max(30.0, 40 * opts.damping_time),
     )
     angles = bend_angles(built, d)
+    if observe is not None:
+        observe(built, d)
     return {
         "model": model.value,
         "tension_n": float(tension),

@@ -17,6 +17,7 @@ from mjcodesign.chain import contact_solref
 from mjcodesign.errors import SimulationDiverged
 from mjcodesign.finger import FingerDesign
 from mjcodesign.mjcf import make_data
+from mjcodesign.observe import Observer, Rollout
 from mjcodesign.scenario import (
     STATE_SPEC,
     GraspScenario,
@@ -123,8 +124,19 @@ class MujocoBackend:
     def __init__(self, nthread: int | None = None):
         self.nthread = nthread or len(os.sched_getaffinity(0))
 
-    def run(self, scene: GraspScene, scenario: GraspScenario, model: mujoco.MjModel | None = None) -> Outcome:
-        """Step the scenario one ``mj_step`` at a time, checking MuJoCo's warnings after every step."""
+    def run(
+        self,
+        scene: GraspScene,
+        scenario: GraspScenario,
+        model: mujoco.MjModel | None = None,
+        *,
+        observer: Observer | None = None,
+        label: str = "grasp",
+    ) -> Outcome:
+        """Step the scenario one ``mj_step`` at a time, checking MuJoCo's warnings after every step.
+
+        ``observer`` receives the full rollout (its states up to a divergence) under ``label``.
+        """
         t0 = time.perf_counter()
         m = model or scene.model
         ctrl, starts = phase_controls(scene, scenario)
@@ -140,19 +152,30 @@ class MujocoBackend:
                 check_state(d, f"step {t}: ")
                 mujoco.mj_getState(m, d, states[t], STATE_SPEC)
         except SimulationDiverged as exc:
-            return failed_outcome(f"diverged: {exc}", time.perf_counter() - t0)
+            out = failed_outcome(f"diverged: {exc}", time.perf_counter() - t0)
+            _observe(observer, label, scene, scenario, m, x0, states[:t], ctrl, starts, out)
+            return out
         out = outcome_from_states(_scene_with(scene, m), scenario, x0, states, ctrl, starts)
         out.wall_time_s = time.perf_counter() - t0
+        _observe(observer, label, scene, scenario, m, x0, states, ctrl, starts, out)
         return out
 
     def run_batch(
-        self, scene: GraspScene, scenario: GraspScenario, stiffnesses: list[Stiffness]
+        self,
+        scene: GraspScene,
+        scenario: GraspScenario,
+        stiffnesses: list[Stiffness],
+        *,
+        observer: Observer | None = None,
+        labels: list[str] | None = None,
     ) -> list[Outcome]:
         """All designs through one ``mujoco.rollout`` call on ``nthread`` threads.
 
         Every thread's MjData warnings are checked afterwards; if any warned, the batch is re-run one
         rollout at a time to find which diverged. ``wall_time_s`` is the batch's wall time shared evenly.
+        ``observer`` receives every rollout, labelled ``labels[i]`` (default ``design{i}``).
         """
+        labels = labels or [f"design{i}" for i in range(len(stiffnesses))]
         t0 = time.perf_counter()
         models = [with_stiffness(scene, s) for s in stiffnesses]
         ctrl, starts = phase_controls(scene, scenario)
@@ -168,7 +191,11 @@ class MujocoBackend:
             except SimulationDiverged:
                 warned = True
         if warned or not np.all(np.isfinite(states)):
-            outs = [self.run(scene, scenario, model=mi) for mi in models]
+            outs = [
+                self.run(scene, scenario, model=mi, observer=observer, label=lb)
+                for mi, lb in zip(models, labels, strict=True)
+            ]
+            observer = None  # run() handed them over
         else:
             outs = [
                 outcome_from_states(_scene_with(scene, mi), scenario, x0, states[i], ctrl, starts)
@@ -177,7 +204,14 @@ class MujocoBackend:
         wall = (time.perf_counter() - t0) / len(models)
         for o in outs:
             o.wall_time_s = wall
+        for i, o in enumerate(outs if observer is not None else []):
+            _observe(observer, labels[i], scene, scenario, models[i], x0, states[i], ctrl, starts, o)
         return outs
+
+
+def _observe(observer, label, scene, scenario, m, x0, states, ctrl, starts, out) -> None:
+    if observer is not None:
+        observer.rollout(Rollout(label, _scene_with(scene, m), scenario, m, x0, states, ctrl, starts, out))
 
 
 def _scene_with(scene: GraspScene, m: mujoco.MjModel) -> GraspScene:

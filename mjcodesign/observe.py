@@ -1,0 +1,189 @@
+"""What a simulator hands to an observer, and how observers are found.
+
+An observer (the Rerun recorder of the top-level ``viz`` package, for one) receives whole rollouts and
+rest shapes after they are computed, so it never slows or changes a simulation. Observers are found by
+name in the entry-point group ``mjcodesign.observers`` (``pyproject.toml``); the core never imports
+them, and :func:`load_observer` turns a missing one into an :class:`~mjcodesign.errors.ObserverError`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+
+from mjcodesign.errors import ObserverError
+
+if TYPE_CHECKING:
+    import mujoco
+
+    from mjcodesign.mjcf import Built
+    from mjcodesign.scenario import GraspScenario, GraspScene, Outcome
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "Rollout",
+    "Snapshot",
+    "Observer",
+    "observer_class",
+    "load_observer",
+    "observe_curl",
+]
+
+ENTRY_POINT_GROUP = "mjcodesign.observers"
+
+
+@dataclass(frozen=True)
+class Rollout:
+    """One grasp rollout, complete enough to replay every step.
+
+    ``mj_setState`` of ``states[t]``, then the controls of step t+1 and ``mj_forward``, reproduce the
+    data of step t, contact forces included.
+    """
+
+    label: str
+    """Name of the run (a design preset, a backend...); observers keep runs with different labels apart."""
+    scene: GraspScene
+    scenario: GraspScenario
+    model: mujoco.MjModel
+    """The model that ran: the scene's, or a copy with another design's stiffness."""
+    x0: np.ndarray
+    """Initial state, ``mjSTATE_FULLPHYSICS``, shape (nstate,)."""
+    states: np.ndarray
+    """State after every step, shape (nstep, nstate); fewer rows than ``ctrl`` if the run diverged."""
+    ctrl: np.ndarray
+    """Controls of every step (``scenario.control_spec()``), shape (nstep, nu + 6 nbody)."""
+    starts: dict[str, int]
+    """First step of every phase, and ``end`` (:func:`mjcodesign.scenario.phase_controls`)."""
+    outcome: Outcome
+
+    def __post_init__(self) -> None:
+        if self.states.ndim != 2 or self.states.shape[1] != self.x0.size:
+            raise ValueError(f"states must have shape (nstep, {self.x0.size}), got {self.states.shape}")
+        if len(self.states) > len(self.ctrl):
+            raise ValueError("more states than control steps")
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """One finger at rest under a load (crosscheck scenarios), in the finger frame [m].
+
+    Either a MuJoCo model (``built`` and its ``data`` at rest) or a tetrahedral mesh (``positions``,
+    ``tets``, ``tet_block``, ``tendon``: the Warp FEM).
+    """
+
+    label: str
+    log_e: np.ndarray
+    """ln(E / Pa) of the finger's blocks, base to tip, shape (n_blocks,)."""
+    metrics: dict[str, float] = field(default_factory=dict)
+    built: Built | None = None
+    data: mujoco.MjData | None = None
+    positions: np.ndarray | None = None
+    """Deformed vertices [m], shape (n_vertices, 3)."""
+    tets: np.ndarray | None = None
+    """Vertex indices, corners first, shape (n_tets, 4) or (n_tets, 10)."""
+    tet_block: np.ndarray | None = None
+    """Block index of every tet, shape (n_tets,)."""
+    tendon: np.ndarray | None = None
+    """Tendon waypoints [m], base to tip, shape (n_waypoints, 3)."""
+
+    def __post_init__(self) -> None:
+        mujoco_given = self.built is not None and self.data is not None
+        mesh_given = self.positions is not None and self.tets is not None and self.tet_block is not None
+        if mujoco_given == mesh_given:
+            raise ValueError("a snapshot needs either built and data, or positions, tets and tet_block")
+
+
+class Observer(Protocol):
+    """What a backend or command calls; an observer writes or shows, it never changes the runs."""
+
+    def rollout(self, rollout: Rollout) -> None:
+        """Record one grasp rollout."""
+        ...
+
+    def snapshot(self, snapshot: Snapshot) -> None:
+        """Record one rest shape."""
+        ...
+
+    def close(self) -> None:
+        """Flush and release the output (a file is complete afterwards)."""
+        ...
+
+
+def observer_class(name: str) -> type:
+    """The class registered as ``name`` in ``mjcodesign.observers`` (imports its package).
+
+    Raises :class:`ObserverError` with one line if it is not registered or its package (e.g.
+    ``rerun-sdk``) is not installed.
+    """
+    eps = entry_points(group=ENTRY_POINT_GROUP)
+    if name not in eps.names:
+        known = ", ".join(sorted(eps.names)) or "none"
+        raise ObserverError(f"no observer named {name!r} is installed (registered: {known})")
+    try:
+        return eps[name].load()
+    except ImportError as exc:
+        raise ObserverError(
+            f"observer {name!r} is not usable: {exc} (install the extra: pip install 'mjcodesign[viz]')"
+        ) from exc
+
+
+def load_observer(name: str, **options) -> Observer:
+    """The observer registered as ``name``, constructed with ``options`` (see :func:`observer_class`)."""
+    return observer_class(name)(**options)
+
+
+def observe_curl(
+    observer: Observer, models: list[str], design_name: str, tension: float, *, fem_options=None
+) -> None:
+    """Free tendon curl of finger A at ``tension`` [N] in every model, handed to ``observer`` at rest.
+
+    The same cases as the crosscheck's curl rows (point-force tendon for the MuJoCo models), run again.
+    """
+    from mjcodesign.finger import FingerDesign
+    from mjcodesign.mjcf import TendonMode
+    from mjcodesign.stiffness import Stiffness
+    from mjcodesign.validate import curl
+
+    design = FingerDesign()
+    stiffness = Stiffness.parse(design_name)
+    log_e = np.asarray(stiffness.log_e[0])
+    for m in models:
+        if m == "fem":
+            from mjcodesign.fem import FemFinger
+
+            fem = FemFinger(design, stiffness, options=fem_options)
+            r = fem.curl(tension)
+            x = r["positions"]
+            observer.snapshot(
+                Snapshot(
+                    label=m,
+                    log_e=log_e,
+                    metrics=_curl_metrics(r),
+                    positions=x,
+                    tets=fem.mesh.tets,
+                    tet_block=fem.mesh.tet_block,
+                    tendon=fem.mesh.waypoint_weights @ x,
+                )
+            )
+            continue
+        rest: dict = {}
+        r = curl(design, stiffness, m, tension, tendon_mode=TendonMode.POINT_FORCE, observe=_keep(rest))
+        observer.snapshot(Snapshot(label=m, log_e=log_e, metrics=_curl_metrics(r), **rest))
+
+
+def _keep(rest: dict):
+    def keep(built, data) -> None:
+        rest.update(built=built, data=data)
+
+    return keep
+
+
+def _curl_metrics(r: dict) -> dict[str, float]:
+    return {
+        "tension_n": float(r["tension_n"]),
+        "bend_angle_rad": float(r["bend_angle_rad"]),
+        "tip_displacement_m": float(np.linalg.norm(r["tip_displacement_m"])),
+    }
