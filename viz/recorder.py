@@ -1,0 +1,438 @@
+"""The Rerun observer: grasp rollouts and crosscheck rest shapes, side by side in one recording.
+
+A grasp rollout is replayed from its states (``mj_setState`` + ``mj_forward`` at the logged steps) and
+logged on the ``sim_time`` timeline [s] with one columnar ``send_columns`` call per entity:
+
+* ``/designs/{label}``: a static offset (runs side by side along world x), ``ground``, ``object``
+  (pose per step, mesh static), ``fingers/A``, ``fingers/B`` (deformed surface per step, coloured per
+  block by stiffness), ``gripper`` (palm and carriages), ``tendon`` (native wrap path per step),
+  ``contacts`` (force arrows), ``phases`` (a text log entry at every phase start), ``outcome``;
+* ``/designs/{label}/series/``: ``tendon_force`` (fingers A, B) [N], ``object_height`` (COM) [m],
+  ``contact_force`` (norm of the fingers' force on the object) [N], ``displacement`` (object COM
+  relative to the palm, palm frame, since the grasp: x, y, z) [m];
+* ``/crosscheck/{label}``: a rest shape (``finger``, ``tendon``, ``metrics``), static;
+* ``/legend``: the stiffness colour scale and every design's ln E (``/legend/colorbar`` in 3-D).
+"""
+
+from __future__ import annotations
+
+import json
+import uuid
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import rerun as rr
+
+from mjcodesign.errors import OutputError
+from mjcodesign.observe import Rollout, Snapshot
+from mjcodesign.scenario import STATE_SPEC, control_spec
+from viz.colormap import NEUTRAL_RGB, legend_markdown, legend_ticks, stiffness_rgb
+from viz.geometry import Surface, body_geom_surface, finger_surfaces, tet_surface
+
+__all__ = ["RerunRecorder", "DEFAULT_FRAME_RATE", "TIMELINE", "logged_steps"]
+
+TIMELINE = "sim_time"
+DEFAULT_FRAME_RATE = 10.0
+"""Logged states per simulated second by default [Hz]: smooth playback, and the logging overhead of a
+chain grasp stays under 20% of its rollout time (``mjcodesign bench viz``)."""
+_SPACING_DESIGNS = 0.25  # runs side by side along world x [m]: gripper is 0.09 m wide along y, 0.04 along x
+_SPACING_SHAPES = 0.06  # crosscheck fingers side by side along world y [m] (finger width 20 mm)
+_ARROW_M_PER_N = 0.01  # force arrows: 1 N is drawn 10 mm long
+_ARROW_RADIUS = 0.0008  # [m]
+_TENDON_RADIUS = 0.0006  # [m]
+_GROUND_HALF = 0.12  # drawn ground square half-side [m]
+_COLORBAR_ORIGIN = np.array([-0.1, -0.15, 0.0])  # legend swatches in 3-D, away from the runs [m]
+_COLORBAR_STEP = 0.02  # [m]
+_OBJECT_RGB = (200, 190, 80)
+_GROUND_RGB = (60, 80, 100)
+_FINGER_CONTACT_RGB = (230, 60, 200)
+_OTHER_CONTACT_RGB = (150, 150, 150)
+_TENDON_RGB = (30, 30, 30)
+_SERIES_NAMES = {"tendon_force": ["finger A", "finger B"], "displacement": ["x", "y", "z"]}
+
+
+def logged_steps(n_steps: int, dt: float, starts: dict[str, int], decimation: int | None) -> np.ndarray:
+    """Steps whose states are logged, sorted, unique and below ``n_steps``.
+
+    Every ``decimation``-th step, the grasp (the last step before the lift) and the last step, so that
+    the two states :attr:`~mjcodesign.scenario.Outcome.displacement` compares are always logged.
+    ``decimation`` None logs :data:`DEFAULT_FRAME_RATE` states per simulated second.
+    """
+    every = decimation or max(1, int(round(1.0 / (DEFAULT_FRAME_RATE * dt))))
+    if every < 1:
+        raise ValueError(f"decimation must be >= 1 step, got {every}")
+    keep = set(range(every - 1, n_steps, every)) | {starts["lift"] - 1, n_steps - 1}
+    return np.array(sorted(t for t in keep if 0 <= t < n_steps), dtype=int)
+
+
+class RerunRecorder:
+    """Write (``path``) and/or show (``spawn``) grasp rollouts and rest shapes in one Rerun recording.
+
+    ``decimation``: log every n-th step (None: :data:`DEFAULT_FRAME_RATE` per simulated second). Call
+    :meth:`close` to flush; the file is complete afterwards.
+    """
+
+    def __init__(
+        self,
+        path: str | Path | None = None,
+        *,
+        spawn: bool = False,
+        decimation: int | None = None,
+        application_id: str = "mjcodesign",
+        recording_id: str | None = None,
+    ):
+        if path is None and not spawn:
+            raise OutputError("the Rerun recorder needs an .rrd path, a viewer (spawn), or both")
+        if decimation is not None and decimation < 1:
+            raise OutputError(f"decimation must be >= 1 step, got {decimation}")
+        self.decimation = decimation
+        self.path = Path(path) if path is not None else None
+        if self.path is not None:
+            _check_writable(self.path)
+        self.rec = rr.RecordingStream(application_id, recording_id=recording_id or str(uuid.uuid4()))
+        sinks = []
+        if spawn:
+            self.rec.spawn(connect=False)
+            sinks.append(rr.GrpcSink())
+        if self.path is not None:
+            sinks.append(rr.FileSink(str(self.path)))
+        self.rec.set_sinks(*sinks)
+        self._designs: dict[str, np.ndarray] = {}
+        self._n_rollouts = 0
+        self._n_shapes = 0
+
+    # -- observer protocol ------------------------------------------------------------------------
+    def rollout(self, r: Rollout) -> None:
+        """Log one grasp rollout under ``/designs/{label}``."""
+        root = f"/designs/{_safe(r.label)}"
+        m = r.model
+        scene = r.scene
+        log_e = np.asarray(scene.built.stiffness.log_e) if r.model is scene.built.model else _log_e_of(r)
+        self._legend(r.label, log_e)
+        self.rec.log(
+            root, rr.Transform3D(translation=[_SPACING_DESIGNS * self._n_rollouts, 0.0, 0.0]), static=True
+        )
+        self._n_rollouts += 1
+        steps = logged_steps(len(r.states), m.opt.timestep, r.starts, self.decimation)
+        times = np.r_[0.0, (steps + 1) * m.opt.timestep]
+        index = [rr.TimeColumn(TIMELINE, duration=times)]
+        edges = np.array([b.x1 for b in scene.built.design.blocks()[:-1]])
+        fingers = finger_surfaces(m, scene.built.fingers, edges)
+        rigid = [
+            mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in ("palm", "A_carriage", "B_carriage")
+        ]
+        gripper = body_geom_surface(m, rigid)
+        self._static_geometry(root, r, fingers, gripper, log_e)
+        frames = _Replay(r, fingers, gripper).frames(steps)
+        for name, pos in frames.surfaces.items():
+            self.rec.send_columns(
+                f"{root}/{name}",
+                indexes=index,
+                columns=rr.Mesh3D.columns(vertex_positions=pos.reshape(-1, 3)).partition(
+                    [pos.shape[1]] * len(pos)
+                ),
+            )
+        self.rec.send_columns(
+            f"{root}/object",
+            indexes=index,
+            columns=rr.Transform3D.columns(
+                translation=frames.object_pos, quaternion=frames.object_quat[:, [1, 2, 3, 0]]
+            ),
+        )
+        self._send_ragged(root + "/tendon", index, frames.tendon, _strips)
+        self._send_ragged(root + "/contacts", index, frames.contacts, _arrows)
+        for name, values in frames.series.items():
+            if name in _SERIES_NAMES:
+                self.rec.log(f"{root}/series/{name}", rr.SeriesLines(names=_SERIES_NAMES[name]), static=True)
+            self.rec.send_columns(
+                f"{root}/series/{name}", indexes=index, columns=rr.Scalars.columns(scalars=values)
+            )
+        phases = {k: v for k, v in r.starts.items() if k != "end" and v < len(r.states)}
+        self.rec.send_columns(
+            f"{root}/phases",
+            indexes=[rr.TimeColumn(TIMELINE, duration=[v * m.opt.timestep for v in phases.values()])],
+            columns=rr.TextLog.columns(text=[f"{k} (step {v})" for k, v in phases.items()]),
+        )
+        self.rec.log(
+            f"{root}/outcome",
+            rr.TextDocument(json.dumps(r.outcome.as_dict(), indent=1), media_type="text/markdown"),
+            static=True,
+        )
+
+    def snapshot(self, s: Snapshot) -> None:
+        """Log one rest shape under ``/crosscheck/{label}`` (static)."""
+        root = f"/crosscheck/{_safe(s.label)}"
+        self._legend(f"crosscheck {s.label}", np.asarray(s.log_e)[None])
+        self.rec.log(
+            root, rr.Transform3D(translation=[0.0, _SPACING_SHAPES * self._n_shapes, 0.0]), static=True
+        )
+        self._n_shapes += 1
+        colours = stiffness_rgb(s.log_e)
+        if s.built is not None:
+            edges = np.array([b.x1 for b in s.built.design.blocks()[:-1]])
+            surf = finger_surfaces(s.built.model, s.built.fingers[:1], edges)["A"]
+            pos, tris = surf.positions_of(s.data), surf.triangles
+            rgb = _block_colours(colours, surf.vertex_block)
+            tendon = np.array(
+                [s.data.site_xpos[_site(s.built.model, n)] for n in s.built.fingers[0].waypoint_sites]
+            )
+        else:
+            tri, block = tet_surface(s.tets, s.tet_block)
+            pos = np.asarray(s.positions)[tri].reshape(-1, 3)  # unshared vertices: one colour per face
+            tris = np.arange(len(pos)).reshape(-1, 3)
+            rgb = np.repeat(colours[block], 3, axis=0)
+            tendon = s.tendon
+        self.rec.log(
+            f"{root}/finger",
+            rr.Mesh3D(vertex_positions=pos, triangle_indices=tris, vertex_colors=rgb),
+            static=True,
+        )
+        if tendon is not None and len(tendon):
+            self.rec.log(
+                f"{root}/tendon",
+                rr.LineStrips3D([tendon], radii=_TENDON_RADIUS, colors=_TENDON_RGB),
+                static=True,
+            )
+        text = "\n".join(f"- {k}: {v:.6g}" for k, v in s.metrics.items())
+        self.rec.log(f"{root}/metrics", rr.TextDocument(text, media_type="text/markdown"), static=True)
+
+    def close(self) -> None:
+        """Flush everything and close the sinks."""
+        self.rec.flush()
+        self.rec.disconnect()
+
+    # -- helpers ----------------------------------------------------------------------------------
+    def _legend(self, name: str, log_e: np.ndarray) -> None:
+        first = not self._designs
+        self._designs[name] = log_e
+        self.rec.log(
+            "/legend",
+            rr.TextDocument(legend_markdown(self._designs), media_type="text/markdown"),
+            static=True,
+        )
+        if first:
+            ticks = legend_ticks()
+            self.rec.log(
+                "/legend/colorbar",
+                rr.Boxes3D(
+                    centers=_COLORBAR_ORIGIN + np.outer(np.arange(len(ticks)), [_COLORBAR_STEP, 0, 0]),
+                    half_sizes=[[0.5 * _COLORBAR_STEP, 0.005, 0.002]] * len(ticks),
+                    colors=stiffness_rgb(ticks),
+                    labels=[f"{v:.1f}" for v in ticks],
+                    fill_mode="solid",
+                ),
+                static=True,
+            )
+
+    def _static_geometry(self, root, r: Rollout, fingers, gripper, log_e) -> None:
+        g = _GROUND_HALF
+        self.rec.log(
+            f"{root}/ground",
+            rr.Mesh3D(
+                vertex_positions=[[-g, -g, 0], [g, -g, 0], [g, g, 0], [-g, g, 0]],
+                triangle_indices=[[0, 1, 2], [0, 2, 3]],
+                albedo_factor=_GROUND_RGB,
+            ),
+            static=True,
+        )
+        mesh = r.scene.obj.mesh
+        self.rec.log(
+            f"{root}/object/mesh",
+            rr.Mesh3D(
+                vertex_positions=np.asarray(mesh.vertices),
+                triangle_indices=np.asarray(mesh.faces),
+                albedo_factor=_OBJECT_RGB,
+            ),
+            static=True,
+        )
+        for i, (letter, surf) in enumerate(fingers.items()):
+            self.rec.log(
+                f"{root}/fingers/{letter}",
+                rr.Mesh3D.from_fields(
+                    triangle_indices=surf.triangles,
+                    vertex_colors=_block_colours(stiffness_rgb(log_e[i]), surf.vertex_block),
+                ),
+                static=True,
+            )
+        if gripper is not None:
+            self.rec.log(
+                f"{root}/gripper",
+                rr.Mesh3D.from_fields(
+                    triangle_indices=gripper.triangles,
+                    vertex_colors=np.tile(NEUTRAL_RGB, (len(gripper.local), 1)),
+                ),
+                static=True,
+            )
+
+    def _send_ragged(self, path, index, rows, columns) -> None:
+        self.rec.send_columns(path, indexes=index, columns=columns(rows))
+
+
+class _Frames:
+    """Per logged time point (the initial state first): surfaces, object pose, tendon, contacts, series."""
+
+    def __init__(self, n: int, surfaces: list[str]):
+        self.surfaces: dict[str, np.ndarray] = {k: np.zeros((n, 0, 3)) for k in surfaces}
+        """World vertices per surface [m], shape (n, n_vertices, 3)."""
+        self.object_pos = np.empty((n, 3))
+        self.object_quat = np.empty((n, 4))
+        self.tendon: list[list[np.ndarray]] = []
+        self.contacts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self.series: dict[str, np.ndarray] = {}
+
+
+class _Replay:
+    """Replays a rollout's states and extracts what is logged (no Rerun calls here)."""
+
+    def __init__(self, r: Rollout, fingers: dict[str, Surface], gripper: Surface | None):
+        self.r = r
+        self.m = r.model
+        self.d = mujoco.MjData(self.m)
+        self.surfaces = {f"fingers/{k}": s for k, s in fingers.items()}
+        if gripper is not None:
+            self.surfaces["gripper"] = gripper
+        m = self.m
+        # Tendon actuators per finger, in finger order (A, B): their forces sum to the finger's tension.
+        self.acts = {
+            h.prefix.rstrip("_"): [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in h.actuators]
+            for h in sorted(r.scene.built.fingers, key=lambda h: h.prefix)
+        }
+        self.is_finger = np.zeros(m.nbody, dtype=bool)
+        self.is_finger[r.scene.finger_bodies] = True
+
+    def _load(self, x: np.ndarray, t: int) -> None:
+        # As mjcodesign.scenario.outcome_from_states: the state under the control of the next step.
+        m, d, ctrl = self.m, self.d, self.r.ctrl
+        mujoco.mj_setState(m, d, x, STATE_SPEC)
+        mujoco.mj_setState(m, d, ctrl[min(t + 1, len(ctrl) - 1)], control_spec())
+        mujoco.mj_forward(m, d)
+
+    def frames(self, steps: np.ndarray) -> _Frames:
+        r, m, d = self.r, self.m, self.d
+        ob, palm = r.scene.object_body, r.scene.palm_body
+        n = len(steps) + 1
+        out = _Frames(n, list(self.surfaces))
+        gpos, gmat = np.empty((n, m.ngeom, 3)), np.empty((n, m.ngeom, 9))
+        fpos = np.empty((n, m.nflexvert, 3))
+        tension = np.empty((n, len(self.acts)))
+        height, force, rel = np.empty(n), np.empty(n), np.empty((n, 3))
+        for i, t in enumerate(np.r_[-1, steps]):
+            self._load(r.x0 if t < 0 else r.states[t], int(t))
+            gpos[i], gmat[i], fpos[i] = d.geom_xpos, d.geom_xmat, d.flexvert_xpos
+            out.object_pos[i] = d.xpos[ob]
+            out.object_quat[i] = d.xquat[ob]
+            wrap = d.wrap_xpos.reshape(-1, 3)  # nwrap x 6: two points per wrap object
+            adr, num = d.ten_wrapadr, d.ten_wrapnum
+            out.tendon.append([wrap[adr[j] : adr[j] + num[j]].copy() for j in range(m.ntendon)])
+            pos, vec, on_object = self._contacts()
+            out.contacts.append((pos, vec, on_object))
+            tension[i] = [d.actuator_force[ids].sum() for ids in self.acts.values()]
+            height[i] = d.xipos[ob][2]
+            force[i] = float(np.linalg.norm(vec[on_object].sum(axis=0))) if len(vec) else 0.0
+            R = d.xmat[palm].reshape(3, 3)
+            rel[i] = R.T @ (d.xipos[ob] - d.xpos[palm])
+        for name, surf in self.surfaces.items():
+            out.surfaces[name] = surf.positions(gpos, gmat, fpos)
+        grasp = _index_of(steps, r.starts["lift"] - 1)
+        out.series["tendon_force"] = tension
+        out.series["object_height"] = height
+        out.series["contact_force"] = force
+        # Relative to the grasp (end of tightening), as Outcome.displacement; before it, vs the same state.
+        out.series["displacement"] = rel - (rel[grasp] if grasp is not None else rel[0])
+        return out
+
+    def _contacts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Contact points [m], force on the object (or on geom2's body) [N], finger-object mask."""
+        m, d = self.m, self.d
+        nc = d.ncon
+        if nc == 0:
+            return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=bool)
+        con = d.contact
+        b1, b2 = m.geom_bodyid[con.geom1[:nc]], m.geom_bodyid[con.geom2[:nc]]
+        world = np.einsum("kji,kj->ki", np.asarray(con.frame[:nc]).reshape(-1, 3, 3), self._local_forces(nc))
+        ob = self.r.scene.object_body
+        world[b1 == ob] *= -1.0  # show the force acting on the object
+        other = np.where(b1 == ob, b2, b1)
+        on_object = ((b1 == ob) | (b2 == ob)) & self.is_finger[other]
+        return np.asarray(con.pos[:nc]).copy(), world, on_object
+
+    def _local_forces(self, nc: int) -> np.ndarray:
+        """Contact forces of geom1 on geom2 in each contact frame [N], shape (nc, 3) (mj_contactForce)."""
+        m, d = self.m, self.d
+        con = d.contact
+        adr, dim = np.asarray(con.efc_address[:nc]), np.asarray(con.dim[:nc])
+        if m.opt.cone != mujoco.mjtCone.mjCONE_ELLIPTIC or np.any(dim == 1):
+            out, f6 = np.zeros((nc, 3)), np.zeros(6)
+            for i in range(nc):
+                mujoco.mj_contactForce(m, d, i, f6)
+                out[i] = f6[:3]
+            return out
+        # Elliptic cones: the first three efc rows of a contact are its normal and tangent forces.
+        out = d.efc_force[np.maximum(adr, 0)[:, None] + np.arange(3)]
+        out[adr < 0] = 0.0  # excluded contacts carry no force
+        return out
+
+
+def _index_of(steps: np.ndarray, step: int) -> int | None:
+    """Index of ``step`` among the logged time points (initial state first), or None if not logged."""
+    hit = np.flatnonzero(steps == step)
+    return int(hit[0]) + 1 if hit.size else None
+
+
+def _strips(rows) -> rr.ComponentColumnList:
+    flat = [s for row in rows for s in row]
+    if len({len(s) for s in flat}) == 1:  # site-only tendons: one array converts ~10x faster than a list
+        flat = np.asarray(flat)
+    return rr.LineStrips3D.columns(strips=flat).partition([len(row) for row in rows])
+
+
+def _arrows(rows) -> rr.ComponentColumnList:
+    pos = np.concatenate([p for p, _, _ in rows])
+    vec = np.concatenate([v for _, v, _ in rows]) * _ARROW_M_PER_N
+    rgb = np.concatenate(
+        [np.where(mask[:, None], _FINGER_CONTACT_RGB, _OTHER_CONTACT_RGB) for _, _, mask in rows]
+    ).astype(np.uint8)
+    return rr.Arrows3D.columns(origins=pos, vectors=vec, colors=rgb).partition([len(p) for p, _, _ in rows])
+
+
+def _block_colours(block_rgb: np.ndarray, vertex_block: np.ndarray) -> np.ndarray:
+    out = np.tile(NEUTRAL_RGB, (len(vertex_block), 1))
+    ok = vertex_block >= 0
+    out[ok] = block_rgb[np.clip(vertex_block[ok], 0, len(block_rgb) - 1)]
+    return out
+
+
+def _log_e_of(r: Rollout) -> np.ndarray:
+    """The ln E of a rollout whose model replaces the scene's: read back from the chain's hinge stiffness."""
+    from mjcodesign.beam import block_effective_ei
+
+    built = r.scene.built
+    if built.finger_model.is_flex:
+        raise ValueError("a flex rollout must run the scene's own model: its stiffness is compiled in")
+    out = np.empty(np.shape(built.stiffness.log_e))
+    for i, h in enumerate(built.fingers):
+        for j, (name, blk) in enumerate(zip(h.joints, built.design.blocks(), strict=True)):
+            jid = mujoco.mj_name2id(r.model, mujoco.mjtObj.mjOBJ_JOINT, name)
+            # k = E I / l is linear in E: E = k / (EI(E=1) / l).
+            out[i, j] = np.log(r.model.jnt_stiffness[jid] * blk.length / block_effective_ei(blk, 1.0))
+    return out
+
+
+def _site(m: mujoco.MjModel, name: str) -> int:
+    return mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, name)
+
+
+def _safe(label: str) -> str:
+    """An entity-path part: letters, digits, '-', '_' and '.' kept, anything else replaced by '_'."""
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in label) or "_"
+
+
+def _check_writable(path: Path) -> None:
+    if path.is_dir():
+        raise OutputError(f"cannot write the recording {path}: it is a folder")
+    try:
+        with open(path, "wb"):
+            pass
+    except OSError as exc:
+        raise OutputError(f"cannot write the recording {path}: {exc.strerror or exc}") from exc
