@@ -146,10 +146,12 @@ def build_parser() -> argparse.ArgumentParser:
     bf.add_argument("--json", action="store_true")
     bf.set_defaults(func=_cmd_bench_finger)
 
-    from mjcodesign import cli_crosscheck, cli_fabrication, cli_grasp
+    from mjcodesign import cli_crosscheck, cli_fabrication, cli_grasp, cli_viz
 
     cli_grasp.add_bench_parser(bsub)
     cli_crosscheck.add_bench_parser(bsub)
+    cli_viz.add_bench_parser(bsub)
+    cli_viz.add_parser(sub)
     cli_grasp.add_parser(sub)
     cli_crosscheck.add_parser(sub)
     cli_fabrication.add_parser(sub)

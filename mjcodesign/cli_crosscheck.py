@@ -178,9 +178,11 @@ def _fem_options(args):
 
 
 def _cmd_crosscheck(args) -> int:
+    from mjcodesign import cli_viz
     from mjcodesign.cli import _emit
 
     tensions = [float(v) for v in args.tensions.split(",")] if args.tensions else None
+    cli_viz.record_crosscheck(args, tensions)
     rows, curves = crosscheck(
         args.scenario, args.models.split(","), args.design, fem_options=_fem_options(args), tensions=tensions
     )
@@ -225,8 +227,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--plot", default=None, help="curl: write bend against tension per model to this PNG")
     # Quadratic tets, 2 spine layers: within 4% of Euler–Bernoulli on the cantilever (mjcodesign.fem).
     _fem_flags(p, h=4e-3, layers=2, order=2)
+    p.add_argument("--rrd", default=None, help="curl: record every model's rest shape (Rerun .rrd)")
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=_cmd_crosscheck)
+    p.set_defaults(func=_cmd_crosscheck, decimation=None)
 
 
 def add_bench_parser(bench_subparsers) -> None:

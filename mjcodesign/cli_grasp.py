@@ -3,6 +3,11 @@
 Wire them into the main CLI with ``cli_grasp.add_parser(subparsers)`` and
 ``cli_grasp.add_bench_parser(bench_subparsers)``. ``python -m mjcodesign.cli_grasp ARGS`` runs
 ``grasp`` on its own with the same error mapping (exit 2 and one line).
+
+``--design`` takes one design (a preset, or 11/22 comma-separated ln E) or several presets separated by
+commas (``soft,semi-rigid,paper-optimized``): each is run on the same object and pose, ``--json`` then
+prints a list of outcome objects, each with its ``design``, and ``--rrd``/``--spawn`` record them side by
+side.
 """
 
 from __future__ import annotations
@@ -13,7 +18,16 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["add_parser", "add_bench_parser", "run", "run_bench", "grasp", "user_cache_dir", "main"]
+__all__ = [
+    "add_parser",
+    "add_bench_parser",
+    "run",
+    "run_bench",
+    "grasp",
+    "split_designs",
+    "user_cache_dir",
+    "main",
+]
 
 _MODELS = ("chain", "flex")
 _BACKENDS = ("mujoco", "mjwarp")
@@ -30,7 +44,9 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         "--object", required=True, help="YCB name (e.g. 025_mug), egad-like:N, or an OBJ/STL/PLY file"
     )
     p.add_argument(
-        "--design", default="paper-optimized", help="stiffness preset or 11/22 comma-separated ln(E/Pa)"
+        "--design",
+        default="paper-optimized",
+        help="stiffness preset, 11/22 comma-separated ln(E/Pa), or several comma-separated presets",
     )
     p.add_argument("--model", choices=_MODELS, default="chain")
     p.add_argument(
@@ -53,6 +69,9 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         "--allow-open", action="store_true", help="use the convex hull of a mesh that cannot be repaired"
     )
     p.add_argument("--json", action="store_true")
+    from mjcodesign.cli_viz import add_recording_flags
+
+    add_recording_flags(p)
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -113,10 +132,15 @@ def grasp(
     seed: int = 0,
     allow_open: bool = False,
     cache_dir: Path | None = None,
+    observer=None,
+    label: str | None = None,
 ) -> dict:
-    """One grasp rollout; returns the JSON-ready outcome plus the object's facts."""
+    """One grasp rollout; returns the JSON-ready outcome plus the object's facts.
+
+    ``observer`` (:mod:`mjcodesign.observe`, MuJoCo backend only) receives the rollout as ``label``.
+    """
     from mjcodesign.backends import get_backend
-    from mjcodesign.errors import MeshError
+    from mjcodesign.errors import DesignError, MeshError
     from mjcodesign.finger import FingerDesign
     from mjcodesign.mjcf import FingerModel
     from mjcodesign.objects import CoacdSettings, convex_decomposition, load_object, parse_density
@@ -127,6 +151,8 @@ def grasp(
     rho = parse_density(density)
     if Path(source).is_dir():
         raise MeshError(f"{source} is a folder: grasp takes one object (pass one mesh file)")
+    if observer is not None and backend != "mujoco":
+        raise DesignError(f"recording a grasp needs --backend mujoco, not {backend}")
     sim = get_backend(backend)
     obj = load_object(source, rho, allow_open=allow_open, seed=seed)
     convex_decomposition(obj, CoacdSettings(seed=seed), cache_dir=cache_dir)
@@ -135,7 +161,8 @@ def grasp(
     kwargs = {k: v for k, v in (("tension", tension), ("lift", lift)) if v is not None}
     scenario = GraspScenario(impulse=impulse, **kwargs)
     scene = build_scene(obj, finger_design, stiffness, FingerModel(model), gripper_pose)
-    out = sim.run(scene, scenario).as_dict()
+    recording = {} if observer is None else {"observer": observer, "label": label or design}
+    out = sim.run(scene, scenario, **recording).as_dict()
     out.update(
         object=obj.name,
         mass_kg=obj.mass,
@@ -149,23 +176,54 @@ def grasp(
     return out
 
 
+def split_designs(text: str) -> list[str]:
+    """Several comma-separated presets, or one design (a preset or comma-separated ln E values)."""
+    from mjcodesign.stiffness import PRESETS
+
+    parts = [p.strip() for p in text.split(",")]
+    return parts if len(parts) > 1 and all(p in PRESETS for p in parts) else [text]
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``grasp``; library errors propagate to the caller (exit 2 there)."""
-    out = grasp(
-        args.object,
-        args.design,
-        args.model,
-        args.density,
-        args.pose,
-        impulse=args.impulse,
-        tension=args.tension,
-        lift=args.lift,
-        backend=args.backend,
-        seed=args.seed,
-        allow_open=args.allow_open,
-        cache_dir=user_cache_dir(),
-    )
-    _print(out, args.json)
+    from mjcodesign.cli_viz import open_recorder
+
+    designs = split_designs(args.design)
+    if len(set(designs)) != len(designs):
+        from mjcodesign.errors import StiffnessError
+
+        raise StiffnessError(f"--design lists a preset twice: {args.design}")
+    recorder = open_recorder(args)
+    outs = []
+    try:
+        for design in designs:
+            out = grasp(
+                args.object,
+                design,
+                args.model,
+                args.density,
+                args.pose,
+                impulse=args.impulse,
+                tension=args.tension,
+                lift=args.lift,
+                backend=args.backend,
+                seed=args.seed,
+                allow_open=args.allow_open,
+                cache_dir=user_cache_dir(),
+                observer=recorder,
+            )
+            outs.append(out if len(designs) == 1 else {"design": design, **out})
+    finally:
+        if recorder is not None:
+            recorder.close()
+    if len(outs) == 1:
+        _print(outs[0], args.json)
+    elif args.json:
+        print(json.dumps(outs))
+    else:
+        for out in outs:
+            _print(out, False)
+            print()
     return 0
 
 

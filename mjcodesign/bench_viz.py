@@ -1,0 +1,116 @@
+"""Cost of recording a grasp rollout with an observer (``mjcodesign bench viz``).
+
+Cases are data (:data:`CASES`); one runner times, per case and decimation, the same rollout without and
+with the observer (created, fed and closed inside the timed span), alternating the two so that a busy
+machine slows both alike, and reports medians of wall and CPU time (CPU time counts the observer's own
+threads too).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["VizCase", "CASES", "bench_viz", "OVERHEAD_BUDGET"]
+
+OVERHEAD_BUDGET = 0.2
+"""Issue 6: at the default decimation, recording may add at most 20% to the rollout time."""
+_BOX = 0.04  # box side [m]
+_RHO = 400.0  # heavy preset [kg/m³]
+
+
+@dataclass(frozen=True)
+class VizCase:
+    """A grasp to record: finger model, design preset and a box object."""
+
+    name: str
+    model: str = "chain"
+    design: str = "paper-optimized"
+
+
+CASES = (VizCase("chain-box"), VizCase("flex-box", model="flex"))
+
+
+def _time(fn) -> tuple[float, float]:
+    w, c = time.perf_counter(), time.process_time()
+    fn()
+    return time.perf_counter() - w, time.process_time() - c
+
+
+def _measure(sim, scene, scenario, observer: str, path: Path, dec, repeats: int):
+    """Medians of (wall, CPU) [s]: plain rollouts and recorded ones, alternated."""
+    from mjcodesign.observe import observer_class
+
+    cls = observer_class(observer)  # finding the entry point (~20 ms) is start-up, not per rollout
+
+    def plain():
+        sim.run(scene, scenario)
+
+    def recorded():
+        rec = cls(path=path, decimation=dec)
+        sim.run(scene, scenario, observer=rec)
+        rec.close()
+
+    times = [(_time(plain), _time(recorded)) for _ in range(repeats)]
+    return np.median([t[0] for t in times], axis=0), np.median([t[1] for t in times], axis=0)
+
+
+def bench_viz(
+    *,
+    cases: tuple[VizCase, ...] = CASES,
+    models: list[str] | None = None,
+    decimations: tuple[int | None, ...] = (None, 1),
+    repeats: int = 5,
+    observer: str = "rerun",
+) -> dict:
+    """Per case and decimation: rollout and recorded times [s], relative overheads, recording size [B]."""
+    from mjcodesign.backends import MujocoBackend
+    from mjcodesign.finger import FingerDesign
+    from mjcodesign.mjcf import FingerModel
+    from mjcodesign.objects import box_object
+    from mjcodesign.observe import load_observer
+    from mjcodesign.scenario import GraspScenario, auto_pose, build_scene
+    from mjcodesign.stiffness import Stiffness
+
+    sim = MujocoBackend(nthread=1)
+    scenario = GraspScenario()
+    out: dict = {
+        "overhead_budget": OVERHEAD_BUDGET,
+        "repeats": repeats,
+        "cpus": len(os.sched_getaffinity(0)),
+        "load_average_1min": os.getloadavg()[0],
+        "cases": [],
+    }
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "bench.rrd"
+        load_observer(observer, path=path).close()  # import and start-up once, outside the timings
+        for case in cases:
+            if models is not None and case.model not in models:
+                continue
+            obj = box_object((_BOX,) * 3, _RHO)
+            scene = build_scene(
+                obj, FingerDesign(), Stiffness.parse(case.design), FingerModel(case.model), auto_pose(obj)
+            )
+            sim.run(scene, scenario)  # warm up
+            for dec in decimations:
+                p, r = _measure(sim, scene, scenario, observer, path, dec, repeats)
+                out["cases"].append(
+                    {
+                        "case": case.name,
+                        "model": case.model,
+                        "decimation": "default" if dec is None else dec,
+                        "rollout_wall_s": float(p[0]),
+                        "recorded_wall_s": float(r[0]),
+                        "overhead_wall": float((r[0] - p[0]) / p[0]),
+                        "rollout_cpu_s": float(p[1]),
+                        "recorded_cpu_s": float(r[1]),
+                        "overhead_cpu": float((r[1] - p[1]) / p[1]),
+                        "rrd_bytes": path.stat().st_size,
+                    }
+                )
+    return out

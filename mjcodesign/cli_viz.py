@@ -1,0 +1,141 @@
+"""``mjcodesign view``, ``mjcodesign bench viz`` and the recording flags of ``grasp`` and ``crosscheck``.
+
+Recording goes through the observer registered as ``rerun`` (``mjcodesign.observers`` entry points, the
+``viz`` package); this module never imports ``viz``. ``view`` runs the ``rerun`` viewer that ships with
+``rerun-sdk``; its web viewer and gRPC server bind 127.0.0.1 only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+__all__ = [
+    "add_parser",
+    "add_bench_parser",
+    "add_recording_flags",
+    "open_recorder",
+    "record_crosscheck",
+    "view_command",
+]
+
+_LOOPBACK = "127.0.0.1"
+
+
+def add_recording_flags(p: argparse.ArgumentParser, *, spawn: bool = True) -> None:
+    """``--rrd FILE`` (offline recording, no viewer), ``--spawn`` (desktop viewer) and ``--decimation``."""
+    p.add_argument("--rrd", default=None, help="write a Rerun recording to this .rrd file (no viewer)")
+    if spawn:
+        p.add_argument("--spawn", action="store_true", help="also stream to a desktop Rerun viewer")
+    p.add_argument(
+        "--decimation",
+        type=int,
+        default=None,
+        help="log every N-th simulation step (default: 10 states per simulated second)",
+    )
+
+
+def open_recorder(args: argparse.Namespace):
+    """The Rerun observer for ``--rrd``/``--spawn``, or None when neither is given."""
+    spawn = getattr(args, "spawn", False)
+    if not args.rrd and not spawn:
+        return None
+    from mjcodesign.observe import load_observer
+
+    return load_observer("rerun", path=args.rrd, spawn=spawn, decimation=args.decimation)
+
+
+def record_crosscheck(args: argparse.Namespace, tensions: list[float] | None) -> None:
+    """``crosscheck --rrd``: the curl of every model at the largest tension, side by side (static)."""
+    if not args.rrd:
+        return
+    from mjcodesign.errors import DesignError
+
+    if args.scenario != "curl":
+        raise DesignError(f"--rrd records the curl scenario only, not {args.scenario!r}")
+    from mjcodesign.cli_crosscheck import _fem_options, default_tensions
+    from mjcodesign.observe import observe_curl
+    from mjcodesign.stiffness import Stiffness
+
+    tension = max(tensions or default_tensions(Stiffness.parse(args.design)))
+    rec = open_recorder(args)
+    try:
+        observe_curl(rec, args.models.split(","), args.design, tension, fem_options=_fem_options(args))
+    finally:
+        rec.close()
+
+
+def view_command(path: str | Path, *, web: bool = False) -> list[str]:
+    """The viewer's command line: desktop, or web viewer + gRPC server bound to 127.0.0.1."""
+    cmd = [sys.executable, "-m", "rerun"]
+    if web:
+        cmd += ["--serve-web", "--bind", _LOOPBACK]
+    return cmd + [str(path)]
+
+
+def _cmd_view(args) -> int:
+    import importlib.util
+
+    from mjcodesign.errors import ObserverError
+
+    path = Path(args.file)
+    if not path.is_file():
+        raise ObserverError(f"recording not found: {path}")
+    if importlib.util.find_spec("rerun") is None:
+        raise ObserverError("the Rerun viewer is not installed (pip install 'mjcodesign[viz]')")
+    return subprocess.call(view_command(path, web=args.web))
+
+
+def _cmd_bench_viz(args) -> int:
+    from mjcodesign.bench_viz import bench_viz
+
+    decimations = tuple(None if v == "default" else int(v) for v in args.decimations.split(","))
+    if any(v is not None and v < 1 for v in decimations):
+        from mjcodesign.errors import DesignError
+
+        raise DesignError(f"--decimations must be 'default' or steps >= 1, got {args.decimations}")
+    res = bench_viz(
+        models=args.models.split(",") if args.models else None, decimations=decimations, repeats=args.repeats
+    )
+    if args.out:
+        from mjcodesign.errors import OutputError
+
+        try:
+            Path(args.out).write_text(json.dumps(res, indent=1))
+        except OSError as exc:
+            raise OutputError(f"cannot write {args.out}: {exc.strerror or exc}") from exc
+    if args.json:
+        print(json.dumps(res))
+    else:
+        from mjcodesign.cli import _emit
+
+        _emit(res["cases"], False)
+    return 0
+
+
+def add_parser(subparsers) -> None:
+    """Register ``view`` on the top-level sub-parsers."""
+    p = subparsers.add_parser("view", help="open a Rerun recording (.rrd) in the desktop or web viewer")
+    p.add_argument("file", help="a .rrd file written with --rrd")
+    p.add_argument("--web", action="store_true", help=f"serve the web viewer on {_LOOPBACK} instead")
+    p.set_defaults(func=_cmd_view)
+
+
+def add_bench_parser(bench_subparsers) -> None:
+    """Register ``bench viz`` on the ``bench`` sub-parsers."""
+    p = bench_subparsers.add_parser(
+        "viz", help="cost of recording a grasp to Rerun against the rollout time, per decimation"
+    )
+    p.add_argument("--models", default="chain", help="finger models to time, comma-separated (chain,flex)")
+    p.add_argument("--repeats", type=int, default=5, help="rollouts per measurement (median)")
+    p.add_argument(
+        "--decimations",
+        default="default,5,1",
+        help="logged every N steps, comma-separated ('default': 10 Hz)",
+    )
+    p.add_argument("--out", default=None, help="also write the JSON to this file")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_bench_viz)
