@@ -1,0 +1,442 @@
+"""Rerun recordings of grasps and crosscheck shapes, read back and checked against the rollouts (issue 6).
+
+Everything that needs ``rerun-sdk`` is skipped without it; the import and error-mapping tests run always.
+"""
+
+from __future__ import annotations
+
+import ast
+import json
+import os
+import shutil
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from mjcodesign.backends import MujocoBackend
+from mjcodesign.finger import FingerDesign
+from mjcodesign.mjcf import FingerModel
+from mjcodesign.objects import box_object
+from mjcodesign.scenario import GraspScenario, auto_pose, build_scene
+from mjcodesign.stiffness import Stiffness
+
+ROOT = Path(__file__).resolve().parents[1]
+_KEYS = {"success", "body_force", "displacement", "ground_contact", "reason", "wall_time_s"}
+_BOX = 0.05  # box side [m]
+_RHO = 400.0  # heavy preset [kg/m³]: a 50 g box the chain gripper holds
+# A short grasp (0.52 s simulated) that still closes, tightens, lifts 3 cm and holds.
+_SCENARIO = GraspScenario(
+    impulse=0.0, settle_s=0.02, close_s=0.1, tighten_s=0.1, lift_s=0.15, hold_s=0.1, post_hold_s=0.05
+)
+_DECIMATION = 5
+_TOL_EXACT = 1e-12  # logged values replay the same states as the outcome: equal up to rounding [m]
+_TOL_HOLD_FORCE = 0.02  # logged |F| at hold frames vs the outcome's mean over its own hold samples
+_TOL_VOLUME = 1e-5  # closed-surface volume vs sum of tet volumes: float32 vertex positions in Rerun
+_ROOT = "/designs/paper-optimized"
+
+
+def _scene(design: str = "paper-optimized", model: FingerModel = FingerModel.CHAIN):
+    obj = box_object((_BOX,) * 3, _RHO)
+    return build_scene(obj, FingerDesign(), Stiffness.preset(design), model, auto_pose(obj))
+
+
+def _read(path: Path) -> dict[str, list]:
+    """Record batches of a recording, by entity path."""
+    from rerun.chunk import RrdReader
+
+    out = defaultdict(list)
+    for chunk in RrdReader(str(path)).stream().to_chunks():
+        out[str(chunk.entity_path)].append(chunk.to_record_batch())
+    return out
+
+
+def _column(batches: list, name: str) -> tuple[np.ndarray | None, list]:
+    """(sim_time [s] or None for static rows, values) of one component over an entity's chunks."""
+    times, values = [], []
+    for b in batches:
+        if name not in b.schema.names:
+            continue
+        vals = b.column(name).to_pylist()
+        values += vals
+        if vals and isinstance(vals[0], list) and vals[0] and isinstance(vals[0][0], str):
+            values[-len(vals) :] = [v[0] for v in vals]  # one string per row (text components)
+        if "sim_time" in b.schema.names:
+            times += [t.total_seconds() for t in b.column("sim_time").to_pylist()]
+    return (np.array(times) if times else None), values
+
+
+def _rgb(row) -> set[tuple[int, int, int]]:
+    """Distinct colours of one row of Rgba32 values (0xRRGGBBAA)."""
+    c = np.asarray(row, dtype=np.uint64)
+    return {tuple(int(v) for v in x) for x in np.column_stack([c >> 24, (c >> 16) & 255, (c >> 8) & 255])}
+
+
+def _want(rgb) -> set[tuple[int, int, int]]:
+    return {tuple(int(v) for v in x) for x in np.atleast_2d(rgb)}
+
+
+def _verify(path: Path) -> None:
+    exe = shutil.which("rerun")
+    if exe is None:
+        pytest.skip("the rerun CLI is not installed")
+    r = subprocess.run([exe, "rrd", "verify", str(path)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    pytest.importorskip("rerun")
+    from mjcodesign.observe import load_observer
+
+    path = tmp_path_factory.mktemp("viz") / "grasp.rrd"
+    scene = _scene()
+    rec = load_observer("rerun", path=path, decimation=_DECIMATION)
+    out = MujocoBackend(nthread=1).run(scene, _SCENARIO, observer=rec, label="paper-optimized")
+    rec.close()
+    assert out.success, out.reason
+    return path, scene, out, _read(path)
+
+
+def test_recording_has_every_entity(recorded):
+    path, _, _, data = recorded
+    for part in (
+        "fingers/A",
+        "fingers/B",
+        "gripper",
+        "object",
+        "object/mesh",
+        "ground",
+        "tendon",
+        "contacts",
+        "phases",
+        "outcome",
+        "series/tendon_force",
+        "series/object_height",
+        "series/contact_force",
+        "series/displacement",
+    ):
+        assert f"{_ROOT}/{part}" in data, part
+    assert "/legend" in data and "/legend/colorbar" in data
+    _verify(path)
+
+
+def test_time_points(recorded):
+    _, scene, _, data = recorded
+    dt = scene.model.opt.timestep
+    n = sum(_SCENARIO.phase_steps(dt).values())
+    lift = sum(v for k, v in _SCENARIO.phase_steps(dt).items() if k in ("settle", "close", "tighten"))
+    # The initial state, every 5th step, the grasp (step before the lift) and the last step.
+    expected = sorted(
+        {0.0} | {(t + 1) * dt for t in range(_DECIMATION - 1, n, _DECIMATION)} | {lift * dt, n * dt}
+    )
+    for part in ("fingers/A", "fingers/B", "object", "tendon", "contacts", "series/object_height"):
+        name = {
+            "object": "Transform3D:translation",
+            "tendon": "LineStrips3D:strips",
+            "contacts": "Arrows3D:vectors",
+            "series/object_height": "Scalars:scalars",
+        }.get(part, "Mesh3D:vertex_positions")
+        t, v = _column(data[f"{_ROOT}/{part}"], name)
+        assert len(v) == len(expected), part
+        np.testing.assert_allclose(np.sort(t), expected, atol=1e-9)
+    t, text = _column(data[f"{_ROOT}/phases"], "TextLog:text")
+    assert [s.split()[0] for s in text] == [
+        "settle",
+        "close",
+        "tighten",
+        "lift",
+        "hold",
+        "impulse",
+        "post_hold",
+    ]
+
+
+def test_finger_colours_follow_stiffness(recorded):
+    from viz.colormap import stiffness_rgb
+
+    _, scene, _, data = recorded
+    for i, letter in enumerate("AB"):
+        _, colours = _column(data[f"{_ROOT}/fingers/{letter}"], "Mesh3D:vertex_colors")
+        # Every block's colour, and nothing else (the 11 blocks of paper-optimized differ).
+        assert _rgb(colours[0]) == _want(stiffness_rgb(scene.built.stiffness.log_e[i]))
+
+
+def test_colormap_ends_and_monotone():
+    pytest.importorskip("rerun")
+    from viz.colormap import stiffness_rgb
+
+    soft, stiff = stiffness_rgb([13.5, 17.0])
+    assert soft[0] > 2 * soft[1] and stiff[1] > 2 * stiff[0]  # red = soft, green = stiff
+    rgb = stiffness_rgb(np.linspace(13.5, 17.0, 50)).astype(int)
+    assert np.all(np.diff(rgb[:, 1] - rgb[:, 0]) > 0)  # red -> yellow -> green, never back
+
+
+def test_scalars_match_outcome(recorded):
+    _, scene, out, data = recorded
+    t_h, h = _column(data[f"{_ROOT}/series/object_height"], "Scalars:scalars")
+    h = np.array(h)[np.argsort(t_h), 0]
+    # Outcome.lift_height = z_COM(end) - z_COM(t = 0), both logged.
+    assert abs((h[-1] - h[0]) - out.lift_height) < _TOL_EXACT
+    t_d, disp = _column(data[f"{_ROOT}/series/displacement"], "Scalars:scalars")
+    disp = np.array(disp)[np.argsort(t_d)]
+    np.testing.assert_allclose(disp[-1], out.displacement, atol=_TOL_EXACT)
+    # Tension per finger: the motor's force equals its control, the full ramp after tightening.
+    t_f, f = _column(data[f"{_ROOT}/series/tendon_force"], "Scalars:scalars")
+    f = np.array(f)[np.argsort(t_f)]
+    t_f = np.sort(t_f)
+    dt = scene.model.opt.timestep
+    steps = _SCENARIO.phase_steps(dt)
+    hold0 = dt * sum(v for k, v in steps.items() if k in ("settle", "close", "tighten", "lift"))
+    hold1 = hold0 + dt * steps["hold"]
+    in_hold = (t_f > 0.5 * (hold0 + hold1)) & (t_f < hold1)
+    assert in_hold.sum() >= 2
+    np.testing.assert_allclose(f[in_hold], _SCENARIO.tension, rtol=1e-12)
+    # Contact force: |F| of the fingers on the object in the hold, against the outcome's mean.
+    t_c, c = _column(data[f"{_ROOT}/series/contact_force"], "Scalars:scalars")
+    c = np.array(c)[np.argsort(t_c), 0]
+    ref = np.linalg.norm(out.body_force[3:])
+    assert ref > 0.4  # the 50 g box's weight is carried (m g = 0.49 N)
+    np.testing.assert_allclose(c[in_hold], ref, rtol=_TOL_HOLD_FORCE)
+
+
+def test_contact_arrows_at_contacts(recorded):
+    _, _, _, data = recorded
+    t, vec = _column(data[f"{_ROOT}/contacts"], "Arrows3D:vectors")
+    last = vec[int(np.argmax(t))]
+    assert len(last) > 0  # the held box touches the fingers at the end
+    assert np.all(np.isfinite(np.array(last)))
+
+
+def test_run_batch_hands_every_design_to_the_observer(tmp_path):
+    pytest.importorskip("rerun")
+    from mjcodesign.observe import load_observer
+    from viz.colormap import stiffness_rgb
+
+    scene = _scene()
+    designs = ["soft", "semi-rigid"]
+    path = tmp_path / "batch.rrd"
+    rec = load_observer("rerun", path=path, decimation=50)
+    outs = MujocoBackend(nthread=1).run_batch(
+        scene, _SCENARIO, [Stiffness.preset(d) for d in designs], observer=rec, labels=designs
+    )
+    rec.close()
+    data = _read(path)
+    for d, out in zip(designs, outs, strict=True):
+        # The batch's models carry the design in their hinge stiffness; colours are read back from it.
+        _, colours = _column(data[f"/designs/{d}/fingers/A"], "Mesh3D:vertex_colors")
+        assert _rgb(colours[0]) == _want(stiffness_rgb(Stiffness.preset(d).log_e[0, 0]))
+        t, h = _column(data[f"/designs/{d}/series/object_height"], "Scalars:scalars")
+        h = np.array(h)[np.argsort(t), 0]
+        assert abs((h[-1] - h[0]) - out.lift_height) < _TOL_EXACT
+    _verify(path)
+
+
+def test_flex_fingers_deform_and_are_coloured(tmp_path):
+    pytest.importorskip("rerun")
+    from mjcodesign.observe import load_observer
+    from viz.colormap import stiffness_rgb
+
+    scene = _scene(model=FingerModel.FLEX)
+    scenario = GraspScenario(
+        impulse=0.0, settle_s=0.0, close_s=0.04, tighten_s=0.06, lift_s=0.02, hold_s=0.02, post_hold_s=0.0
+    )
+    path = tmp_path / "flex.rrd"
+    rec = load_observer("rerun", path=path, decimation=10)
+    MujocoBackend(nthread=1).run(scene, scenario, observer=rec, label="flex")
+    rec.close()
+    data = _read(path)
+    t, pos = _column(data["/designs/flex/fingers/A"], "Mesh3D:vertex_positions")
+    first, last = np.array(pos[int(np.argmin(t))]), np.array(pos[int(np.argmax(t))])
+    m = scene.model
+    assert first.shape == (m.flex_vertnum[0], 3)
+    assert np.abs(last - first).max() > 1e-3  # the tendon curls the flex (and it closed)
+    _, colours = _column(data["/designs/flex/fingers/A"], "Mesh3D:vertex_colors")
+    got = _rgb(colours[0])
+    assert got <= _want(stiffness_rgb(scene.built.stiffness.log_e[0]))
+    assert len(got) >= 8  # most of the 11 blocks own a surface vertex
+    _verify(path)
+
+
+def test_crosscheck_curl_shape(tmp_path):
+    pytest.importorskip("rerun")
+    from mjcodesign.observe import load_observer, observe_curl
+
+    path = tmp_path / "curl.rrd"
+    rec = load_observer("rerun", path=path)
+    observe_curl(rec, ["chain"], "semi-rigid", 1.6)  # about 1 rad of curl (cli_crosscheck)
+    rec.close()
+    data = _read(path)
+    _, pos = _column(data["/crosscheck/chain/finger"], "Mesh3D:vertex_positions")
+    pos = np.array(pos[0])
+    _, doc = _column(data["/crosscheck/chain/metrics"], "TextDocument:text")
+    bend = float(doc[0].split("bend_angle_rad: ")[1].split()[0])
+    assert bend > 0.5
+    # Curled towards +z: the tip comes back from x = L and rises.
+    length = FingerDesign().length
+    assert pos[:, 0].max() < length - 0.01 and pos[:, 2].max() > 0.03
+    _, strips = _column(data["/crosscheck/chain/tendon"], "LineStrips3D:strips")
+    assert len(strips[0][0]) == 11  # one waypoint per block
+    _verify(path)
+
+
+def test_tet_snapshot_is_a_closed_coloured_surface(tmp_path):
+    pytest.importorskip("rerun")
+    from mjcodesign.femmesh import mesh_finger
+    from mjcodesign.observe import Snapshot, load_observer
+    from viz.colormap import stiffness_rgb
+
+    mesh = mesh_finger(FingerDesign(), h=6e-3, spine_layers=2)
+    log_e = Stiffness.preset("paper-optimized").log_e[0]
+    path = tmp_path / "tets.rrd"
+    rec = load_observer("rerun", path=path)
+    rec.snapshot(
+        Snapshot(
+            label="fem",
+            log_e=log_e,
+            positions=mesh.vertices,
+            tets=mesh.tets,
+            tet_block=mesh.tet_block,
+            tendon=mesh.waypoint_weights @ mesh.vertices,
+        )
+    )
+    rec.close()
+    data = _read(path)
+    _, pos = _column(data["/crosscheck/fem/finger"], "Mesh3D:vertex_positions")
+    _, tri = _column(data["/crosscheck/fem/finger"], "Mesh3D:triangle_indices")
+    _, colours = _column(data["/crosscheck/fem/finger"], "Mesh3D:vertex_colors")
+    x = np.array(pos[0])[np.array(tri[0])]  # (k, 3 corners, 3)
+    # Divergence theorem: an outward closed surface encloses sum_faces (a · (b × c)) / 6 = the tets' volume.
+    enclosed = np.einsum("ki,ki->k", x[:, 0], np.cross(x[:, 1], x[:, 2])).sum() / 6.0
+    assert enclosed == pytest.approx(mesh.volumes().sum(), rel=_TOL_VOLUME)
+    assert _rgb(colours[0]) == _want(stiffness_rgb(log_e))
+    _verify(path)
+
+
+# -- command line ----------------------------------------------------------------------------------
+def _cli(tmp_path, *args, timeout=180, code=None):
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "RERUN_ANALYTICS": "0"}
+    cmd = [sys.executable, "-c", code] if code else [sys.executable, "-m", "mjcodesign.cli", *args]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, env=env, cwd=ROOT)
+
+
+def _box_file(tmp_path) -> str:
+    path = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(_BOX,) * 3).export(path)
+    return str(path)
+
+
+def test_cli_several_designs_side_by_side(tmp_path):
+    pytest.importorskip("rerun")
+    rrd = tmp_path / "designs.rrd"
+    designs = ["soft", "semi-rigid", "paper-optimized"]
+    r = _cli(
+        tmp_path, "grasp", "--object", _box_file(tmp_path), "--density", "heavy", "--impulse", "0",
+        "--design", ",".join(designs), "--rrd", str(rrd), "--json",
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    outs = json.loads(r.stdout)
+    assert [o["design"] for o in outs] == designs and all(_KEYS <= set(o) for o in outs)
+    data = _read(rrd)
+    offsets = []
+    for d in designs:
+        _, tr = _column(data[f"/designs/{d}"], "Transform3D:translation")
+        offsets.append(tuple(np.ravel(tr[0])))
+        _, doc = _column(data[f"/designs/{d}/outcome"], "TextDocument:text")
+        logged = json.loads(doc[0])
+        out = next(o for o in outs if o["design"] == d)
+        assert logged["success"] == out["success"] and logged["displacement"] == out["displacement"]
+    assert len(set(offsets)) == 3  # side by side, not on top of each other
+    _verify(rrd)
+
+
+def test_cli_single_design_json_is_one_object(tmp_path):
+    pytest.importorskip("rerun")
+    rrd = tmp_path / "one.rrd"
+    r = _cli(
+        tmp_path, "grasp", "--object", _box_file(tmp_path), "--impulse", "0", "--rrd", str(rrd), "--json"
+    )
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert isinstance(out, dict) and _KEYS <= set(out) and "design" not in out
+    _verify(rrd)
+
+
+@pytest.mark.parametrize("case", ["unwritable", "folder", "decimation", "rerun_missing", "view_missing"])
+def test_bad_recording_input_exits_2_with_one_line(tmp_path, case):
+    box = _box_file(tmp_path)
+    args, code = ["grasp", "--object", box, "--rrd", str(tmp_path / "x.rrd")], None
+    if case == "unwritable":
+        args[-1] = str(tmp_path / "missing" / "x.rrd")
+    elif case == "folder":
+        args[-1] = str(tmp_path)
+    elif case == "decimation":
+        args += ["--decimation", "0"]
+    elif case == "rerun_missing":  # as if rerun-sdk were not installed
+        code = f"import sys; sys.modules['rerun'] = None; from mjcodesign.cli import main; sys.exit(main({args!r}))"
+    elif case == "view_missing":
+        args = ["view", str(tmp_path / "none.rrd")]
+    r = _cli(tmp_path, *args, code=code)
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    if case == "rerun_missing":
+        assert "rerun" in lines[0]
+
+
+def test_view_binds_loopback():
+    from mjcodesign.cli_viz import view_command
+
+    web = view_command("f.rrd", web=True)
+    assert web[web.index("--bind") + 1] == "127.0.0.1" and "--serve-web" in web
+    assert "--serve-web" not in view_command("f.rrd")
+
+
+def test_bench_viz_json(tmp_path):
+    pytest.importorskip("rerun")
+    r = _cli(tmp_path, "bench", "viz", "--repeats", "1", "--decimations", "default,50", "--json")
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    assert res["overhead_budget"] == 0.2
+    assert [c["decimation"] for c in res["cases"]] == ["default", 50]
+    for c in res["cases"]:
+        assert c["rollout_wall_s"] > 0 and c["recorded_wall_s"] > 0 and c["rrd_bytes"] > 0
+        assert np.isfinite(c["overhead_wall"]) and np.isfinite(c["overhead_cpu"])
+
+
+# -- import boundaries ----------------------------------------------------------------------------
+def test_import_mjcodesign_never_imports_rerun_or_viz():
+    code = (
+        "import sys, mjcodesign, mjcodesign.cli, mjcodesign.backends, mjcodesign.observe, mjcodesign.cli_viz\n"
+        "mjcodesign.cli.build_parser()\n"
+        "print(','.join(m for m in ('rerun', 'viz', 'pyarrow') if m in sys.modules))"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0 and r.stdout.strip() == "", r.stdout + r.stderr
+
+
+def test_core_never_names_viz():
+    for path in (ROOT / "mjcodesign").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                names = [node.module or ""]
+            else:
+                continue
+            assert not any(n == "viz" or n.startswith("viz.") for n in names), path
+
+
+def test_observer_entry_point_is_registered():
+    from importlib.metadata import entry_points
+
+    from mjcodesign.errors import ObserverError
+    from mjcodesign.observe import ENTRY_POINT_GROUP, load_observer
+
+    assert entry_points(group=ENTRY_POINT_GROUP)["rerun"].value == "viz.recorder:RerunRecorder"
+    with pytest.raises(ObserverError, match="no observer named"):
+        load_observer("no-such-observer")
