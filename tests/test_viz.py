@@ -388,6 +388,18 @@ def test_bad_recording_input_exits_2_with_one_line(tmp_path, case):
         assert "rerun" in lines[0]
 
 
+def test_crosscheck_rrd_records_the_curl_only(tmp_path):
+    import argparse
+
+    from mjcodesign.cli_viz import record_crosscheck
+    from mjcodesign.errors import DesignError
+
+    args = argparse.Namespace(rrd=str(tmp_path / "c.rrd"), scenario="cantilever", decimation=None)
+    with pytest.raises(DesignError, match="curl scenario only"):
+        record_crosscheck(args, None)
+    assert not (tmp_path / "c.rrd").exists()
+
+
 def test_view_binds_loopback():
     from mjcodesign.cli_viz import view_command
 
