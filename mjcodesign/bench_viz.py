@@ -26,14 +26,19 @@ _RHO = 400.0  # heavy preset [kg/m³]
 
 @dataclass(frozen=True)
 class VizCase:
-    """A grasp to record: finger model, design preset and a box object."""
+    """A grasp to record: finger model, design preset and object (``box`` or a YCB name)."""
 
     name: str
     model: str = "chain"
     design: str = "paper-optimized"
+    object: str = "box"
 
 
-CASES = (VizCase("chain-box"), VizCase("flex-box", model="flex"))
+CASES = (
+    VizCase("chain-box"),  # the cheapest rollout, so the largest relative overhead
+    VizCase("chain-ycb", object="010_potted_meat_can"),  # 4 CoACD hulls, a 16k-face mesh to log
+    VizCase("flex-box", model="flex"),
+)
 
 
 def _time(fn) -> tuple[float, float]:
@@ -67,12 +72,13 @@ def bench_viz(
     decimations: tuple[int | None, ...] = (None, 1),
     repeats: int = 5,
     observer: str = "rerun",
+    cache_dir: Path | None = None,
 ) -> dict:
     """Per case and decimation: rollout and recorded times [s], relative overheads, recording size [B]."""
     from mjcodesign.backends import MujocoBackend
     from mjcodesign.finger import FingerDesign
     from mjcodesign.mjcf import FingerModel
-    from mjcodesign.objects import box_object
+    from mjcodesign.objects import CoacdSettings, box_object, convex_decomposition, load_object
     from mjcodesign.observe import load_observer
     from mjcodesign.scenario import GraspScenario, auto_pose, build_scene
     from mjcodesign.stiffness import Stiffness
@@ -92,7 +98,11 @@ def bench_viz(
         for case in cases:
             if models is not None and case.model not in models:
                 continue
-            obj = box_object((_BOX,) * 3, _RHO)
+            if case.object == "box":
+                obj = box_object((_BOX,) * 3, _RHO)
+            else:
+                obj = load_object(case.object, _RHO)
+                convex_decomposition(obj, CoacdSettings(), cache_dir=cache_dir)
             scene = build_scene(
                 obj, FingerDesign(), Stiffness.parse(case.design), FingerModel(case.model), auto_pose(obj)
             )
@@ -103,6 +113,7 @@ def bench_viz(
                     {
                         "case": case.name,
                         "model": case.model,
+                        "object": obj.name,
                         "decimation": "default" if dec is None else dec,
                         "rollout_wall_s": float(p[0]),
                         "recorded_wall_s": float(r[0]),

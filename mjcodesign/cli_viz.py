@@ -91,6 +91,7 @@ def _cmd_view(args) -> int:
 
 def _cmd_bench_viz(args) -> int:
     from mjcodesign.bench_viz import bench_viz
+    from mjcodesign.cli_grasp import user_cache_dir
 
     decimations = tuple(None if v == "default" else int(v) for v in args.decimations.split(","))
     if any(v is not None and v < 1 for v in decimations):
@@ -98,7 +99,10 @@ def _cmd_bench_viz(args) -> int:
 
         raise DesignError(f"--decimations must be 'default' or steps >= 1, got {args.decimations}")
     res = bench_viz(
-        models=args.models.split(",") if args.models else None, decimations=decimations, repeats=args.repeats
+        models=args.models.split(",") if args.models else None,
+        decimations=decimations,
+        repeats=args.repeats,
+        cache_dir=user_cache_dir(),
     )
     if args.out:
         from mjcodesign.errors import OutputError
