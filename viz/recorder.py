@@ -156,7 +156,7 @@ class RerunRecorder:
         )
         self.rec.log(
             f"{root}/outcome",
-            rr.TextDocument(json.dumps(r.outcome.as_dict(), indent=1), media_type="text/markdown"),
+            rr.TextDocument(json.dumps(r.outcome.as_dict(), indent=1), media_type="text/plain"),
             static=True,
         )
 
