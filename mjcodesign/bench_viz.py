@@ -68,13 +68,16 @@ def _measure(sim, scene, scenario, observer: str, path: Path, dec, repeats: int)
 def bench_viz(
     *,
     cases: tuple[VizCase, ...] = CASES,
-    models: list[str] | None = None,
+    names: list[str] | None = None,
     decimations: tuple[int | None, ...] = (None, 1),
     repeats: int = 5,
     observer: str = "rerun",
     cache_dir: Path | None = None,
 ) -> dict:
-    """Per case and decimation: rollout and recorded times [s], relative overheads, recording size [B]."""
+    """Rollout and recorded times [s], relative overheads and recording size [B] per case and decimation.
+
+    ``names`` picks cases by name (default: all of ``cases``).
+    """
     from mjcodesign.backends import MujocoBackend
     from mjcodesign.finger import FingerDesign
     from mjcodesign.mjcf import FingerModel
@@ -96,7 +99,7 @@ def bench_viz(
         path = Path(tmp) / "bench.rrd"
         load_observer(observer, path=path).close()  # import and start-up once, outside the timings
         for case in cases:
-            if models is not None and case.model not in models:
+            if names is not None and case.name not in names:
                 continue
             if case.object == "box":
                 obj = box_object((_BOX,) * 3, _RHO)

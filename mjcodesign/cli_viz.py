@@ -90,16 +90,23 @@ def _cmd_view(args) -> int:
 
 
 def _cmd_bench_viz(args) -> int:
-    from mjcodesign.bench_viz import bench_viz
+    from mjcodesign.bench_viz import CASES, bench_viz
     from mjcodesign.cli_grasp import user_cache_dir
+    from mjcodesign.errors import DesignError
 
-    decimations = tuple(None if v == "default" else int(v) for v in args.decimations.split(","))
+    try:
+        decimations = tuple(None if v == "default" else int(v) for v in args.decimations.split(","))
+    except ValueError:
+        decimations = (0,)
     if any(v is not None and v < 1 for v in decimations):
-        from mjcodesign.errors import DesignError
-
         raise DesignError(f"--decimations must be 'default' or steps >= 1, got {args.decimations}")
+    unknown = set(args.cases.split(",")) - {c.name for c in CASES}
+    if unknown:
+        raise DesignError(
+            f"unknown bench viz case(s) {sorted(unknown)}; choose from {[c.name for c in CASES]}"
+        )
     res = bench_viz(
-        models=args.models.split(",") if args.models else None,
+        names=args.cases.split(","),
         decimations=decimations,
         repeats=args.repeats,
         cache_dir=user_cache_dir(),
@@ -133,7 +140,9 @@ def add_bench_parser(bench_subparsers) -> None:
     p = bench_subparsers.add_parser(
         "viz", help="cost of recording a grasp to Rerun against the rollout time, per decimation"
     )
-    p.add_argument("--models", default="chain", help="finger models to time, comma-separated (chain,flex)")
+    p.add_argument(
+        "--cases", default="chain-box,chain-ycb", help="comma-separated, from chain-box, chain-ycb, flex-box"
+    )
     p.add_argument("--repeats", type=int, default=5, help="rollouts per measurement (median)")
     p.add_argument(
         "--decimations",

@@ -410,7 +410,18 @@ def test_view_binds_loopback():
 
 def test_bench_viz_json(tmp_path):
     pytest.importorskip("rerun")
-    r = _cli(tmp_path, "bench", "viz", "--repeats", "1", "--decimations", "default,50", "--json")
+    r = _cli(
+        tmp_path,
+        "bench",
+        "viz",
+        "--cases",
+        "chain-box",
+        "--repeats",
+        "1",
+        "--decimations",
+        "default,50",
+        "--json",
+    )
     assert r.returncode == 0, r.stderr
     res = json.loads(r.stdout)
     assert res["overhead_budget"] == 0.2
