@@ -187,12 +187,13 @@ def split_designs(text: str) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     """Run ``grasp``; library errors propagate to the caller (exit 2 there)."""
     from mjcodesign.cli_viz import open_recorder
+    from mjcodesign.errors import DesignError, StiffnessError
 
     designs = split_designs(args.design)
     if len(set(designs)) != len(designs):
-        from mjcodesign.errors import StiffnessError
-
         raise StiffnessError(f"--design lists a preset twice: {args.design}")
+    if (args.rrd or args.spawn) and args.backend != "mujoco":
+        raise DesignError(f"recording a grasp needs --backend mujoco, not {args.backend}")
     recorder = open_recorder(args)
     outs = []
     try:

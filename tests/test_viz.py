@@ -366,7 +366,9 @@ def test_cli_single_design_json_is_one_object(tmp_path):
     _verify(rrd)
 
 
-@pytest.mark.parametrize("case", ["unwritable", "folder", "decimation", "rerun_missing", "view_missing"])
+@pytest.mark.parametrize(
+    "case", ["unwritable", "folder", "decimation", "rerun_missing", "view_missing", "mjwarp", "twice"]
+)
 def test_bad_recording_input_exits_2_with_one_line(tmp_path, case):
     box = _box_file(tmp_path)
     args, code = ["grasp", "--object", box, "--rrd", str(tmp_path / "x.rrd")], None
@@ -380,12 +382,18 @@ def test_bad_recording_input_exits_2_with_one_line(tmp_path, case):
         code = f"import sys; sys.modules['rerun'] = None; from mjcodesign.cli import main; sys.exit(main({args!r}))"
     elif case == "view_missing":
         args = ["view", str(tmp_path / "none.rrd")]
+    elif case == "mjwarp":
+        args += ["--backend", "mjwarp"]
+    elif case == "twice":
+        args += ["--design", "soft,soft"]
     r = _cli(tmp_path, *args, code=code)
     assert r.returncode == 2, (r.stdout, r.stderr)
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
     if case == "rerun_missing":
         assert "rerun" in lines[0]
+    if case in ("mjwarp", "twice"):
+        assert not (tmp_path / "x.rrd").exists()  # refused before the recording is opened
 
 
 def test_crosscheck_rrd_records_the_curl_only(tmp_path):
