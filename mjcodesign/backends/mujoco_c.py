@@ -5,7 +5,9 @@ from __future__ import annotations
 import copy
 import functools
 import os
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple, Protocol
 
 import mujoco
@@ -16,7 +18,7 @@ from mjcodesign.beam import block_bending_compliance
 from mjcodesign.chain import contact_solref
 from mjcodesign.errors import SimulationDiverged
 from mjcodesign.finger import FingerDesign
-from mjcodesign.mjcf import make_data
+from mjcodesign.mjcf import GripperPose, make_data
 from mjcodesign.scenario import (
     STATE_SPEC,
     GraspScenario,
@@ -27,11 +29,14 @@ from mjcodesign.scenario import (
     failed_outcome,
     outcome_from_states,
     phase_controls,
+    scene_at_pose,
 )
 from mjcodesign.simulate import check_state, reset_warnings
 from mjcodesign.stiffness import Stiffness
 
 __all__ = ["GraspBackend", "MujocoBackend", "with_stiffness"]
+
+_CLOCK_TOL = 0.5  # [steps]: a rollout's time off by half a step means MuJoCo reset it
 
 
 class GraspBackend(Protocol):
@@ -45,6 +50,12 @@ class GraspBackend(Protocol):
         self, scene: GraspScene, scenario: GraspScenario, stiffnesses: list[Stiffness]
     ) -> list[Outcome]:
         """One rollout per design on the same object and pose."""
+        ...
+
+    def run_poses(
+        self, scene: GraspScene, scenario: GraspScenario, poses: list[GripperPose]
+    ) -> list[Outcome]:
+        """One rollout per pose of the scene's design."""
         ...
 
 
@@ -148,36 +159,80 @@ class MujocoBackend:
     def run_batch(
         self, scene: GraspScene, scenario: GraspScenario, stiffnesses: list[Stiffness]
     ) -> list[Outcome]:
-        """All designs through one ``mujoco.rollout`` call on ``nthread`` threads.
+        """All designs at the scene's pose through one ``mujoco.rollout`` call on ``nthread`` threads.
 
-        Every thread's MjData warnings are checked afterwards; if any warned, the batch is re-run one
-        rollout at a time to find which diverged. ``wall_time_s`` is the batch's wall time shared evenly.
+        ``wall_time_s`` is the batch's wall time shared evenly (see :meth:`run_scenes`).
+        """
+        models = [with_stiffness(scene, s) for s in stiffnesses]
+        return self.run_scenes([_scene_with(scene, m) for m in models], scenario)
+
+    def run_poses(
+        self, scene: GraspScene, scenario: GraspScenario, poses: list[GripperPose]
+    ) -> list[Outcome]:
+        """The scene's design at every pose (one model structure): one ``mujoco.rollout`` call.
+
+        A pose moves the mount and palm in a copy of the model and sets the initial openings and the
+        controls (:func:`mjcodesign.scenario.scene_at_pose`); raises :class:`PoseError` for a bad pose.
+        """
+        return self.run_scenes([scene_at_pose(scene, p) for p in poses], scenario)
+
+    def run_scenes(self, scenes: list[GraspScene], scenario: GraspScenario) -> list[Outcome]:
+        """Scenes of one model structure (other designs or poses), batched through ``mujoco.rollout``.
+
+        A rollout diverged if its recorded time is not the step count times dt (MuJoCo resets the data
+        after a bad acceleration) or its state is not finite; MuJoCo warnings left in a thread's data
+        are checked too. Diverged rollouts, or all when a warning is left, are re-run one step at a
+        time by :meth:`run`, which names the warning. The outcomes (contact-force replays) are then
+        evaluated on ``nthread`` threads; MuJoCo releases the GIL in ``mj_forward``.
         """
         t0 = time.perf_counter()
-        models = [with_stiffness(scene, s) for s in stiffnesses]
-        ctrl, starts = phase_controls(scene, scenario)
-        x0 = _initial_state(scene)
+        plans = [phase_controls(sc, scenario) for sc in scenes]
+        starts = plans[0][1]
+        ctrl = np.stack([c for c, _ in plans])
+        x0 = np.stack([_initial_state(sc) for sc in scenes])
+        models = [sc.model for sc in scenes]
         datas = [mujoco.MjData(models[0]) for _ in range(min(self.nthread, len(models)))]
         for d in datas:
             reset_warnings(d)
-        states, _ = mj_rollout.rollout(models, datas, x0[None], ctrl[None], control_spec=control_spec())
+        states, _ = mj_rollout.rollout(models, datas, x0, ctrl, control_spec=control_spec())
+        bad = _diverged(states, x0, models[0].opt.timestep)
         warned = False
         for d in datas:
             try:
                 check_state(d)
             except SimulationDiverged:
                 warned = True
-        if warned or not np.all(np.isfinite(states)):
-            outs = [self.run(scene, scenario, model=mi) for mi in models]
-        else:
-            outs = [
-                outcome_from_states(_scene_with(scene, mi), scenario, x0, states[i], ctrl, starts)
-                for i, mi in enumerate(models)
-            ]
-        wall = (time.perf_counter() - t0) / len(models)
+        if warned:
+            bad[:] = True
+        outs: list[Outcome | None] = [None] * len(scenes)
+        for i in np.flatnonzero(bad):
+            outs[i] = self.run(scenes[i], scenario)
+        good = np.flatnonzero(~bad)
+        with ThreadPoolExecutor(max_workers=self.nthread) as pool:
+            scratch = threading.local()
+
+            def evaluate(i: int) -> Outcome:
+                if not hasattr(scratch, "data"):
+                    scratch.data = mujoco.MjData(models[0])
+                return outcome_from_states(
+                    scenes[i], scenario, x0[i], states[i], ctrl[i], starts, scratch.data
+                )
+
+            for i, out in zip(good, pool.map(evaluate, good), strict=True):
+                outs[i] = out
+        wall = (time.perf_counter() - t0) / len(scenes)
         for o in outs:
             o.wall_time_s = wall
         return outs
+
+
+def _diverged(states: np.ndarray, x0: np.ndarray, dt: float) -> np.ndarray:
+    """Per rollout: True if its state is not finite or its clock was reset (MuJoCo's auto-reset)."""
+    nstep = states.shape[1]
+    expected = x0[:, :1] + dt * np.arange(1, nstep + 1)[None, :]
+    finite = np.all(np.isfinite(states), axis=(1, 2))
+    clock = np.all(np.abs(states[:, :, 0] - expected) < _CLOCK_TOL * dt, axis=1)
+    return ~(finite & clock)
 
 
 def _scene_with(scene: GraspScene, m: mujoco.MjModel) -> GraspScene:
