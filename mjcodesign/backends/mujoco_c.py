@@ -186,10 +186,15 @@ class MujocoBackend:
         evaluated on ``nthread`` threads; MuJoCo releases the GIL in ``mj_forward``.
         """
         t0 = time.perf_counter()
-        plans = [phase_controls(sc, scenario) for sc in scenes]
-        starts = plans[0][1]
-        ctrl = np.stack([c for c, _ in plans])
-        x0 = np.stack([_initial_state(sc) for sc in scenes])
+        plans: dict[tuple, tuple[np.ndarray, dict[str, int], np.ndarray]] = {}
+        for sc in scenes:  # designs of one pose share their controls and initial state
+            key = (id(sc.built), sc.pose)
+            if key not in plans:
+                plans[key] = (*phase_controls(sc, scenario), _initial_state(sc))
+        rows = [plans[(id(sc.built), sc.pose)] for sc in scenes]
+        starts = rows[0][1]
+        ctrl = np.stack([c for c, _, _ in rows])
+        x0 = np.stack([x for _, _, x in rows])
         models = [sc.model for sc in scenes]
         datas = [mujoco.MjData(models[0]) for _ in range(min(self.nthread, len(models)))]
         for d in datas:
