@@ -13,7 +13,16 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["add_parser", "add_bench_parser", "run", "run_bench", "grasp", "user_cache_dir", "main"]
+__all__ = [
+    "add_parser",
+    "add_bench_parser",
+    "run",
+    "run_bench",
+    "grasp",
+    "object_sources",
+    "user_cache_dir",
+    "main",
+]
 
 _MODELS = ("chain", "flex")
 _BACKENDS = ("mujoco", "mjwarp")
@@ -27,7 +36,10 @@ def user_cache_dir() -> Path:
 
 def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
-        "--object", required=True, help="YCB name (e.g. 025_mug), egad-like:N, or an OBJ/STL/PLY file"
+        "--object",
+        required=True,
+        help="YCB name (e.g. 025_mug), egad-like:N or an OBJ/STL/PLY file; or several: a named set "
+        "(ycb-in-domain, ycb-ood, egad-like) or a folder of OBJ/STL/PLY files, printed as a JSON list",
     )
     p.add_argument(
         "--design", default="paper-optimized", help="stiffness preset or 11/22 comma-separated ln(E/Pa)"
@@ -132,7 +144,7 @@ def grasp(
     stiffness = Stiffness.parse(design)
     rho = parse_density(density)
     if Path(source).is_dir():
-        raise MeshError(f"{source} is a folder: grasp takes one object (pass one mesh file)")
+        raise MeshError(f"{source} is a folder: grasp() takes one object (see object_sources)")
     sim = get_backend(backend)
     obj = load_object(source, rho, allow_open=allow_open, seed=seed)
     convex_decomposition(obj, CoacdSettings(seed=seed), cache_dir=cache_dir)
@@ -155,23 +167,85 @@ def grasp(
     return out
 
 
+def object_sources(text: str) -> list[str] | None:
+    """The objects of a named set or a folder (sorted mesh files), or None for a single object.
+
+    Raises :class:`MeshError` for a folder without OBJ/STL/PLY files.
+    """
+    from mjcodesign.errors import MeshError
+    from mjcodesign.objects import MESH_SUFFIXES, OBJECT_SETS, named_set
+
+    if text in OBJECT_SETS:
+        return list(named_set(text))
+    folder = Path(text)
+    if not folder.is_dir():
+        return None
+    files = sorted(str(p) for p in folder.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
+    if not files:
+        raise MeshError(f"{folder}: no {', '.join(MESH_SUFFIXES)} files")
+    return files
+
+
+def _failed_object(source: str, exc: Exception) -> dict:
+    """The record of an object that could not be simulated in a multi-object run (never NaN)."""
+    return {
+        "object": Path(source).stem if Path(source).suffix else source,
+        "success": False,
+        "body_force": [0.0] * 6,
+        "displacement": [0.0] * 3,
+        "ground_contact": False,
+        "reason": f"error: {exc}",
+        "wall_time_s": 0.0,
+    }
+
+
 def run(args: argparse.Namespace) -> int:
-    """Run ``grasp``; library errors propagate to the caller (exit 2 there)."""
-    out = grasp(
-        args.object,
-        args.design,
-        args.model,
-        args.density,
-        args.pose,
-        impulse=args.impulse,
-        tension=args.tension,
-        lift=args.lift,
-        backend=args.backend,
-        seed=args.seed,
-        allow_open=args.allow_open,
-        cache_dir=user_cache_dir(),
-    )
-    _print(out, args.json)
+    """Run ``grasp``; library errors propagate to the caller (exit 2 there).
+
+    A named set or a folder runs every object and prints a JSON list (one object per line); an
+    object that fails to load, decompose or pose is a failed entry with ``reason`` "error: ...".
+    """
+    from mjcodesign.errors import MjcodesignError
+
+    def one(source: str) -> dict:
+        return grasp(
+            source,
+            args.design,
+            args.model,
+            args.density,
+            args.pose,
+            impulse=args.impulse,
+            tension=args.tension,
+            lift=args.lift,
+            backend=args.backend,
+            seed=args.seed,
+            allow_open=args.allow_open,
+            cache_dir=user_cache_dir(),
+        )
+
+    sources = object_sources(args.object)
+    if sources is None:
+        _print(one(args.object), args.json)
+        return 0
+    from rich.console import Console
+    from rich.progress import Progress
+
+    results = []
+    with Progress(console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task(f"grasp {args.object}", total=len(sources))
+        for source in sources:
+            bar.update(task, description=f"grasp {Path(source).name}")
+            try:
+                results.append(one(source))
+            except MjcodesignError as exc:
+                results.append(_failed_object(source, exc))
+            bar.advance(task)
+    if args.json:
+        print("[\n" + ",\n".join(json.dumps(r) for r in results) + "\n]")
+    else:
+        for r in results:
+            _print(r, False)
+            print()
     return 0
 
 
