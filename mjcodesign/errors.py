@@ -12,6 +12,7 @@ __all__ = [
     "SimulationDiverged",
     "OutputError",
     "HardwareError",
+    "UnsupportedError",
 ]
 
 
@@ -49,3 +50,7 @@ class OutputError(MjcodesignError, OSError):
 
 class HardwareError(MjcodesignError, RuntimeError):
     """A robot, motor or camera refused a command, timed out or is missing."""
+
+
+class UnsupportedError(MjcodesignError, NotImplementedError):
+    """A backend cannot run this model or feature; raised instead of approximating it silently."""
