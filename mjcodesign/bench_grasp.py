@@ -40,7 +40,7 @@ def bench_grasp(
     models, controls, the rollout, the divergence checks and the outcomes (contact-force replays).
     The two alternate ``repeats`` times and the fastest of each is kept, since the machine is shared;
     ``pipeline_overhead_cpu`` compares the process CPU time of the two, which other users of the
-    machine disturb less than wall time.
+    machine disturb less than wall time; ``*_per_cpu_s`` are rollouts per CPU second (one free core).
     Loading, decomposing the object and building the scene happen once and are not timed.
     """
     n = rollouts or _DEFAULT_ROLLOUTS[model]
@@ -93,6 +93,8 @@ def bench_grasp(
         "pipeline_overhead": raw / pipe - 1.0,
         "pipeline_overhead_cpu": min(pipe_cpu) / min(raw_cpu) - 1.0,
         "raw_steps_per_s": raw * len(ctrl),
+        "raw_rollouts_per_cpu_s": n / min(raw_cpu),
+        "rollouts_per_cpu_s": n / min(pipe_cpu),
         "raw_wall_s": raw_walls,
         "pipeline_wall_s": pipe_walls,
         "raw_cpu_s": raw_cpu,
