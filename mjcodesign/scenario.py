@@ -433,11 +433,16 @@ def _finger_wrench(
         return wrench, False, False
     con = d.contact
     g1, g2 = np.asarray(con.geom1), np.asarray(con.geom2)
-    b1, b2 = m.geom_bodyid[g1], m.geom_bodyid[g2]
+    # A flex side of a contact has geom -1 and its flex id in con.flex; every flex is a finger.
+    flex = np.asarray(con.flex).reshape(-1, 2)
+    b1 = np.where(g1 >= 0, m.geom_bodyid[g1], -1)
+    b2 = np.where(g2 >= 0, m.geom_bodyid[g2], -1)
     on_obj = (b1 == ob) | (b2 == ob)
     ground = bool(np.any(on_obj & ((g1 == scene.ground_geom) | (g2 == scene.ground_geom))))
     other = np.where(b1 == ob, b2, b1)
-    sel = np.flatnonzero(on_obj & scene.finger_mask[other])
+    other_flex = np.where(b1 == ob, flex[:, 1], flex[:, 0])
+    finger = (other_flex >= 0) | ((other >= 0) & scene.finger_mask[np.maximum(other, 0)])
+    sel = np.flatnonzero(on_obj & finger)
     if sel.size == 0 or not forces:
         return wrench, sel.size > 0, ground
     f6 = np.zeros(6)

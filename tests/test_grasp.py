@@ -181,3 +181,34 @@ def test_default_impulse_is_the_papers_at_real_scale():
     assert DEFAULT_IMPULSE == pytest.approx(0.1 / (125 / 50 * 5**0.5), rel=1e-12)
     assert GraspScenario().impulse == DEFAULT_IMPULSE
     assert paper_impulse(0.4) == pytest.approx(4 * DEFAULT_IMPULSE, rel=1e-12)
+
+
+@pytest.mark.slow
+def test_flex_contacts_count_as_finger_contacts():
+    # A contact on a flex has geom -1 on the flex side; it must count as a finger touching the object
+    # (geom_bodyid[-1] would name the object itself). Step until the closing fingers touch the box.
+    import mujoco
+
+    from mjcodesign.backends.mujoco_c import _initial_state
+    from mjcodesign.scenario import STATE_SPEC, _finger_wrench, control_spec, phase_controls
+
+    obj = box_object((_BOX,) * 3, _RHO)
+    scene = build_scene(obj, FingerDesign(), Stiffness.preset("semi-rigid"), FingerModel.FLEX, auto_pose(obj))
+    m = scene.model
+    ctrl, starts = phase_controls(scene, GraspScenario())
+    d = mujoco.MjData(m)
+    mujoco.mj_setState(m, d, _initial_state(scene), STATE_SPEC)
+    for t in range(starts["lift"]):
+        mujoco.mj_setState(m, d, ctrl[t], control_spec())
+        mujoco.mj_step(m, d)
+        if np.any(np.asarray(d.contact.flex) >= 0):
+            break
+    flex_on_object = [
+        i
+        for i in range(d.ncon)
+        if max(d.contact.flex[i]) >= 0
+        and scene.object_body in m.geom_bodyid[d.contact.geom[i][d.contact.geom[i] >= 0]]
+    ]
+    assert flex_on_object, "the flex fingers never touched the box"
+    wrench, finger, _ = _finger_wrench(scene, d)
+    assert finger and np.linalg.norm(wrench[3:]) > 0
