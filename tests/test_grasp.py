@@ -212,3 +212,18 @@ def test_flex_contacts_count_as_finger_contacts():
     assert flex_on_object, "the flex fingers never touched the box"
     wrench, finger, _ = _finger_wrench(scene, d)
     assert finger and np.linalg.norm(wrench[3:]) > 0
+
+
+_TOL_FLEX_RECORD = 1e-12  # relative: a rescaled flex stiffness record vs a recompile (round-off only)
+
+
+def test_flex_with_stiffness_equals_recompile():
+    obj = box_object((_BOX,) * 3, _RHO)
+    scene = build_scene(obj, FingerDesign(), Stiffness.preset("semi-rigid"), FingerModel.FLEX, auto_pose(obj))
+    other = Stiffness.preset("paper-optimized")
+    m = with_stiffness(scene, other)
+    ref = build_scene(obj, FingerDesign(), other, FingerModel.FLEX, scene.pose).model
+    assert not np.allclose(m.flex_stiffness, scene.model.flex_stiffness, rtol=0.1)  # the design changed
+    np.testing.assert_allclose(m.flex_stiffness, ref.flex_stiffness, rtol=_TOL_FLEX_RECORD, atol=0)
+    for name in ("flex_damping", "body_mass", "jnt_stiffness", "geom_solref"):
+        assert_array_equal(getattr(m, name), getattr(ref, name), err_msg=name)

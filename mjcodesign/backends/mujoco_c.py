@@ -24,7 +24,6 @@ from mjcodesign.scenario import (
     GraspScenario,
     GraspScene,
     Outcome,
-    build_scene,
     control_spec,
     failed_outcome,
     outcome_from_states,
@@ -82,14 +81,17 @@ def with_stiffness(scene: GraspScene, stiffness: Stiffness) -> mujoco.MjModel:
     Chain: hinge stiffness k = E I / l (the arithmetic of :func:`mjcodesign.chain.hinge_stiffness`),
     damping ``damping_time`` k and the blocks' contact solref (:func:`mjcodesign.chain.contact_solref`)
     are rewritten instead of a recompile; the test checks they equal a recompiled model bitwise. Flex:
-    the scene is rebuilt (its cell moduli are compiled into the flex).
+    each cell's stiffness record is rescaled to the design's cell modulus
+    (:func:`mjcodesign.flex.rescale_cell_young`; equal to a recompile to round-off, tested).
     """
     built = scene.built
-    if built.finger_model.is_flex:
-        return build_scene(
-            scene.obj, built.design, stiffness, built.finger_model, scene.pose, options=built.options
-        ).model
     m = copy.copy(scene.model)
+    if built.finger_model.is_flex:
+        from mjcodesign.flex import rescale_cell_young
+
+        for h, young in zip(built.fingers, stiffness.young, strict=True):
+            rescale_cell_young(m, h, built.design, young, built.options.poisson)
+        return m
     design, opts = built.design, built.options
     facts = _block_facts(design)
     ids = _chain_ids(scene)
