@@ -10,7 +10,7 @@ Phases (durations and forces in :class:`GraspScenario`):
 5. impulse: one step of a downward force ``impulse / dt`` at the object's COM (``xfrc_applied``);
 6. hold.
 
-The default durations (0.7 s in all, 350 steps of 2 ms) are longer than the authors' whole simulated
+The default durations (0.7 s in all, 351 steps of 2 ms) are longer than the authors' whole simulated
 grasp (850 frames at 4000 fps, 0.21 s). Every phase spans several time constants of what it drives
 (finger servos ~13 ms, contacts 4 ms); a dropped object reaches the ground 3 cm below in 78 ms, inside
 the 0.1 s final hold. Shortening close and tighten to 0.1 s each let a held 50 g box slip, so the
@@ -503,16 +503,17 @@ def outcome_from_states(
 
     def load(x: np.ndarray, t: int, stage: str) -> None:
         # "forward": contact forces (mj_forward, warm-started by the previous replay); "collide":
-        # contacts only; "kinematics": poses only.
+        # contacts only (mj_fwdPosition, which also places flex vertices); "kinematics": poses only.
         mujoco.mj_setState(m, d, x, STATE_SPEC)
         mujoco.mj_setState(m, d, ctrl[min(t + 1, len(ctrl) - 1)], spec)
         if stage == "forward":
             mujoco.mj_forward(m, d)
             d.qacc_warmstart[:] = d.qacc  # the hold samples are a few steps apart
             return
-        mujoco.mj_kinematics(m, d)
         if stage == "collide":
-            mujoco.mj_collision(m, d)
+            mujoco.mj_fwdPosition(m, d)
+        else:
+            mujoco.mj_kinematics(m, d)
 
     ob = scene.object_body
     # The object's body frame is at its COM (build_scene), so the free joint's position is the COM.
