@@ -100,3 +100,13 @@ def test_folder_runs_every_object_as_a_json_list(tmp_path):
     assert out[0]["success"], out[0]["reason"]
     assert not out[1]["success"] and out[1]["reason"].startswith("error:") and "too big" in out[1]["reason"]
     assert len(r.stdout.strip().splitlines()) == 4  # "[", one line per object, "]"
+
+
+def test_mjwarp_flex_is_refused_with_one_line(tmp_path):
+    pytest.importorskip("mujoco_warp")
+    box = _mesh(tmp_path, "box.stl", trimesh.creation.box(extents=(0.05, 0.05, 0.05)))
+    r = _run(tmp_path, "--object", box, "--model", "flex", "--backend", "mjwarp", "--json", timeout=240)
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    # Warp itself may print a CUDA-driver notice on a CPU-only machine; ours is the one error line.
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1 and "flex" in lines[0] and "Traceback" not in r.stderr

@@ -60,7 +60,7 @@ class MjwarpBackend:
 
     def run(self, scene: GraspScene, scenario: GraspScenario) -> Outcome:
         """One world with the scene's own design."""
-        return self.run_batch(scene, scenario, [scene.built.stiffness])[0]
+        return self.run_scenes([scene], scenario)[0]
 
     def run_batch(
         self, scene: GraspScene, scenario: GraspScenario, stiffnesses: list[Stiffness]
