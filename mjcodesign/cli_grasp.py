@@ -25,6 +25,7 @@ __all__ = [
     "run_bench",
     "grasp",
     "split_designs",
+    "object_sources",
     "user_cache_dir",
     "main",
 ]
@@ -41,7 +42,10 @@ def user_cache_dir() -> Path:
 
 def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
-        "--object", required=True, help="YCB name (e.g. 025_mug), egad-like:N, or an OBJ/STL/PLY file"
+        "--object",
+        required=True,
+        help="YCB name (e.g. 025_mug), egad-like:N or an OBJ/STL/PLY file; or several: a named set "
+        "(ycb-in-domain, ycb-ood, egad-like) or a folder of OBJ/STL/PLY files, printed as a JSON list",
     )
     p.add_argument(
         "--design",
@@ -58,7 +62,13 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         help='auto (top-down) or a JSON file {"pose": 4x4 palm pose [m], "openings": [s1, s2] [m]}; the '
         "object's COM is at world x = y = 0 with the object resting on the ground (z = 0)",
     )
-    p.add_argument("--impulse", type=float, default=0.1, help="downward disturbance impulse [N s]")
+    p.add_argument(
+        "--impulse",
+        type=float,
+        default=None,
+        help="downward disturbance impulse [N s]; default 0.0179, the paper's 0.1 N s (applied to a 5x "
+        "larger scene) mapped to real size (its 0.2 and 0.4 map to 0.036 and 0.072)",
+    )
     p.add_argument("--tension", type=float, default=None, help="tendon tension per finger [N]")
     p.add_argument("--lift", type=float, default=None, help="lift distance [m]")
     p.add_argument("--backend", choices=_BACKENDS, default="mujoco")
@@ -125,7 +135,7 @@ def grasp(
     density: str = "light",
     pose: str = "auto",
     *,
-    impulse: float = 0.1,
+    impulse: float | None = None,
     tension: float | None = None,
     lift: float | None = None,
     backend: str = "mujoco",
@@ -150,7 +160,7 @@ def grasp(
     stiffness = Stiffness.parse(design)
     rho = parse_density(density)
     if Path(source).is_dir():
-        raise MeshError(f"{source} is a folder: grasp takes one object (pass one mesh file)")
+        raise MeshError(f"{source} is a folder: grasp() takes one object (see object_sources)")
     if observer is not None and backend != "mujoco":
         raise DesignError(f"recording a grasp needs --backend mujoco, not {backend}")
     sim = get_backend(backend)
@@ -158,8 +168,8 @@ def grasp(
     convex_decomposition(obj, CoacdSettings(seed=seed), cache_dir=cache_dir)
     finger_design = FingerDesign()
     gripper_pose = _read_pose(pose, obj, finger_design)
-    kwargs = {k: v for k, v in (("tension", tension), ("lift", lift)) if v is not None}
-    scenario = GraspScenario(impulse=impulse, **kwargs)
+    kwargs = {k: v for k, v in (("tension", tension), ("lift", lift), ("impulse", impulse)) if v is not None}
+    scenario = GraspScenario(**kwargs)
     scene = build_scene(obj, finger_design, stiffness, FingerModel(model), gripper_pose)
     recording = {} if observer is None else {"observer": observer, "label": label or design}
     out = sim.run(scene, scenario, **recording).as_dict()
@@ -184,46 +194,111 @@ def split_designs(text: str) -> list[str]:
     return parts if len(parts) > 1 and all(p in PRESETS for p in parts) else [text]
 
 
+def object_sources(text: str) -> list[str] | None:
+    """The objects of a named set or a folder (sorted mesh files), or None for a single object.
+
+    Raises :class:`MeshError` for a folder without OBJ/STL/PLY files.
+    """
+    from mjcodesign.errors import MeshError
+    from mjcodesign.objects import MESH_SUFFIXES, OBJECT_SETS, named_set
+
+    if text in OBJECT_SETS:
+        return list(named_set(text))
+    folder = Path(text)
+    if not folder.is_dir():
+        return None
+    files = sorted(str(p) for p in folder.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
+    if not files:
+        raise MeshError(f"{folder}: no {', '.join(MESH_SUFFIXES)} files")
+    return files
+
+
+def _failed_object(source: str, exc: Exception) -> dict:
+    """The record of an object that could not be simulated in a multi-object run (never NaN)."""
+    return {
+        "object": Path(source).stem if Path(source).suffix else source,
+        "success": False,
+        "body_force": [0.0] * 6,
+        "displacement": [0.0] * 3,
+        "ground_contact": False,
+        "reason": f"error: {exc}",
+        "wall_time_s": 0.0,
+    }
+
+
 def run(args: argparse.Namespace) -> int:
-    """Run ``grasp``; library errors propagate to the caller (exit 2 there)."""
+    """Run ``grasp``; library errors propagate to the caller (exit 2 there).
+
+    Several designs run on the same object side by side. A named set or a folder runs every object
+    (for every design) and prints a JSON list (one object per line); an object that fails to load,
+    decompose or pose is a failed entry with ``reason`` "error: ...".
+    """
     from mjcodesign.cli_viz import open_recorder
-    from mjcodesign.errors import DesignError, StiffnessError
+    from mjcodesign.errors import DesignError, MjcodesignError, StiffnessError
 
     designs = split_designs(args.design)
     if len(set(designs)) != len(designs):
         raise StiffnessError(f"--design lists a preset twice: {args.design}")
     if (args.rrd or args.spawn) and args.backend != "mujoco":
         raise DesignError(f"recording a grasp needs --backend mujoco, not {args.backend}")
+    sources = object_sources(args.object)
     recorder = open_recorder(args)
-    outs = []
+
+    def one(source: str, design: str, label: str) -> dict:
+        out = grasp(
+            source,
+            design,
+            args.model,
+            args.density,
+            args.pose,
+            impulse=args.impulse,
+            tension=args.tension,
+            lift=args.lift,
+            backend=args.backend,
+            seed=args.seed,
+            allow_open=args.allow_open,
+            cache_dir=user_cache_dir(),
+            observer=recorder,
+            label=label,
+        )
+        return out if len(designs) == 1 else {"design": design, **out}
+
     try:
-        for design in designs:
-            out = grasp(
-                args.object,
-                design,
-                args.model,
-                args.density,
-                args.pose,
-                impulse=args.impulse,
-                tension=args.tension,
-                lift=args.lift,
-                backend=args.backend,
-                seed=args.seed,
-                allow_open=args.allow_open,
-                cache_dir=user_cache_dir(),
-                observer=recorder,
-            )
-            outs.append(out if len(designs) == 1 else {"design": design, **out})
+        if sources is None:
+            outs = [one(args.object, design, design) for design in designs]
+            if len(outs) == 1:
+                _print(outs[0], args.json)
+            elif args.json:
+                print(json.dumps(outs))
+            else:
+                for out in outs:
+                    _print(out, False)
+                    print()
+            return 0
+        from rich.console import Console
+        from rich.progress import Progress
+
+        results = []
+        with Progress(console=Console(stderr=True), transient=True) as bar:
+            task = bar.add_task(f"grasp {args.object}", total=len(sources) * len(designs))
+            for source in sources:
+                name = Path(source).stem if Path(source).suffix else source
+                for design in designs:
+                    bar.update(task, description=f"grasp {name} ({design})")
+                    try:
+                        results.append(one(source, design, f"{name}/{design}"))
+                    except MjcodesignError as exc:
+                        failed = _failed_object(source, exc)
+                        results.append(failed if len(designs) == 1 else {"design": design, **failed})
+                    bar.advance(task)
     finally:
         if recorder is not None:
             recorder.close()
-    if len(outs) == 1:
-        _print(outs[0], args.json)
-    elif args.json:
-        print(json.dumps(outs))
+    if args.json:
+        print("[\n" + ",\n".join(json.dumps(r) for r in results) + "\n]")
     else:
-        for out in outs:
-            _print(out, False)
+        for r in results:
+            _print(r, False)
             print()
     return 0
 

@@ -13,6 +13,7 @@ __all__ = [
     "OutputError",
     "HardwareError",
     "ObserverError",
+    "UnsupportedError",
 ]
 
 
@@ -54,3 +55,7 @@ class HardwareError(MjcodesignError, RuntimeError):
 
 class ObserverError(MjcodesignError, RuntimeError):
     """A rollout observer (e.g. the Rerun recorder) is unknown, not installed, or cannot write."""
+
+
+class UnsupportedError(MjcodesignError, NotImplementedError):
+    """A backend cannot run this model or feature; raised instead of approximating it silently."""

@@ -40,6 +40,7 @@ from mjcodesign.mjcf import CONTYPE_FINGER, CONTYPE_WORLD, FingerHandle, FingerM
 __all__ = [
     "add_flex_finger",
     "apply_cell_young",
+    "rescale_cell_young",
     "cell_young",
     "finger_mesh",
     "lagrange_weights",
@@ -268,8 +269,8 @@ def _overlap_volume(block, a: float, b: float) -> float:
     return float(0.5 * (hi - lo) * np.sum(wg * block.height(x)) * block.width)
 
 
-def apply_cell_young(m: mujoco.MjModel, handle: FingerHandle) -> None:
-    """Scale each cell's stiffness record of the compiled flex to the handle's cell moduli."""
+def _cell_records(m: mujoco.MjModel, handle: FingerHandle) -> np.ndarray:
+    """The handle's flex stiffness records in ``m``, one row per cell (a view: writes go to ``m``)."""
     fid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_FLEX, handle.flex)
     n_cells = len(handle.cell_young)
     adr = int(m.flex_stiffnessadr[fid])
@@ -278,8 +279,27 @@ def apply_cell_young(m: mujoco.MjModel, handle: FingerHandle) -> None:
     size = (end - adr) // n_cells
     if size * n_cells != end - adr:
         raise DesignError("unexpected flex stiffness layout; cannot write per-cell modulus")
-    rec = m.flex_stiffness[adr:end].reshape(n_cells, size)
+    return m.flex_stiffness[adr:end].reshape(n_cells, size)
+
+
+def apply_cell_young(m: mujoco.MjModel, handle: FingerHandle) -> None:
+    """Scale each cell's stiffness record of the compiled flex to the handle's cell moduli."""
+    rec = _cell_records(m, handle)
     rec *= (handle.cell_young / _E_REF)[:, None]
+
+
+def rescale_cell_young(
+    m: mujoco.MjModel, handle: FingerHandle, design: FingerDesign, young: np.ndarray, poisson: float
+) -> None:
+    """Rewrite the records in ``m`` (holding ``handle.cell_young``) for block moduli ``young`` [Pa].
+
+    The records are linear in E, so each is scaled by new / old cell modulus instead of recompiling;
+    a test checks it against a recompile.
+    """
+    _, _, _, n_cells, order = handle.grid
+    new = cell_young(design, young, n_cells) * locking_factor(design, n_cells, poisson, order)
+    rec = _cell_records(m, handle)
+    rec *= (new / handle.cell_young)[:, None]
 
 
 def assemble_stiffness(m: mujoco.MjModel, handle: FingerHandle) -> np.ndarray:

@@ -23,6 +23,7 @@ from mjcodesign.errors import MeshError
 __all__ = [
     "DENSITY_PRESETS",
     "MESH_SUFFIXES",
+    "OBJECT_SETS",
     "YCB_IN_DOMAIN",
     "YCB_OOD",
     "CoacdSettings",
@@ -278,6 +279,10 @@ def egad_like(index: int, density: float, *, seed: int = 0) -> GraspObject:
     verts = 0.5 * _EGAD_SIZE * u * r[:, None] * axes
     mesh = trimesh.Trimesh(verts, sphere.faces, process=True)
     return _from_mesh(mesh, density, allow_open=False, name=f"egad-like-{seed}-{index:03d}")
+
+
+OBJECT_SETS = ("ycb-in-domain", "ycb-ood", "egad-like")
+"""Names of the object sets of :func:`named_set`."""
 
 
 def named_set(name: str) -> tuple[str, ...]:

@@ -76,9 +76,37 @@ def test_bad_input_exits_2_with_one_line(tmp_path, case):
     elif case == "bad_density":
         args += ["--density", "feather"]
     elif case == "folder":
-        args = ["--object", str(tmp_path)]
+        empty = tmp_path / "empty"
+        empty.mkdir()
+        args = ["--object", str(empty)]
     r = _run(tmp_path, *args, "--json")
     assert r.returncode == 2, (r.stdout, r.stderr)
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1, r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_folder_runs_every_object_as_a_json_list(tmp_path):
+    folder = tmp_path / "objects"
+    folder.mkdir()
+    _mesh(folder, "a_box.stl", trimesh.creation.box(extents=(0.05, 0.05, 0.05)))
+    _mesh(folder, "b_wide.obj", trimesh.creation.box(extents=(0.04, 0.2, 0.04)))  # too big to grasp
+    (folder / "notes.txt").write_text("not a mesh")
+    r = _run(tmp_path, "--object", str(folder), "--density", "heavy", "--impulse", "0", "--json", timeout=240)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert [o["object"] for o in out] == ["a_box", "b_wide"]
+    assert all(_KEYS <= set(o) for o in out)
+    assert out[0]["success"], out[0]["reason"]
+    assert not out[1]["success"] and out[1]["reason"].startswith("error:") and "too big" in out[1]["reason"]
+    assert len(r.stdout.strip().splitlines()) == 4  # "[", one line per object, "]"
+
+
+def test_mjwarp_flex_is_refused_with_one_line(tmp_path):
+    pytest.importorskip("mujoco_warp")
+    box = _mesh(tmp_path, "box.stl", trimesh.creation.box(extents=(0.05, 0.05, 0.05)))
+    r = _run(tmp_path, "--object", box, "--model", "flex", "--backend", "mjwarp", "--json", timeout=240)
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    # Warp itself may print a CUDA-driver notice on a CPU-only machine; ours is the one error line.
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
+    assert len(lines) == 1 and "flex" in lines[0] and "Traceback" not in r.stderr

@@ -119,3 +119,111 @@ def test_flex_grasp_smoke():
     out = MujocoBackend().run(scene, scenario)
     assert not out.reason.startswith("diverged"), out.reason
     assert np.all(np.isfinite(out.body_force)) and np.all(np.isfinite(out.displacement))
+
+
+_TOL_POSE_MODEL = 1e-12  # relative: a moved model vs a recompile differ only by round-off at qpos0
+
+
+def test_scene_at_pose_equals_recompile(box_scene):
+    from mjcodesign.scenario import scene_at_pose
+
+    p0 = box_scene.pose
+    half = 0.15  # half of a 0.3 rad yaw
+    pose = GripperPose(
+        (0.003, -0.002, p0.position[2] + 0.01), (np.cos(half), 0.0, 0.0, np.sin(half)), (0.02, 0.021)
+    )
+    moved = scene_at_pose(box_scene, pose).model
+    ref = build_scene(box_scene.obj, FingerDesign(), box_scene.built.stiffness, FingerModel.CHAIN, pose).model
+    compared = 0
+    for name in dir(ref):
+        value = getattr(ref, name, None)
+        if name.startswith("_") or name == "light_poscom0" or not isinstance(value, np.ndarray):
+            continue  # light_poscom0 only places lights
+        np.testing.assert_allclose(getattr(moved, name), value, rtol=_TOL_POSE_MODEL, atol=0, err_msg=name)
+        compared += 1
+    assert compared > 100
+
+
+def test_pose_batch_equals_single_bitwise(box_scene):
+    from mjcodesign.scenario import scene_at_pose
+
+    scenario = GraspScenario(hold_s=0.05, post_hold_s=0.05)
+    p0 = box_scene.pose
+    poses = [p0, GripperPose((0.002, 0.0, p0.position[2]), p0.quat, (p0.openings[0] + 0.002, p0.openings[1]))]
+    outs = MujocoBackend(nthread=2).run_poses(box_scene, scenario, poses)
+    for pose, out in zip(poses, outs, strict=True):
+        single = MujocoBackend().run(scene_at_pose(box_scene, pose), scenario)
+        assert_array_equal(out.body_force, single.body_force)
+        assert_array_equal(out.displacement, single.displacement)
+        assert out.reason == single.reason
+    assert not np.array_equal(outs[0].object_path, outs[1].object_path)
+
+
+def test_batch_flags_a_diverged_rollout(box_scene):
+    # An undamped hinge 1e6 times too stiff blows up the explicit spring; MuJoCo then resets that
+    # rollout's data (its clock restarts), which the batch must report, not average into outcomes.
+    # One thread: the good rollout that follows on the same MjData clears the bad one's warning.
+    from mjcodesign.backends.mujoco_c import _scene_with
+
+    bad = with_stiffness(box_scene, Stiffness.preset("soft"))
+    bad.jnt_stiffness[:] *= 1e6
+    bad.dof_damping[:] = 0.0
+    scenario = GraspScenario(hold_s=0.02, post_hold_s=0.02)
+    outs = MujocoBackend(nthread=1).run_scenes([_scene_with(box_scene, bad), box_scene], scenario)
+    assert outs[0].reason.startswith("diverged") and not outs[0].success
+    assert not outs[1].reason.startswith("diverged")
+
+
+def test_default_impulse_is_the_papers_at_real_scale():
+    # J = J_paper / (s³/50 · √s): the authors' 0.1 N s on a 5x scene at 1/50 of our density, Froude-scaled.
+    from mjcodesign.scenario import DEFAULT_IMPULSE, paper_impulse
+
+    assert DEFAULT_IMPULSE == pytest.approx(0.1 / (125 / 50 * 5**0.5), rel=1e-12)
+    assert GraspScenario().impulse == DEFAULT_IMPULSE
+    assert paper_impulse(0.4) == pytest.approx(4 * DEFAULT_IMPULSE, rel=1e-12)
+
+
+@pytest.mark.slow
+def test_flex_contacts_count_as_finger_contacts():
+    # A contact on a flex has geom -1 on the flex side; it must count as a finger touching the object
+    # (geom_bodyid[-1] would name the object itself). Step until the closing fingers touch the box.
+    import mujoco
+
+    from mjcodesign.backends.mujoco_c import _initial_state
+    from mjcodesign.scenario import STATE_SPEC, _finger_wrench, control_spec, phase_controls
+
+    obj = box_object((_BOX,) * 3, _RHO)
+    scene = build_scene(obj, FingerDesign(), Stiffness.preset("semi-rigid"), FingerModel.FLEX, auto_pose(obj))
+    m = scene.model
+    ctrl, starts = phase_controls(scene, GraspScenario())
+    d = mujoco.MjData(m)
+    mujoco.mj_setState(m, d, _initial_state(scene), STATE_SPEC)
+    for t in range(starts["lift"]):
+        mujoco.mj_setState(m, d, ctrl[t], control_spec())
+        mujoco.mj_step(m, d)
+        if np.any(np.asarray(d.contact.flex) >= 0):
+            break
+    flex_on_object = [
+        i
+        for i in range(d.ncon)
+        if max(d.contact.flex[i]) >= 0
+        and scene.object_body in m.geom_bodyid[d.contact.geom[i][d.contact.geom[i] >= 0]]
+    ]
+    assert flex_on_object, "the flex fingers never touched the box"
+    wrench, finger, _ = _finger_wrench(scene, d)
+    assert finger and np.linalg.norm(wrench[3:]) > 0
+
+
+_TOL_FLEX_RECORD = 1e-12  # relative: a rescaled flex stiffness record vs a recompile (round-off only)
+
+
+def test_flex_with_stiffness_equals_recompile():
+    obj = box_object((_BOX,) * 3, _RHO)
+    scene = build_scene(obj, FingerDesign(), Stiffness.preset("semi-rigid"), FingerModel.FLEX, auto_pose(obj))
+    other = Stiffness.preset("paper-optimized")
+    m = with_stiffness(scene, other)
+    ref = build_scene(obj, FingerDesign(), other, FingerModel.FLEX, scene.pose).model
+    assert not np.allclose(m.flex_stiffness, scene.model.flex_stiffness, rtol=0.1)  # the design changed
+    np.testing.assert_allclose(m.flex_stiffness, ref.flex_stiffness, rtol=_TOL_FLEX_RECORD, atol=0)
+    for name in ("flex_damping", "body_mass", "jnt_stiffness", "geom_solref"):
+        assert_array_equal(getattr(m, name), getattr(ref, name), err_msg=name)

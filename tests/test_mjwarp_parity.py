@@ -38,3 +38,39 @@ def test_mjwarp_matches_mujoco_c():
         np.testing.assert_allclose(b.object_path, a.object_path, atol=_TOL_PATH, rtol=0)
         np.testing.assert_allclose(b.displacement, a.displacement, atol=_TOL_PATH, rtol=0)
     assert got[0].body_force[5] == pytest.approx(ref[0].body_force[5], rel=_TOL_FORCE)
+
+
+@pytest.mark.slow
+def test_mjwarp_pose_batch_matches_mujoco_c():
+    # Two poses of one design as two worlds (batched body_pos/body_quat, per-world state and controls).
+    from mjcodesign.mjcf import GripperPose
+
+    obj = box_object((0.05,) * 3, 400.0)
+    p0 = auto_pose(obj)
+    # The second pose sits 3 mm off the object's centre along the palm's x: another contact patch and
+    # a path 0.67 mm from the first pose's. (Poses where the grasp is marginal, e.g. 3 mm off along
+    # the closing axis or 5 mm higher, differ by 0.65 mm or in success between float32 and float64.)
+    poses = [p0, GripperPose((0.003, 0.0, p0.position[2]), p0.quat, p0.openings)]
+    scene = build_scene(obj, FingerDesign(), Stiffness.preset("paper-optimized"), FingerModel.CHAIN, p0)
+    scenario = GraspScenario(
+        settle_s=0.05, close_s=0.1, tighten_s=0.1, lift_s=0.1, hold_s=0.06, impulse=0.0, post_hold_s=0.02
+    )
+    ref = MujocoBackend().run_poses(scene, scenario, poses)
+    got = MjwarpBackend("cpu").run_poses(scene, scenario, poses)
+    assert not np.allclose(ref[0].object_path, ref[1].object_path, atol=_TOL_PATH, rtol=0)  # poses differ
+    for a, b in zip(ref, got, strict=True):
+        assert a.reason == b.reason and a.success == b.success
+        np.testing.assert_allclose(b.object_path, a.object_path, atol=_TOL_PATH, rtol=0)
+        np.testing.assert_allclose(b.displacement, a.displacement, atol=_TOL_PATH, rtol=0)
+
+
+def test_mjwarp_refuses_flex_with_a_typed_error():
+    from mjcodesign.errors import UnsupportedError
+
+    obj = box_object((0.05,) * 3, 400.0)
+    scene = build_scene(obj, FingerDesign(), Stiffness.preset("semi-rigid"), FingerModel.FLEX, auto_pose(obj))
+    backend = MjwarpBackend("cpu")
+    with pytest.raises(UnsupportedError, match="flex"):
+        backend.run_poses(scene, GraspScenario(), [scene.pose])
+    with pytest.raises(UnsupportedError, match="flex"):
+        backend.run_batch(scene, GraspScenario(), [Stiffness.preset("soft")])

@@ -1,8 +1,12 @@
 """MuJoCo Warp backend: the designs of a batch are worlds of one device model.
 
-Per-world stiffness (chain): ``jnt_stiffness``, ``dof_damping`` and ``geom_solref`` are batched
-(``put_model(batch_sizes=...)``) and filled from :func:`with_stiffness`. Flex moduli are shared by all
-worlds in MJWarp, so flex is refused here. The phase controls are copied into ``ctrl`` and
+Per-world designs and poses (chain): ``jnt_stiffness``, ``dof_damping``, ``geom_solref`` and the mount
+and palm ``body_pos``/``body_quat`` are batched (``put_model(batch_sizes=...)``) and filled from
+:func:`with_stiffness` and :func:`scene_at_pose`; each world gets its own initial state and controls.
+Flex is refused with :class:`UnsupportedError`: MJWarp shares ``flex_stiffness`` across worlds (so a
+flex design would be one model batched over poses), and although MJWarp 4.0 runs this trilinear flex on
+Warp's CPU device, a 2-world grasp step took 3.3 s there (194 s of kernel compilation first), too slow
+for a parity test; it is untested on CUDA. The phase controls are copied into ``ctrl`` and
 ``xfrc_applied`` before every step. The states at the steps the outcome reads are copied back and
 the outcome (contact wrench included) is evaluated by :func:`outcome_from_states` with MuJoCo C's
 ``mj_forward`` on those states, so both backends share one outcome definition. On the CPU the first
@@ -17,7 +21,8 @@ import mujoco
 import numpy as np
 
 from mjcodesign.backends.mujoco_c import _initial_state, with_stiffness
-from mjcodesign.errors import DesignError
+from mjcodesign.errors import DesignError, UnsupportedError
+from mjcodesign.mjcf import GripperPose
 from mjcodesign.scenario import (
     STATE_SPEC,
     GraspScenario,
@@ -27,12 +32,14 @@ from mjcodesign.scenario import (
     outcome_from_states,
     outcome_steps,
     phase_controls,
+    scene_at_pose,
 )
 from mjcodesign.stiffness import Stiffness
 
 __all__ = ["MjwarpBackend"]
 
-_BATCHED = ("jnt_stiffness", "dof_damping", "geom_solref")
+# Per-world model fields: a design's stiffness (with_stiffness) and a pose's mount and palm (scene_at_pose).
+_BATCHED = ("jnt_stiffness", "dof_damping", "geom_solref", "body_pos", "body_quat", "body_ipos")
 _NCONMAX_PER_WORLD = 256  # contacts per world (a grasp makes ~20-60)
 _NJMAX_PER_WORLD = 1024  # constraint rows per world
 
@@ -53,44 +60,70 @@ class MjwarpBackend:
 
     def run(self, scene: GraspScene, scenario: GraspScenario) -> Outcome:
         """One world with the scene's own design."""
-        return self.run_batch(scene, scenario, [scene.built.stiffness])[0]
+        return self.run_scenes([scene], scenario)[0]
 
     def run_batch(
         self, scene: GraspScene, scenario: GraspScenario, stiffnesses: list[Stiffness]
     ) -> list[Outcome]:
         """One world per design; a world whose state turns non-finite is a failed outcome."""
+        if scene.built.finger_model.is_flex:
+            raise UnsupportedError(
+                "mjwarp shares flex stiffness across worlds: use --backend mujoco for flex designs"
+            )
+        return self.run_scenes([_with_model(scene, with_stiffness(scene, s)) for s in stiffnesses], scenario)
+
+    def run_poses(
+        self, scene: GraspScene, scenario: GraspScenario, poses: list[GripperPose]
+    ) -> list[Outcome]:
+        """One world per pose of the scene's design (batched ``body_pos``/``body_quat``, chain only)."""
+        return self.run_scenes([scene_at_pose(scene, p) for p in poses], scenario)
+
+    def run_scenes(self, scenes: list[GraspScene], scenario: GraspScenario) -> list[Outcome]:
+        """Scenes of one model structure as worlds: per-world model fields, initial state and controls.
+
+        Flex is refused (:class:`UnsupportedError`): MJWarp 4.0 runs this trilinear flex with the
+        discrete integrator on Warp's CPU device, but a 2-world grasp step took 3.3 s there after 194 s
+        of kernel compilation, so a rollout takes ~20 min and no parity test fits; it is untested on CUDA.
+        """
         import mujoco_warp as mjw
         import warp as wp
 
-        if scene.built.finger_model.is_flex:
-            raise DesignError("mjwarp shares flex stiffness across worlds: use --backend mujoco for flex")
+        if scenes[0].built.finger_model.is_flex:
+            raise UnsupportedError(
+                "mjwarp flex is not supported here: on Warp's CPU device one 2-world grasp step took 3.3 s "
+                "(a rollout ~20 min), too slow to test parity with MuJoCo C; use --backend mujoco"
+            )
         t0 = time.perf_counter()
-        n = len(stiffnesses)
-        mjm = scene.model
-        models = [with_stiffness(scene, s) for s in stiffnesses]
+        n = len(scenes)
+        mjm = scenes[0].model
         m = mjw.put_model(mjm, batch_sizes={f: n for f in _BATCHED})
         for f in _BATCHED:
             arr = getattr(m, f)
             like = arr.numpy()
-            host = np.stack([getattr(mi, f) for mi in models]).astype(like.dtype)
+            host = np.stack([getattr(sc.model, f) for sc in scenes]).astype(like.dtype)
             arr.assign(host.reshape(like.shape))
-        ctrl, starts = phase_controls(scene, scenario)
-        x0 = _initial_state(scene)
+        plans = [phase_controls(sc, scenario) for sc in scenes]
+        starts = plans[0][1]
+        ctrl = np.stack([c for c, _ in plans])
+        x0 = np.stack([_initial_state(sc) for sc in scenes])
+        nq, nv, na = mjm.nq, mjm.nv, mjm.na
         mjd = mujoco.MjData(mjm)
-        mujoco.mj_setState(mjm, mjd, x0, STATE_SPEC)
+        mujoco.mj_setState(mjm, mjd, x0[0], STATE_SPEC)
         mujoco.mj_forward(mjm, mjd)
         d = mjw.put_data(mjm, mjd, nworld=n, nconmax=_NCONMAX_PER_WORLD * n, njmax=_NJMAX_PER_WORLD)
+        d.qpos.assign(x0[:, 1 : 1 + nq])  # state = (time, qpos, qvel, act, ...)
+        d.qvel.assign(x0[:, 1 + nq : 1 + nq + nv])
         keep = outcome_steps(starts)
         nu, nbody = mjm.nu, mjm.nbody
-        states = np.zeros((n, len(ctrl), x0.size))
+        states = np.zeros((n, ctrl.shape[1], x0.shape[1]))
         scratch = mujoco.MjData(mjm)
-        for t in range(len(ctrl)):
-            d.ctrl.assign(np.tile(ctrl[t, :nu], (n, 1)))
-            d.xfrc_applied.assign(np.tile(ctrl[t, nu:].reshape(nbody, 6), (n, 1, 1)))
+        for t in range(ctrl.shape[1]):
+            d.ctrl.assign(ctrl[:, t, :nu])
+            d.xfrc_applied.assign(ctrl[:, t, nu:].reshape(n, nbody, 6))
             mjw.step(m, d)
             if t in keep:
                 qpos, qvel = d.qpos.numpy(), d.qvel.numpy()
-                act = d.act.numpy() if mjm.na else None
+                act = d.act.numpy() if na else None
                 for w in range(n):
                     scratch.time = (t + 1) * mjm.opt.timestep
                     scratch.qpos[:] = qpos[w]
@@ -100,12 +133,11 @@ class MjwarpBackend:
                     mujoco.mj_getState(mjm, scratch, states[w, t], STATE_SPEC)
         wp.synchronize()
         outs = []
-        for w, mi in enumerate(models):
+        for w, sc in enumerate(scenes):
             if not np.all(np.isfinite(states[w][sorted(keep)])):
                 outs.append(failed_outcome("diverged: mjwarp state is not finite"))
                 continue
-            scene_w = _with_model(scene, mi)
-            outs.append(outcome_from_states(scene_w, scenario, x0, states[w], ctrl, starts))
+            outs.append(outcome_from_states(sc, scenario, x0[w], states[w], ctrl[w], starts))
         wall = (time.perf_counter() - t0) / n
         for o in outs:
             o.wall_time_s = wall

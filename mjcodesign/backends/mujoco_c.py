@@ -5,7 +5,9 @@ from __future__ import annotations
 import copy
 import functools
 import os
+import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from typing import NamedTuple, Protocol
 
 import mujoco
@@ -16,23 +18,25 @@ from mjcodesign.beam import block_bending_compliance
 from mjcodesign.chain import contact_solref
 from mjcodesign.errors import SimulationDiverged
 from mjcodesign.finger import FingerDesign
-from mjcodesign.mjcf import make_data
+from mjcodesign.mjcf import GripperPose, make_data
 from mjcodesign.observe import Observer, Rollout
 from mjcodesign.scenario import (
     STATE_SPEC,
     GraspScenario,
     GraspScene,
     Outcome,
-    build_scene,
     control_spec,
     failed_outcome,
     outcome_from_states,
     phase_controls,
+    scene_at_pose,
 )
 from mjcodesign.simulate import check_state, reset_warnings
 from mjcodesign.stiffness import Stiffness
 
 __all__ = ["GraspBackend", "MujocoBackend", "with_stiffness"]
+
+_CLOCK_TOL = 0.5  # [steps]: a rollout's time off by half a step means MuJoCo reset it
 
 
 class GraspBackend(Protocol):
@@ -46,6 +50,12 @@ class GraspBackend(Protocol):
         self, scene: GraspScene, scenario: GraspScenario, stiffnesses: list[Stiffness]
     ) -> list[Outcome]:
         """One rollout per design on the same object and pose."""
+        ...
+
+    def run_poses(
+        self, scene: GraspScene, scenario: GraspScenario, poses: list[GripperPose]
+    ) -> list[Outcome]:
+        """One rollout per pose of the scene's design."""
         ...
 
 
@@ -72,14 +82,17 @@ def with_stiffness(scene: GraspScene, stiffness: Stiffness) -> mujoco.MjModel:
     Chain: hinge stiffness k = E I / l (the arithmetic of :func:`mjcodesign.chain.hinge_stiffness`),
     damping ``damping_time`` k and the blocks' contact solref (:func:`mjcodesign.chain.contact_solref`)
     are rewritten instead of a recompile; the test checks they equal a recompiled model bitwise. Flex:
-    the scene is rebuilt (its cell moduli are compiled into the flex).
+    each cell's stiffness record is rescaled to the design's cell modulus
+    (:func:`mjcodesign.flex.rescale_cell_young`; equal to a recompile to round-off, tested).
     """
     built = scene.built
-    if built.finger_model.is_flex:
-        return build_scene(
-            scene.obj, built.design, stiffness, built.finger_model, scene.pose, options=built.options
-        ).model
     m = copy.copy(scene.model)
+    if built.finger_model.is_flex:
+        from mjcodesign.flex import rescale_cell_young
+
+        for h, young in zip(built.fingers, stiffness.young, strict=True):
+            rescale_cell_young(m, h, built.design, young, built.options.poisson)
+        return m
     design, opts = built.design, built.options
     facts = _block_facts(design)
     ids = _chain_ids(scene)
@@ -169,49 +182,117 @@ class MujocoBackend:
         observer: Observer | None = None,
         labels: list[str] | None = None,
     ) -> list[Outcome]:
-        """All designs through one ``mujoco.rollout`` call on ``nthread`` threads.
+        """All designs at the scene's pose through one ``mujoco.rollout`` call on ``nthread`` threads.
 
-        Every thread's MjData warnings are checked afterwards; if any warned, the batch is re-run one
-        rollout at a time to find which diverged. ``wall_time_s`` is the batch's wall time shared evenly.
-        ``observer`` receives every rollout, labelled ``labels[i]`` (default ``design{i}``).
+        ``wall_time_s`` is the batch's wall time shared evenly (see :meth:`run_scenes`). ``observer``
+        receives every rollout, labelled ``labels[i]`` (default ``design{i}``).
         """
-        labels = labels or [f"design{i}" for i in range(len(stiffnesses))]
-        t0 = time.perf_counter()
         models = [with_stiffness(scene, s) for s in stiffnesses]
-        ctrl, starts = phase_controls(scene, scenario)
-        x0 = _initial_state(scene)
+        labels = labels or [f"design{i}" for i in range(len(stiffnesses))]
+        return self.run_scenes(
+            [_scene_with(scene, m) for m in models], scenario, observer=observer, labels=labels
+        )
+
+    def run_poses(
+        self,
+        scene: GraspScene,
+        scenario: GraspScenario,
+        poses: list[GripperPose],
+        *,
+        observer: Observer | None = None,
+        labels: list[str] | None = None,
+    ) -> list[Outcome]:
+        """The scene's design at every pose (one model structure): one ``mujoco.rollout`` call.
+
+        A pose moves the mount and palm in a copy of the model and sets the initial openings and the
+        controls (:func:`mjcodesign.scenario.scene_at_pose`); raises :class:`PoseError` for a bad pose.
+        ``observer`` receives every rollout, labelled ``labels[i]`` (default ``pose{i}``).
+        """
+        labels = labels or [f"pose{i}" for i in range(len(poses))]
+        scenes = [scene_at_pose(scene, p) for p in poses]
+        return self.run_scenes(scenes, scenario, observer=observer, labels=labels)
+
+    def run_scenes(
+        self,
+        scenes: list[GraspScene],
+        scenario: GraspScenario,
+        *,
+        observer: Observer | None = None,
+        labels: list[str] | None = None,
+    ) -> list[Outcome]:
+        """Scenes of one model structure (other designs or poses), batched through ``mujoco.rollout``.
+
+        A rollout diverged if its recorded time is not the step count times dt (MuJoCo resets the data
+        after a bad acceleration) or its state is not finite; MuJoCo warnings left in a thread's data
+        are checked too. Diverged rollouts, or all when a warning is left, are re-run one step at a
+        time by :meth:`run`, which names the warning. The outcomes (contact-force replays) are then
+        evaluated on ``nthread`` threads; MuJoCo releases the GIL in ``mj_forward``. ``observer``
+        receives every rollout, labelled ``labels[i]`` (default ``scene{i}``).
+        """
+        labels = labels or [f"scene{i}" for i in range(len(scenes))]
+        t0 = time.perf_counter()
+        plans: dict[tuple, tuple[np.ndarray, dict[str, int], np.ndarray]] = {}
+        for sc in scenes:  # designs of one pose share their controls and initial state
+            key = (id(sc.built), sc.pose)
+            if key not in plans:
+                plans[key] = (*phase_controls(sc, scenario), _initial_state(sc))
+        rows = [plans[(id(sc.built), sc.pose)] for sc in scenes]
+        starts = rows[0][1]
+        ctrl = np.stack([c for c, _, _ in rows])
+        x0 = np.stack([x for _, _, x in rows])
+        models = [sc.model for sc in scenes]
         datas = [mujoco.MjData(models[0]) for _ in range(min(self.nthread, len(models)))]
         for d in datas:
             reset_warnings(d)
-        states, _ = mj_rollout.rollout(models, datas, x0[None], ctrl[None], control_spec=control_spec())
+        states, _ = mj_rollout.rollout(models, datas, x0, ctrl, control_spec=control_spec())
+        bad = _diverged(states, x0, models[0].opt.timestep)
         warned = False
         for d in datas:
             try:
                 check_state(d)
             except SimulationDiverged:
                 warned = True
-        if warned or not np.all(np.isfinite(states)):
-            outs = [
-                self.run(scene, scenario, model=mi, observer=observer, label=lb)
-                for mi, lb in zip(models, labels, strict=True)
-            ]
-            observer = None  # run() handed them over
-        else:
-            outs = [
-                outcome_from_states(_scene_with(scene, mi), scenario, x0, states[i], ctrl, starts)
-                for i, mi in enumerate(models)
-            ]
-        wall = (time.perf_counter() - t0) / len(models)
+        if warned:
+            bad[:] = True
+        outs: list[Outcome | None] = [None] * len(scenes)
+        for i in np.flatnonzero(bad):  # run() hands these to the observer itself
+            outs[i] = self.run(scenes[i], scenario, observer=observer, label=labels[i])
+        good = np.flatnonzero(~bad)
+        with ThreadPoolExecutor(max_workers=self.nthread) as pool:
+            scratch = threading.local()
+
+            def evaluate(i: int) -> Outcome:
+                if not hasattr(scratch, "data"):
+                    scratch.data = mujoco.MjData(models[0])
+                return outcome_from_states(
+                    scenes[i], scenario, x0[i], states[i], ctrl[i], starts, scratch.data
+                )
+
+            for i, out in zip(good, pool.map(evaluate, good), strict=True):
+                outs[i] = out
+        wall = (time.perf_counter() - t0) / len(scenes)
         for o in outs:
             o.wall_time_s = wall
-        for i, o in enumerate(outs if observer is not None else []):
-            _observe(observer, labels[i], scene, scenario, models[i], x0, states[i], ctrl, starts, o)
+        for i in good if observer is not None else ():
+            sc = scenes[i]
+            observer.rollout(
+                Rollout(labels[i], sc, scenario, sc.model, x0[i], states[i], ctrl[i], starts, outs[i])
+            )
         return outs
 
 
 def _observe(observer, label, scene, scenario, m, x0, states, ctrl, starts, out) -> None:
     if observer is not None:
         observer.rollout(Rollout(label, _scene_with(scene, m), scenario, m, x0, states, ctrl, starts, out))
+
+
+def _diverged(states: np.ndarray, x0: np.ndarray, dt: float) -> np.ndarray:
+    """Per rollout: True if its state is not finite or its clock was reset (MuJoCo's auto-reset)."""
+    nstep = states.shape[1]
+    expected = x0[:, :1] + dt * np.arange(1, nstep + 1)[None, :]
+    finite = np.all(np.isfinite(states), axis=(1, 2))
+    clock = np.all(np.abs(states[:, :, 0] - expected) < _CLOCK_TOL * dt, axis=1)
+    return ~(finite & clock)
 
 
 def _scene_with(scene: GraspScene, m: mujoco.MjModel) -> GraspScene:
