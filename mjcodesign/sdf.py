@@ -60,7 +60,10 @@ class MeshSDF:
     """Signed distance to a watertight mesh [m]: negative inside, positive outside."""
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
-        import warp as wp
+        try:
+            import warp as wp
+        except ImportError as exc:
+            raise MeshError("signed distances need warp-lang (pip install 'mjcodesign[poses]')") from exc
 
         v = np.ascontiguousarray(vertices, dtype=np.float32)
         f = np.ascontiguousarray(faces, dtype=np.int32)

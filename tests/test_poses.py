@@ -265,3 +265,12 @@ def test_cli_bad_input_exit_2(tmp_path, case):
     assert r.returncode == 2
     assert r.stdout == ""
     assert len(r.stderr.strip().splitlines()) == 1 and r.stderr.startswith("error:")
+
+
+def test_grasp_pose_best_is_the_top_ranked(box):
+    from mjcodesign.cli_grasp import _read_pose
+
+    pose = _read_pose("best", box, FingerDesign(), 0)
+    top = sample_poses(box, 1, seed=0)
+    np.testing.assert_allclose(pose.position, top.matrices[0, :3, 3])
+    np.testing.assert_allclose(pose.openings, top.openings[0])
