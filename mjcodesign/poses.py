@@ -88,6 +88,7 @@ _DENSE_EDGE = 0.002  # check point spacing [m]: features thinner than this can h
 _MAX_OBJECT_SAMPLES = 4000  # caps the object points of the opening initialisation
 _ITERATIONS = 100
 _STEP0, _STEP_MIN, _STEP_MAX = 1e-3, 1e-6, 5e-3  # Rprop steps [m]
+_STEP_TOL = 1e-5  # refinement stops when every moving variable's step is below this [m]
 _T_RANGE = 0.04  # the approach offset stays within ±this of the candidate's [m]
 _CAMERA_HEIGHT = 0.5  # authors' camera: 0.5 m above the ground, looking down (init_pose.py T_cb)
 _R_CAMERA = np.diag([-1.0, 1.0, -1.0])  # authors' camera axes in the object (z-up) frame
@@ -336,6 +337,8 @@ def refine(
         grad = np.where(same < 0, 0.0, grad)
         x = x - np.sign(grad) * step
         g_prev = grad
+        if not np.any((grad != 0) & (step > _STEP_TOL)):
+            break  # every variable has settled (or feels no force)
         x[:, 0] = np.clip(x[:, 0], -_T_RANGE, _T_RANGE)
         x[:, 1:] = np.clip(x[:, 1:], 0.0, MAX_OPENING)
     p = p0 + x[:, :1] * R[:, :, 2]

@@ -16,7 +16,8 @@ from mjcodesign.errors import MeshError
 
 __all__ = ["MeshSDF"]
 
-_MAX_DIST = 1.0  # [m]: every query point of a gripper lies well within 1 m of the object
+_NEAR = 0.03  # [m]: first query radius; a BVH query with 1 m is 5x slower on a 16k-face mesh
+_FAR = 1.0  # [m]: second query, only for points inside the mesh's bounding box beyond _NEAR
 _EPSILON = 1e-3  # warp's default tie tolerance, as a fraction of the mean edge length
 
 _KERNEL = None
@@ -32,13 +33,21 @@ def _kernel():
         def _sdf(
             mesh_in: wp.uint64,
             points_in: wp.array(dtype=wp.vec3),
-            max_dist_in: float,
+            lower_in: wp.vec3,
+            upper_in: wp.vec3,
+            near_in: float,
+            far_in: float,
             dist_out: wp.array(dtype=float),
             normal_out: wp.array(dtype=wp.vec3),
         ):
             tid = wp.tid()
             p = points_in[tid]
-            q = wp.mesh_query_point_sign_normal(mesh_in, p, max_dist_in, _EPSILON)
+            q = wp.mesh_query_point_sign_normal(mesh_in, p, near_in, _EPSILON)
+            if not q.result:
+                inside_box = p[0] > lower_in[0] and p[1] > lower_in[1] and p[2] > lower_in[2]
+                inside_box = inside_box and p[0] < upper_in[0] and p[1] < upper_in[1] and p[2] < upper_in[2]
+                if inside_box:
+                    q = wp.mesh_query_point_sign_normal(mesh_in, p, far_in, _EPSILON)
             if q.result:
                 c = wp.mesh_eval_position(mesh_in, q.face, q.u, q.v)
                 delta = p - c
@@ -49,7 +58,8 @@ def _kernel():
                 else:
                     normal_out[tid] = wp.mesh_eval_face_normal(mesh_in, q.face)
             else:
-                dist_out[tid] = max_dist_in
+                # Outside the bounding box and beyond _NEAR: outside, at least _NEAR away (a bound).
+                dist_out[tid] = near_in
                 normal_out[tid] = wp.vec3(0.0, 0.0, 0.0)
 
         _KERNEL = _sdf
@@ -77,6 +87,8 @@ class MeshSDF:
         self._points = wp.array(v, dtype=wp.vec3, device=self._device)
         self._indices = wp.array(f.ravel(), dtype=wp.int32, device=self._device)
         self._mesh = wp.Mesh(points=self._points, indices=self._indices)
+        self._lower = wp.vec3(*v.min(axis=0).tolist())
+        self._upper = wp.vec3(*v.max(axis=0).tolist())
 
     @classmethod
     def from_trimesh(cls, mesh) -> MeshSDF:
@@ -84,7 +96,11 @@ class MeshSDF:
         return cls(np.asarray(mesh.vertices), np.asarray(mesh.faces))
 
     def query(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Signed distance [m], shape (n,), and the unit gradient (outward), shape (n, 3), at ``points``."""
+        """Signed distance [m], shape (n,), and the unit gradient (outward), shape (n, 3), at ``points``.
+
+        Points outside the mesh's bounding box and more than ``_NEAR`` from the surface get ``_NEAR`` (a
+        lower bound) and a zero gradient: exact values there never change a grasp's loss or its check.
+        """
         import warp as wp
 
         p = np.ascontiguousarray(np.asarray(points, dtype=np.float32).reshape(-1, 3))
@@ -96,7 +112,14 @@ class MeshSDF:
         wp.launch(
             _kernel(),
             dim=n,
-            inputs=[self._mesh.id, wp.array(p, dtype=wp.vec3, device=self._device), _MAX_DIST],
+            inputs=[
+                self._mesh.id,
+                wp.array(p, dtype=wp.vec3, device=self._device),
+                self._lower,
+                self._upper,
+                _NEAR,
+                _FAR,
+            ],
             outputs=[dist, normal],
             device=self._device,
         )
