@@ -278,3 +278,14 @@ def test_grasp_pose_best_is_the_top_ranked(box):
     top = sample_poses(box, 1, seed=0)
     np.testing.assert_allclose(pose.position, top.matrices[0, :3, 3])
     np.testing.assert_allclose(pose.openings, top.openings[0])
+
+
+def test_start_openings_are_relative_to_the_palm(box):
+    from mjcodesign.mjcf import GripperPose
+    from mjcodesign.scenario import _START_CLEARANCE, _start_openings
+
+    # The box spans y in ±25 mm; a palm 10 mm towards +y sees 15 mm on A's side and 35 mm on B's.
+    pose = GripperPose((0.0, 0.01, 0.2), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0))
+    np.testing.assert_allclose(
+        _start_openings(box, pose), (0.015 + _START_CLEARANCE, 0.035 + _START_CLEARANCE), atol=1e-9
+    )
