@@ -14,6 +14,7 @@ from mjcodesign.errors import PoseError
 from mjcodesign.finger import FingerDesign
 from mjcodesign.objects import box_object
 from mjcodesign.poses import (
+    ANYGRASP_DEPTH,
     MAX_PENETRATION,
     NOISE_TRANSLATION,
     RigidGripper,
@@ -195,7 +196,7 @@ def test_anygrasp_mapping_matches_the_authors_frames():
     T = np.eye(4)
     T[:3, :3] = np.column_stack([[0, 0, 1.0], [0, 1.0, 0], [-1.0, 0, 0]])  # x approach, y closing
     T[:3, 3] = [0.0, 0.0, 0.5 - 0.05]  # 5 cm above the ground, camera 0.5 m up
-    W = anygrasp_to_world(T[None], obj, src)[0]
+    W = anygrasp_to_world(T[None], obj, src, depth=0.02)[0]
     np.testing.assert_allclose(-W[:3, 2], [0, 0, -1], atol=1e-12)  # approach down
     np.testing.assert_allclose(np.abs(W[:3, 1]), [0, 1, 0], atol=1e-12)  # closing along ±y (camera y)
     centre = W[:3, 3] - W[:3, 2] * 0.0  # palm position
@@ -213,7 +214,7 @@ def test_anygrasp_reference_poses_cross_the_object(reference_dir):
     obj = load_object(name, 100.0)
     T = load_external(reference_dir / "pose_info" / f"{name}.npz")
     W = anygrasp_to_world(T, obj, load_mesh(name).vertices)
-    contact = W[:, :3, 3] - W[:, :3, 2] * (FingerDesign().length - 0.02)
+    contact = W[:, :3, 3] - W[:, :3, 2] * (FingerDesign().length - ANYGRASP_DEPTH)
     d, _ = MeshSDF.from_trimesh(obj.mesh).query(contact - _scene_offset(obj))
     # The authors' camera looks down: every grasp approaches from above, its centre on the object
     # (GraspNet centres sit at most a few mm under the surface; 2 cm covers the strawberry's size).
