@@ -78,7 +78,7 @@ NOISE_ROTATION = 5e-3
 """Augmentation noise σ on each component of the rotation vector [rad] (paper, NOTES.md)."""
 
 _D0 = 1e-3  # the loss measures distances in mm
-_TIP_INSET = 0.02  # contacts sit this far from the fingertip along the finger [m]
+_TIP_INSET = 0.05  # contacts sit this far from the fingertip along the finger [m] (ANYGRASP_DEPTH)
 _MIN_TIP_INSET = 0.004  # ... or this close to the tip for contacts near the ground [m]
 _OPEN_CLEARANCE = 0.004  # refinement starts each inner face this far outside the object [m]
 _MIN_WIDTH = 0.004  # antipodal pairs closer than this are one surface patch, not two contacts [m]
