@@ -93,7 +93,7 @@ def _read_pose(text: str, obj, design, seed: int = 0):
     if text == "best":
         from mjcodesign.poses import sample_poses, to_gripper_pose
 
-        return to_gripper_pose(sample_poses(obj, 1, seed=seed, design=design))
+        return to_gripper_pose(sample_poses(obj, 10, seed=seed, design=design))
     path = Path(text)
     if not path.is_file():
         raise PoseError(f"pose file not found: {path}")

@@ -725,7 +725,10 @@ def read_candidates(path: str | Path) -> Candidates:
 
 
 def to_gripper_pose(c: Candidates, index: int = 0):
-    """Row ``index`` as a :class:`mjcodesign.mjcf.GripperPose`."""
+    """Row ``index`` as a :class:`mjcodesign.mjcf.GripperPose`; :class:`PoseError` if there is none."""
     from mjcodesign.mjcf import GripperPose
+
+    if not (0 <= index < len(c)):
+        raise PoseError(f"no grasp candidate {index} (of {len(c)}); rejected: {c.rejected}")
 
     return GripperPose.from_matrix(c.matrices[index], tuple(float(v) for v in c.openings[index]))

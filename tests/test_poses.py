@@ -162,6 +162,14 @@ def test_too_large_object_raises():
         sample_poses(box_object((0.2, 0.2, 0.2), 100.0), 2, seed=0)
 
 
+def test_no_candidate_is_a_pose_error():
+    from mjcodesign.poses import Candidates, to_gripper_pose
+
+    empty = Candidates(np.zeros((0, 4, 4)), np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), {"x": 3})
+    with pytest.raises(PoseError, match="rejected"):
+        to_gripper_pose(empty)
+
+
 def test_point_cloud_input(box):
     pts, face = trimesh.sample.sample_surface(box.mesh, 300, seed=0)
     normals = box.mesh.face_normals[face]
@@ -286,7 +294,7 @@ def test_grasp_pose_best_is_the_top_ranked(box):
     from mjcodesign.cli_grasp import _read_pose
 
     pose = _read_pose("best", box, FingerDesign(), 0)
-    top = sample_poses(box, 1, seed=0)
+    top = sample_poses(box, 10, seed=0)
     np.testing.assert_allclose(pose.position, top.matrices[0, :3, 3])
     np.testing.assert_allclose(pose.openings, top.openings[0])
 
