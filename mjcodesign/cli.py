@@ -146,15 +146,17 @@ def build_parser() -> argparse.ArgumentParser:
     bf.add_argument("--json", action="store_true")
     bf.set_defaults(func=_cmd_bench_finger)
 
-    from mjcodesign import cli_crosscheck, cli_fabrication, cli_grasp, cli_viz
+    from mjcodesign import cli_crosscheck, cli_fabrication, cli_grasp, cli_poses, cli_viz
 
     cli_grasp.add_bench_parser(bsub)
     cli_crosscheck.add_bench_parser(bsub)
     cli_viz.add_bench_parser(bsub)
+    cli_poses.add_bench_parser(bsub)
     cli_viz.add_parser(sub)
     cli_grasp.add_parser(sub)
     cli_crosscheck.add_parser(sub)
     cli_fabrication.add_parser(sub)
+    cli_poses.add_parser(sub)
 
     from hardware.cli import add_parser as add_hardware
 

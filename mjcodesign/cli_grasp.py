@@ -59,7 +59,8 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--pose",
         default="auto",
-        help='auto (top-down) or a JSON file {"pose": 4x4 palm pose [m], "openings": [s1, s2] [m]}; the '
+        help="auto (top-down), best (top-ranked of `mjcodesign poses`), an .npz from `poses --out` (its "
+        'first row) or a JSON file {"pose": 4x4 palm pose [m], "openings": [s1, s2] [m]}; the '
         "object's COM is at world x = y = 0 with the object resting on the ground (z = 0)",
     )
     p.add_argument(
@@ -111,16 +112,24 @@ def add_bench_parser(bench_subparsers) -> argparse.ArgumentParser:
     return p
 
 
-def _read_pose(text: str, obj, design):
+def _read_pose(text: str, obj, design, seed: int = 0):
     from mjcodesign.errors import PoseError
     from mjcodesign.mjcf import GripperPose
     from mjcodesign.scenario import auto_pose
 
     if text == "auto":
         return auto_pose(obj, design)
+    if text == "best":
+        from mjcodesign.poses import sample_poses, to_gripper_pose
+
+        return to_gripper_pose(sample_poses(obj, 10, seed=seed, design=design))
     path = Path(text)
     if not path.is_file():
         raise PoseError(f"pose file not found: {path}")
+    if path.suffix == ".npz":
+        from mjcodesign.poses import read_candidates, to_gripper_pose
+
+        return to_gripper_pose(read_candidates(path))
     try:
         raw = json.loads(path.read_text(encoding="utf-8"))
         return GripperPose.from_matrix(raw["pose"], tuple(raw["openings"]))
@@ -167,7 +176,7 @@ def grasp(
     obj = load_object(source, rho, allow_open=allow_open, seed=seed)
     convex_decomposition(obj, CoacdSettings(seed=seed), cache_dir=cache_dir)
     finger_design = FingerDesign()
-    gripper_pose = _read_pose(pose, obj, finger_design)
+    gripper_pose = _read_pose(pose, obj, finger_design, seed)
     kwargs = {k: v for k, v in (("tension", tension), ("lift", lift), ("impulse", impulse)) if v is not None}
     scenario = GraspScenario(**kwargs)
     scene = build_scene(obj, finger_design, stiffness, FingerModel(model), gripper_pose)

@@ -276,7 +276,10 @@ def _start_openings(obj: GraspObject, pose: GripperPose) -> tuple[float, float]:
     R = np.zeros(9)
     mujoco.mju_quat2Mat(R, np.asarray(pose.quat, dtype=float))
     y_axis = R.reshape(3, 3)[:, 1]
-    proj = _object_vertices(obj) @ y_axis
+    v = _object_vertices(obj)
+    # Object points relative to the palm (COM at x = y = 0, resting on the ground as in build_scene).
+    rel = v + [0.0, 0.0, _REST_GAP - float(v[:, 2].min())] - np.asarray(pose.position, dtype=float)
+    proj = rel @ y_axis
     ext_a, ext_b = float(proj.max()), float(-proj.min())
     if max(ext_a, ext_b) + _START_CLEARANCE > MAX_OPENING:
         raise PoseError(

@@ -35,7 +35,8 @@ _SCENARIO = GraspScenario(
 )
 _DECIMATION = 5
 _TOL_EXACT = 1e-12  # logged values replay the same states as the outcome: equal up to rounding [m]
-_TOL_HOLD_FORCE = 0.05  # logged |F| at hold frames vs the outcome's mean of 5 hold samples: the grip still settles (±2-3%)
+# logged |F| at hold frames vs the outcome's mean of 5 hold samples: the grip still settles (±2-3%)
+_TOL_HOLD_FORCE = 0.05
 _TOL_VOLUME = 1e-5  # closed-surface volume vs sum of tet volumes: float32 vertex positions in Rerun
 _ROOT = "/designs/paper-optimized"
 
