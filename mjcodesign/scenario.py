@@ -76,6 +76,11 @@ _MIN_HOLD_STEPS = 4  # the hold-force samples need a few steps before the impuls
 _HOLD_SAMPLES = 5  # body force: mean over this many states in the second half of the first hold (each
 # costs an mj_forward replay; 10 cost the pipeline ~10% of the rollout time)
 _OBJECT_FRICTION = (1.0, 0.005, 0.0001)  # paper: mu = 1
+# Sparse constraint Jacobian in every grasp scene. MuJoCo's "auto" picks dense below nv = 60, but a
+# contact row touches only the object and one finger's chain (<= 14 of the chain scene's 31 dofs):
+# sparse took 0.89-0.90x the CPU time of dense on the can (min of 12 alternated single-thread runs,
+# docs/benchmarks.md) with the same outcomes on 12 designs. Flex scenes (nv > 400) were sparse already.
+_GRASP_JACOBIAN = mujoco.mjtJacobian.mjJAC_SPARSE
 STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
 
 # The authors' disturbance (code/sim_gen.py, code/evaluation.py): a constant -500 N body force held for
@@ -337,6 +342,7 @@ def build_scene(
             density=0.0,
             rgba=[0.8, 0.75, 0.3, 1],
         )
+    spec.option.jacobian = _GRASP_JACOBIAN
     try:
         m = spec.compile()
     except ValueError as exc:
