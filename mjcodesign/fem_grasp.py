@@ -30,10 +30,14 @@ import numpy as np
 from mjcodesign.errors import DesignError, SimulationDiverged
 from mjcodesign.fem import FemDynamics, FemFinger
 
-__all__ = ["RigidObject", "FemContact"]
+__all__ = ["RigidObject", "FemContact", "grasp_scene"]
 
 _QUERY_RANGE = 0.01
 """Largest vertex-to-object distance [m] the mesh query searches; deeper penetration is not contact."""
+_GRASP_GAP = 2e-4
+"""Gap [m] between the grasp box and the segment tops."""
+_GRASP_RAMP = 0.05
+"""Tendon tension ramp of the grasp [s]."""
 _SEGMENT = 200
 """Steps per taped segment of the adjoint (memory ~ segment × a few state arrays)."""
 
@@ -382,6 +386,19 @@ class FemContact:
         fem.mu.grad.zero_()
         fem.lam.grad.zero_()
         return fwd["mean_normal_force"], g
+
+
+def grasp_scene(fem: FemFinger, tension: float, *, ramp: float = _GRASP_RAMP) -> FemContact:
+    """The finger (base clamped, along +x) closing under ``tension`` [N] on a rigid box.
+
+    The box is the press scenario's plate (`mjcodesign.press.plate_pose`) lowered to 0.2 mm above the
+    segment tops: the finger's first bending mode has a period near 2 s, so a wider gap would not close
+    within a 0.2 s horizon.
+    """
+    from mjcodesign.press import plate_pose
+
+    centre, R, half = plate_pose(fem.design, gap=_GRASP_GAP)
+    return FemContact(fem, RigidObject.box(centre, half, R), tension=tension, ramp=ramp)
 
 
 def _kernels():

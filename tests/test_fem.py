@@ -12,6 +12,7 @@ from mjcodesign.stiffness import Stiffness
 
 _TOL_BEAM = 0.05  # FEM vs Euler–Bernoulli tip deflection (issue 4)
 _TOL_CURL = 0.10  # chain vs FEM bend angle and tip displacement (issue 4)
+_PRESS_MARGIN = 0.2  # distal-third share, uniform-height minus uniform-pressure (measured 0.27–0.37)
 _TOL_GRAD = 1e-4  # adjoint gradient vs central differences (FD step 1e-4 in ln E: error ~1e-8 rel)
 
 
@@ -226,3 +227,59 @@ def test_contact_gradient_matches_central_differences(dyn_finger):
             assert grad[i] == pytest.approx(fd, rel=_TOL_DYN_GRAD)
     finally:
         dyn_finger.set_log_e(base)
+
+
+@pytest.fixture(scope="module")
+def press_results(wp):
+    from mjcodesign.cli_crosscheck import default_tensions
+    from mjcodesign.fem import FemFinger, FemOptions
+    from mjcodesign.press import press_fem, press_mujoco
+
+    stiffness = Stiffness.preset("paper-optimized")
+    tension = 0.5 * default_tensions(stiffness)[-1]
+    out = {}
+    for routing in Routing:
+        design = FingerDesign(routing=routing)
+        fem = FemFinger(design, stiffness, options=FemOptions(h=4e-3, spine_layers=2))
+        out[routing] = (press_fem(fem, tension), press_mujoco(design, stiffness, "chain", tension))
+    return out
+
+
+def test_press_uniform_height_loads_the_tip(press_results):
+    # Paper, Fig. 2: uniform-pressure routing spreads the contact force, uniform-height loads the tip.
+    p = press_results[Routing.UNIFORM_PRESSURE]
+    h = press_results[Routing.UNIFORM_HEIGHT]
+    for k in range(2):  # FEM, chain
+        assert h[k]["distal_third_fraction"] > p[k]["distal_third_fraction"] + _PRESS_MARGIN
+        assert h[k]["centroid_over_length"] > p[k]["centroid_over_length"]
+        assert h[k]["n_contacts"] < p[k]["n_contacts"]
+
+
+def test_press_chain_total_force_matches_fem(press_results):
+    for fem, chain in press_results.values():
+        assert chain["total_force_n"] == pytest.approx(fem["total_force_n"], rel=_TOL_CURL)
+
+
+def test_plot_curves_writes_png(tmp_path):
+    pytest.importorskip("matplotlib")
+    from mjcodesign.cli_crosscheck import plot_curves
+    from mjcodesign.mjcf import TendonMode
+    from mjcodesign.validate import curl
+
+    tensions = [0.02, 0.04]
+    rs = [
+        curl(FingerDesign(), Stiffness.preset("soft"), "chain", t, tendon_mode=TendonMode.POINT_FORCE)
+        for t in tensions
+    ]
+    curves = {
+        "chain": {
+            "tension": tensions,
+            "bend": [r["bend_angle_rad"] for r in rs],
+            "tip": [r["tip_displacement_m"] for r in rs],
+        }
+    }
+    out = tmp_path / "curl.png"
+    plot_curves(curves, str(out))
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(Exception, match="curl scenario"):
+        plot_curves({}, str(tmp_path / "none.png"))
