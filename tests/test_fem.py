@@ -13,6 +13,7 @@ from mjcodesign.stiffness import Stiffness
 _TOL_BEAM = 0.05  # FEM vs Euler–Bernoulli tip deflection (issue 4)
 _TOL_CURL = 0.10  # chain vs FEM bend angle and tip displacement (issue 4)
 _PRESS_MARGIN = 0.2  # distal-third share, uniform-height minus uniform-pressure (measured 0.27–0.37)
+_TOL_LINEAR = 0.05  # flex linear static curl vs its dynamics at 0.3 rad (geometric terms ~ θ²/2 ≈ 5%)
 _TOL_GRAD = 1e-4  # adjoint gradient vs central differences (FD step 1e-4 in ln E: error ~1e-8 rel)
 
 
@@ -283,3 +284,21 @@ def test_plot_curves_writes_png(tmp_path):
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(Exception, match="curl scenario"):
         plot_curves({}, str(tmp_path / "none.png"))
+
+
+def test_flex_linear_curl_matches_its_dynamics_at_small_bend():
+    from mjcodesign.flex import linear_curl
+    from mjcodesign.mjcf import SimOptions, TendonMode, build_finger
+    from mjcodesign.validate import curl
+
+    design, stiffness, tension = FingerDesign(), Stiffness.preset("soft"), 0.02  # ≈ 0.3 rad of bend
+    built = build_finger(
+        design, stiffness, "flex", tendon_mode=TendonMode.POINT_FORCE, options=SimOptions(gravity=False)
+    )
+    lin = linear_curl(built.model, built.fingers[0], design, tension)
+    dyn = curl(design, stiffness, "flex", tension, tendon_mode=TendonMode.POINT_FORCE)
+    # Linear statics is the first-order rest state: measured 1% (tip) and 2.3% (bend) at 0.3 rad.
+    assert np.linalg.norm(lin["tip_displacement_m"]) == pytest.approx(
+        np.linalg.norm(dyn["tip_displacement_m"]), rel=_TOL_LINEAR
+    )
+    assert lin["bend_angle_rad"] == pytest.approx(dyn["bend_angle_rad"], rel=_TOL_LINEAR)
