@@ -36,6 +36,8 @@ _QUERY_RANGE = 0.01
 """Largest vertex-to-object distance [m] the mesh query searches; deeper penetration is not contact."""
 _GRASP_GAP = 2e-4
 """Gap [m] between the grasp box and the segment tops."""
+_GRASP_BASE_HEIGHT = 0.2
+"""Height of the grasp finger's base above the ground [m]."""
 _GRASP_RAMP = 0.05
 """Tendon tension ramp of the grasp [s]."""
 _SEGMENT = 200
@@ -389,16 +391,20 @@ class FemContact:
 
 
 def grasp_scene(fem: FemFinger, tension: float, *, ramp: float = _GRASP_RAMP) -> FemContact:
-    """The finger (base clamped, along +x) closing under ``tension`` [N] on a rigid box.
+    """The finger hanging from its clamped base (as in a top grasp) closing under ``tension`` [N] on a box.
 
-    The box is the press scenario's plate (`mjcodesign.press.plate_pose`) lowered to 0.2 mm above the
-    segment tops: the finger's first bending mode has a period near 2 s, so a wider gap would not close
-    within a 0.2 s horizon.
+    The finger frame maps x (along the finger) to world −z and z (its inner side) to world +x, base at
+    0.2 m. The box is the press scenario's plate (`mjcodesign.press.plate_pose`) lowered to 0.2 mm from
+    the segment tops: the finger's first bending mode has a period near 2 s, so a wider gap would not
+    close within a 0.2 s horizon.
     """
     from mjcodesign.press import plate_pose
 
-    centre, R, half = plate_pose(fem.design, gap=_GRASP_GAP)
-    return FemContact(fem, RigidObject.box(centre, half, R), tension=tension, ramp=ramp)
+    R = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # columns: finger x, y, z in world
+    base = np.array([0.0, 0.0, _GRASP_BASE_HEIGHT])
+    centre, Rp, half = plate_pose(fem.design, gap=_GRASP_GAP)
+    box = RigidObject.box(R @ centre + base, half, R @ Rp)
+    return FemContact(fem, box, rotation=R, position=base, tension=tension, ramp=ramp)
 
 
 def _kernels():
