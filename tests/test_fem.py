@@ -18,7 +18,8 @@ _TOL_GRAD = 1e-4  # adjoint gradient vs central differences (FD step 1e-4 in ln 
 
 
 def test_import_does_not_import_warp():
-    code = "import sys, mjcodesign, mjcodesign.fem, mjcodesign.femmesh, mjcodesign.cli_crosscheck; "
+    code = "import sys, mjcodesign, mjcodesign.fem, mjcodesign.femmesh, mjcodesign.cli_crosscheck, "
+    code += "mjcodesign.fem_grasp, mjcodesign.press; "
     code += "assert 'warp' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True)
 
