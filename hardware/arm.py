@@ -174,9 +174,7 @@ class FrankaArm:
     def set_width(self, width: float) -> None:
         """Move the Franka Hand fingers to `width` [m] without grasping."""
         self._check_width(width)
-        ok = self._call(
-            "move the hand", lambda: self._gripper.move(width, self.config.gripper_speed)
-        )
+        ok = self._call("move the hand", lambda: self._gripper.move(width, self.config.gripper_speed))
         if not ok:
             raise HardwareError(f"Franka Hand did not reach width {width:.4f} m")
 

@@ -421,9 +421,7 @@ class XL330Emulator:
             self._cut_on_goal_s = 0.0
 
 
-def _serve_in_child(
-    conn: object, ids: tuple[int, ...], speed: float, position: int, cut_s: float
-) -> None:
+def _serve_in_child(conn: object, ids: tuple[int, ...], speed: float, position: int, cut_s: float) -> None:
     with XL330Emulator(ids, speed_ticks_s=speed, initial_position=position) as emu:
         if cut_s > 0:
             emu.cut_link_on_goal(cut_s)

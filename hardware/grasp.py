@@ -73,9 +73,7 @@ class GraspJob:
 
     def tendon_config(self) -> TendonConfig:
         """Tendon configuration (a placeholder port in a dry run, for limit checks only)."""
-        return TendonConfig(
-            port=self.dxl or "(dry run)", motors=self.motors, retries=self.tendon_retries
-        )
+        return TendonConfig(port=self.dxl or "(dry run)", motors=self.motors, retries=self.tendon_retries)
 
     def arm_config(self) -> ArmConfig:
         """Arm configuration."""

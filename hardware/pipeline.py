@@ -254,9 +254,7 @@ def plan_grasp(
         Step("hand", f"open to {geo.hand_max_width:.3f} m"),
         Step("arm", f"move to pre-grasp {_xyz(pre)}", pre),
         Step("arm", f"approach to grasp pose {_xyz(hand)}", hand),
-        Step(
-            "hand", f"close to opening {width:.4f} m (s1 {candidate.s1:.4f}, s2 {candidate.s2:.4f})"
-        ),
+        Step("hand", f"close to opening {width:.4f} m (s1 {candidate.s1:.4f}, s2 {candidate.s2:.4f})"),
         Step("tendon", f"pull {settings.tendon_ticks} ticks from slack"),
         Step("arm", f"lift {settings.lift_m:.3f} m to {_xyz(lift)}", lift),
         Step("check", f"object held: hand wider than {width + HELD_MARGIN_M:.4f} m"),
@@ -318,9 +316,7 @@ def execute(
         log(f"{len(records) + 1}. {step.action}: {step.detail}")
         t0 = time.monotonic()
         fn()
-        records.append(
-            {"action": step.action, "detail": step.detail, "s": round(time.monotonic() - t0, 3)}
-        )
+        records.append({"action": step.action, "detail": step.detail, "s": round(time.monotonic() - t0, 3)})
 
     hand_open, pre, approach, close, pull, lift, check = plan.steps
     run(hand_open, lambda: arm.set_width(plan.open_width))

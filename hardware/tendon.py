@@ -305,8 +305,7 @@ class TendonMotors:
             except _Comm as exc:
                 last = str(exc)
         raise HardwareError(
-            f"serial link to the tendon motors lost: {what} failed {self.config.retries} times "
-            f"({last})"
+            f"serial link to the tendon motors lost: {what} failed {self.config.retries} times ({last})"
         )
 
     def _ping(self, motor: FingerMotor) -> int:
@@ -320,8 +319,7 @@ class TendonMotors:
             return self._retry(f"ping of {motor.label}", once)
         except HardwareError:
             raise HardwareError(
-                f"tendon motor {motor.label} (ID {motor.dxl_id}) did not answer on "
-                f"{self.config.port}"
+                f"tendon motor {motor.label} (ID {motor.dxl_id}) did not answer on {self.config.port}"
             ) from None
 
     def _write(self, motor: FingerMotor, item: str, size: int, value: int) -> None:
@@ -345,9 +343,7 @@ class TendonMotors:
         self._port.is_using = False
         try:
             self._port.clearPort()
-            result, error = self._ph.write1ByteTxRx(
-                self._port, motor.dxl_id, ADDR["torque_enable"], 0
-            )
+            result, error = self._ph.write1ByteTxRx(self._port, motor.dxl_id, ADDR["torque_enable"], 0)
         except Exception:
             return False
         return result == _COMM_SUCCESS and not error
