@@ -92,6 +92,9 @@ class TendonConfig:
         move_timeout_s: Longest wait for a pull to reach its goal [s].
         tolerance_ticks: A motor within this many ticks of its goal has arrived [tick].
         safe_stop_s: How long to keep trying to switch torque off after a failure [s].
+        latency_ms: Latency of the USB-serial adapter [ms]. A reply is awaited for
+            ``bytes * t_byte + 2 * latency_ms + 2`` ms, the SDK's formula, which fixes the latency
+            at 16 ms (the FTDI default); raise it for slow adapters or a loaded host.
     """
 
     port: str
@@ -101,6 +104,7 @@ class TendonConfig:
     move_timeout_s: float = 3.0
     tolerance_ticks: int = 10
     safe_stop_s: float = 2.0
+    latency_ms: float = 16.0
     poll_s: float = field(default=0.01, repr=False)
 
     def __post_init__(self) -> None:
@@ -115,11 +119,24 @@ class TendonConfig:
             raise HardwareError("retries, move_timeout_s and tolerance_ticks must be positive")
         if self.safe_stop_s < 0 or self.poll_s <= 0:
             raise HardwareError("safe_stop_s and poll_s must be positive")
+        if not (0 < self.latency_ms <= 1000):
+            raise HardwareError(f"latency_ms must be in (0, 1000] ms, got {self.latency_ms}")
 
     def check_pull(self, ticks: int) -> None:
         """Raise `HardwareError` if pulling every tendon by `ticks` is outside any limit."""
         for motor in self.motors:
             motor.check(ticks)
+
+
+def _port_handler(sdk: Any, port: str, latency_ms: float) -> Any:
+    """The SDK's port handler with the reply timeout computed from ``latency_ms``, not its fixed 16 ms."""
+
+    class _Port(sdk.PortHandler):
+        def setPacketTimeout(self, packet_length: int) -> None:  # noqa: N802 (the SDK's name)
+            self.packet_start_time = self.getCurrentTime()
+            self.packet_timeout = self.tx_time_per_byte * packet_length + 2.0 * latency_ms + 2.0
+
+    return _Port(port)
 
 
 def _signed32(value: int) -> int:
@@ -167,7 +184,7 @@ class TendonMotors:
         import dynamixel_sdk as sdk
 
         self._sdk = sdk
-        self._port = sdk.PortHandler(self.config.port)
+        self._port = _port_handler(sdk, self.config.port, self.config.latency_ms)
         try:
             opened = self._port.openPort() and self._port.setBaudRate(self.config.baudrate)
         except Exception as exc:  # pyserial raises SerialException (an OSError) or ValueError

@@ -16,13 +16,16 @@ pytest.importorskip("dynamixel_sdk")
 
 
 # The in-process emulator shares the GIL with the SDK's busy-polling reader; on a loaded 2-core
-# machine a reply occasionally missed the SDK's 34 ms timeout three times in a row (seen about
-# once in five full runs), so these tests allow more attempts than the default 3.
+# machine a reply occasionally missed the SDK's 34 ms timeout (16 ms latency) ten times in a row,
+# so these tests allow more attempts than the default 3 and a 100 ms adapter latency (a 202 ms
+# reply window); the timeout itself is tested below with the default latency.
 TEST_RETRIES = 10
+TEST_LATENCY_MS = 100.0
 
 
 def config(port, **kw):
     kw.setdefault("retries", TEST_RETRIES)
+    kw.setdefault("latency_ms", TEST_LATENCY_MS)
     return TendonConfig(port=port, motors=(FingerMotor(1, "A"), FingerMotor(2, "B")), **kw)
 
 
@@ -89,16 +92,16 @@ def test_bad_port():
 
 
 def test_transient_timeout_is_retried(emulator):
-    with TendonMotors(config(emulator.port, retries=5)) as motors:
-        emulator.cut_link(0.05)  # ~1.5 SDK timeouts of 34 ms
+    with TendonMotors(config(emulator.port, retries=TEST_RETRIES, latency_ms=16.0)) as motors:
+        emulator.cut_link(0.05)  # ~1.5 SDK timeouts of 34 ms (the SDK's 16 ms latency)
         assert motors.present() == {1: 2048, 2: 2048}
 
 
 def test_lost_link_mid_move_fails_cleanly_and_torque_off(emulator):
-    emulator.cut_link_on_goal(0.4)  # link drops right after the goal is applied
+    emulator.cut_link_on_goal(0.4)  # link drops right after the goal is applied, > 3 timeouts of 34 ms
     t0 = time.monotonic()
     with pytest.raises(HardwareError, match="serial link to the tendon motors lost"):
-        with TendonMotors(config(emulator.port, retries=3, safe_stop_s=2.0)) as motors:
+        with TendonMotors(config(emulator.port, retries=3, safe_stop_s=2.0, latency_ms=16.0)) as motors:
             motors.pull(1000)
     assert time.monotonic() - t0 < 3.0
     assert all_off(emulator)  # torque off once the link came back, within safe_stop_s
@@ -126,7 +129,18 @@ def test_sigterm_inside_block_torques_off(emulator):
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
 
 
+def test_reply_window_follows_latency(emulator):
+    # SDK formula: t = bytes * t_byte + 2 * latency + 2 [ms]; t_byte = 1000 * 10 / 57600 ms at 57600 baud.
+    for latency in (16.0, 100.0):
+        with TendonMotors(config(emulator.port, latency_ms=latency)) as motors:
+            motors._port.setPacketTimeout(14)
+            expected = 14 * 10_000 / 57600 + 2 * latency + 2.0
+            assert motors._port.packet_timeout == pytest.approx(expected, rel=1e-12)
+
+
 def test_config_validation():
+    with pytest.raises(HardwareError):
+        TendonConfig(port="/dev/x", latency_ms=0.0)
     with pytest.raises(HardwareError):
         FingerMotor(300)
     with pytest.raises(HardwareError):
