@@ -99,6 +99,7 @@ class RerunRecorder:
             sinks.append(rr.FileSink(str(self.path)))
         self.rec.set_sinks(*sinks)
         self._designs: dict[str, np.ndarray] = {}
+        self._scratch: tuple[mujoco.MjModel, mujoco.MjData] | None = None
         self._n_rollouts = 0
         self._n_shapes = 0
 
@@ -124,7 +125,7 @@ class RerunRecorder:
         ]
         gripper = body_geom_surface(m, rigid)
         self._static_geometry(root, r, fingers, gripper, log_e)
-        frames = _Replay(r, fingers, gripper).frames(steps)
+        frames = _Replay(r, fingers, gripper, self._data(m)).frames(steps)
         for name, pos in frames.surfaces.items():
             self.rec.send_columns(
                 f"{root}/{name}",
@@ -265,6 +266,12 @@ class RerunRecorder:
                 static=True,
             )
 
+    def _data(self, m: mujoco.MjModel) -> mujoco.MjData:
+        """A scratch ``MjData`` of ``m``, reused while rollouts of the same model follow each other."""
+        if self._scratch is None or self._scratch[0] is not m:
+            self._scratch = (m, mujoco.MjData(m))
+        return self._scratch[1]
+
     def _send_ragged(self, path, index, rows, columns) -> None:
         self.rec.send_columns(path, indexes=index, columns=columns(rows))
 
@@ -283,12 +290,16 @@ class _Frames:
 
 
 class _Replay:
-    """Replays a rollout's states and extracts what is logged (no Rerun calls here)."""
+    """Replays a rollout's states and extracts what is logged (no Rerun calls here).
 
-    def __init__(self, r: Rollout, fingers: dict[str, Surface], gripper: Surface | None):
+    The loop over the logged states only runs ``mj_forward`` and copies ``MjData`` arrays; everything
+    derived from them (surfaces, series, contact forces in world axes) is computed for all states at once.
+    """
+
+    def __init__(self, r: Rollout, fingers: dict[str, Surface], gripper: Surface | None, d: mujoco.MjData):
         self.r = r
         self.m = r.model
-        self.d = mujoco.MjData(self.m)
+        self.d = d
         self.surfaces = {f"fingers/{k}": s for k, s in fingers.items()}
         if gripper is not None:
             self.surfaces["gripper"] = gripper
@@ -300,78 +311,95 @@ class _Replay:
         }
         self.is_finger = np.zeros(m.nbody, dtype=bool)
         self.is_finger[r.scene.finger_bodies] = True
-
-    def _load(self, x: np.ndarray, t: int) -> None:
-        # As mjcodesign.scenario.outcome_from_states: the state under the control of the next step.
-        m, d, ctrl = self.m, self.d, self.r.ctrl
-        mujoco.mj_setState(m, d, x, STATE_SPEC)
-        mujoco.mj_setState(m, d, ctrl[min(t + 1, len(ctrl) - 1)], control_spec())
-        mujoco.mj_forward(m, d)
+        self.elliptic = m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
 
     def frames(self, steps: np.ndarray) -> _Frames:
         r, m, d = self.r, self.m, self.d
         ob, palm = r.scene.object_body, r.scene.palm_body
-        n = len(steps) + 1
+        ts = np.r_[-1, steps]
+        n = len(ts)
         out = _Frames(n, list(self.surfaces))
         gpos, gmat = np.empty((n, m.ngeom, 3)), np.empty((n, m.ngeom, 9))
         fpos = np.empty((n, m.nflexvert, 3))
-        tension = np.empty((n, len(self.acts)))
-        height, force, rel = np.empty(n), np.empty(n), np.empty((n, 3))
-        for i, t in enumerate(np.r_[-1, steps]):
-            self._load(r.x0 if t < 0 else r.states[t], int(t))
+        xpos, xquat, xipos = np.empty((n, m.nbody, 3)), np.empty((n, m.nbody, 4)), np.empty((n, m.nbody, 3))
+        palm_mat, act = np.empty((n, 9)), np.empty((n, m.nu))
+        wrap = np.empty((n, 2 * m.nwrap, 3))
+        wrap_adr, wrap_num = np.empty((n, m.ntendon), dtype=int), np.empty((n, m.ntendon), dtype=int)
+        contacts = []  # per state: (pos, frame, geom1, geom2, force in the contact frame)
+        ctrl, spec = r.ctrl, control_spec()
+        for i, t in enumerate(ts):
+            # As mjcodesign.scenario.outcome_from_states: the state under the control of the next step.
+            mujoco.mj_setState(m, d, r.x0 if t < 0 else r.states[t], STATE_SPEC)
+            mujoco.mj_setState(m, d, ctrl[min(t + 1, len(ctrl) - 1)], spec)
+            mujoco.mj_forward(m, d)
             gpos[i], gmat[i], fpos[i] = d.geom_xpos, d.geom_xmat, d.flexvert_xpos
-            out.object_pos[i] = d.xpos[ob]
-            out.object_quat[i] = d.xquat[ob]
-            wrap = d.wrap_xpos.reshape(-1, 3)  # nwrap x 6: two points per wrap object
-            adr, num = d.ten_wrapadr, d.ten_wrapnum
-            out.tendon.append([wrap[adr[j] : adr[j] + num[j]].copy() for j in range(m.ntendon)])
-            pos, vec, on_object = self._contacts()
-            out.contacts.append((pos, vec, on_object))
-            tension[i] = [d.actuator_force[ids].sum() for ids in self.acts.values()]
-            height[i] = d.xipos[ob][2]
-            force[i] = float(np.linalg.norm(vec[on_object].sum(axis=0))) if len(vec) else 0.0
-            R = d.xmat[palm].reshape(3, 3)
-            rel[i] = R.T @ (d.xipos[ob] - d.xpos[palm])
+            xpos[i], xquat[i], xipos[i] = d.xpos, d.xquat, d.xipos
+            palm_mat[i], act[i] = d.xmat[palm], d.actuator_force
+            wrap[i], wrap_adr[i], wrap_num[i] = d.wrap_xpos.reshape(-1, 3), d.ten_wrapadr, d.ten_wrapnum
+            contacts.append(self._contacts())
         for name, surf in self.surfaces.items():
             out.surfaces[name] = surf.positions(gpos, gmat, fpos)
+        out.object_pos, out.object_quat = xpos[:, ob], xquat[:, ob]
+        out.tendon = [
+            [wrap[i, a : a + k] for a, k in zip(wrap_adr[i], wrap_num[i], strict=True)] for i in range(n)
+        ]
+        out.contacts, force = self._world_contacts(contacts)
         grasp = _index_of(steps, r.starts["lift"] - 1)
-        out.series["tendon_force"] = tension
-        out.series["object_height"] = height
+        out.series["tendon_force"] = np.stack([act[:, ids].sum(axis=1) for ids in self.acts.values()], axis=1)
+        out.series["object_height"] = xipos[:, ob, 2]
         out.series["contact_force"] = force
-        # Relative to the grasp (end of tightening), as Outcome.displacement; before it, vs the same state.
+        # Object COM in the palm frame; relative to the grasp (end of tightening), as Outcome.displacement,
+        # and before it, vs the same state.
+        rel = np.einsum("nji,nj->ni", palm_mat.reshape(n, 3, 3), xipos[:, ob] - xpos[:, palm])
         out.series["displacement"] = rel - (rel[grasp] if grasp is not None else rel[0])
         return out
 
-    def _contacts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Contact points [m], force on the object (or on geom2's body) [N], finger-object mask."""
+    def _contacts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Contacts of the loaded state: points [m], frames (normal, tangents), geoms, local forces [N]."""
         m, d = self.m, self.d
         nc = d.ncon
-        if nc == 0:
-            return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=bool)
         con = d.contact
-        b1, b2 = m.geom_bodyid[con.geom1[:nc]], m.geom_bodyid[con.geom2[:nc]]
-        world = np.einsum("kji,kj->ki", np.asarray(con.frame[:nc]).reshape(-1, 3, 3), self._local_forces(nc))
+        if nc == 0:
+            return (
+                np.zeros((0, 3)),
+                np.zeros((0, 9)),
+                np.zeros(0, dtype=int),
+                np.zeros(0, dtype=int),
+                np.zeros((0, 3)),
+            )
+        dim = con.dim
+        if not self.elliptic or np.any(dim == 1):
+            local, f6 = np.zeros((nc, 3)), np.zeros(6)
+            for i in range(nc):
+                mujoco.mj_contactForce(m, d, i, f6)
+                local[i] = f6[:3]
+        else:
+            # Elliptic cones: the first three efc rows of a contact are its normal and tangent forces.
+            adr = con.efc_address
+            local = d.efc_force[np.maximum(adr, 0)[:, None] + np.arange(3)]
+            local[adr < 0] = 0.0  # excluded contacts carry no force
+        return con.pos.copy(), con.frame.copy(), con.geom1.copy(), con.geom2.copy(), local
+
+    def _world_contacts(self, rows) -> tuple[list, np.ndarray]:
+        """Contacts in world axes, and the norm of the fingers' total force on the object [N], shape (n,).
+
+        Per state: points [m], force on the object (or on geom2's body) [N], finger-object mask.
+        """
+        counts = np.array([len(p) for p, *_ in rows])
+        pos, frame, g1, g2, local = (np.concatenate(c) for c in zip(*rows, strict=True))
+        b1, b2 = self.m.geom_bodyid[g1], self.m.geom_bodyid[g2]
+        world = np.einsum("kji,kj->ki", frame.reshape(-1, 3, 3), local)
         ob = self.r.scene.object_body
         world[b1 == ob] *= -1.0  # show the force acting on the object
         other = np.where(b1 == ob, b2, b1)
         on_object = ((b1 == ob) | (b2 == ob)) & self.is_finger[other]
-        return np.asarray(con.pos[:nc]).copy(), world, on_object
-
-    def _local_forces(self, nc: int) -> np.ndarray:
-        """Contact forces of geom1 on geom2 in each contact frame [N], shape (nc, 3) (mj_contactForce)."""
-        m, d = self.m, self.d
-        con = d.contact
-        adr, dim = np.asarray(con.efc_address[:nc]), np.asarray(con.dim[:nc])
-        if m.opt.cone != mujoco.mjtCone.mjCONE_ELLIPTIC or np.any(dim == 1):
-            out, f6 = np.zeros((nc, 3)), np.zeros(6)
-            for i in range(nc):
-                mujoco.mj_contactForce(m, d, i, f6)
-                out[i] = f6[:3]
-            return out
-        # Elliptic cones: the first three efc rows of a contact are its normal and tangent forces.
-        out = d.efc_force[np.maximum(adr, 0)[:, None] + np.arange(3)]
-        out[adr < 0] = 0.0  # excluded contacts carry no force
-        return out
+        state = np.repeat(np.arange(len(rows)), counts)
+        total = np.zeros((len(rows), 3))
+        np.add.at(total, state[on_object], world[on_object])
+        cuts = np.cumsum(counts)[:-1]
+        return list(
+            zip(np.split(pos, cuts), np.split(world, cuts), np.split(on_object, cuts), strict=True)
+        ), (np.linalg.norm(total, axis=1))
 
 
 def _index_of(steps: np.ndarray, step: int) -> int | None:
