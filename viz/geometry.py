@@ -25,7 +25,8 @@ BOX_TRIANGLES = np.array(
     ]
 )  # fmt: skip
 """Outward triangles of the 8 corners ``_BOX_CORNERS`` (x slowest, z fastest)."""
-_DRAWN = (int(mujoco.mjtGeom.mjGEOM_MESH), int(mujoco.mjtGeom.mjGEOM_BOX))
+_MESH = int(mujoco.mjtGeom.mjGEOM_MESH)
+_DRAWN = (_MESH, int(mujoco.mjtGeom.mjGEOM_BOX))
 
 
 @dataclass
@@ -63,27 +64,27 @@ class Surface:
 
 def _from_geoms(m: mujoco.MjModel, geoms: list[int], blocks: list[int]) -> Surface:
     # Model arrays fetched once: every attribute access builds a new numpy view (~10 us).
-    gtype, gsize, gdata = m.geom_type, m.geom_size, m.geom_dataid
+    gtype, gsize, gdata = m.geom_type[geoms], m.geom_size[geoms], m.geom_dataid[geoms]
     vert, vadr, vnum = m.mesh_vert, m.mesh_vertadr, m.mesh_vertnum
     face, fadr, fnum = m.mesh_face, m.mesh_faceadr, m.mesh_facenum
-    local, gid, vblock, tris, n = [], [], [], [], 0
-    for g, b in zip(geoms, blocks, strict=True):
-        if gtype[g] == mujoco.mjtGeom.mjGEOM_MESH:
-            k = gdata[g]
+    bad = ~np.isin(gtype, _DRAWN)
+    if bad.any():
+        g = np.asarray(geoms)[bad][0]
+        raise ValueError(f"geom {g} has type {m.geom_type[g]}: only mesh and box geoms are drawn")
+    local, tris, n = [], [], 0
+    for t, size, k in zip(gtype.tolist(), gsize, gdata.tolist(), strict=True):
+        if t == _MESH:
             v, f = vert[vadr[k] : vadr[k] + vnum[k]], face[fadr[k] : fadr[k] + fnum[k]]
-        elif gtype[g] == mujoco.mjtGeom.mjGEOM_BOX:
-            v, f = _BOX_CORNERS * gsize[g], BOX_TRIANGLES
         else:
-            raise ValueError(f"geom {g} has type {gtype[g]}: only mesh and box geoms are drawn")
+            v, f = _BOX_CORNERS * size, BOX_TRIANGLES
         local.append(v)
-        gid.append(np.full(len(v), g))
-        vblock.append(np.full(len(v), b))
         tris.append(f + n)
         n += len(v)
+    counts = [len(v) for v in local]
     return Surface(
         triangles=np.vstack(tris),
-        vertex_block=np.concatenate(vblock),
-        geom=np.concatenate(gid),
+        vertex_block=np.repeat(blocks, counts),
+        geom=np.repeat(geoms, counts),
         local=np.vstack(local).astype(float),
     )
 
@@ -113,9 +114,7 @@ def finger_surfaces(m: mujoco.MjModel, fingers, block_edges: np.ndarray) -> dict
     ``fingers`` are the model's :class:`~mjcodesign.mjcf.FingerHandle`; ``block_edges`` the inner
     block boundaries along the finger [m] (``[b.x1 for b in blocks[:-1]]``).
     """
-    parsed = [
-        _CHAIN_GEOM.match(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or "") for g in range(m.ngeom)
-    ]
+    parsed = [_CHAIN_GEOM.match(name) for name in _geom_names(m)]
     out = {}
     for h in fingers:
         letter = h.prefix.rstrip("_")
@@ -133,12 +132,7 @@ def finger_surfaces(m: mujoco.MjModel, fingers, block_edges: np.ndarray) -> dict
 
 def body_geom_surface(m: mujoco.MjModel, bodies: list[int]) -> Surface | None:
     """Every mesh and box geom of ``bodies`` as one rigid-part surface (no blocks), or None."""
-    geoms = [
-        g
-        for g in range(m.ngeom)
-        if m.geom_bodyid[g] in bodies
-        and int(m.geom_type[g]) in _DRAWN  # numpy ints never equal pybind enums inside `in`
-    ]
+    geoms = np.flatnonzero(np.isin(m.geom_bodyid, bodies) & np.isin(m.geom_type, _DRAWN)).tolist()
     return _from_geoms(m, geoms, [-1] * len(geoms)) if geoms else None
 
 
