@@ -27,6 +27,7 @@ import rerun as rr
 from mjcodesign.errors import OutputError
 from mjcodesign.observe import Rollout, Snapshot
 from mjcodesign.scenario import STATE_SPEC, control_spec
+from viz.batch import ColumnBatch, rgba32
 from viz.colormap import NEUTRAL_RGB, legend_markdown, legend_ticks, stiffness_rgb
 from viz.geometry import Surface, body_geom_surface, finger_surfaces, tet_surface
 
@@ -105,66 +106,76 @@ class RerunRecorder:
 
     # -- observer protocol ------------------------------------------------------------------------
     def rollout(self, r: Rollout) -> None:
-        """Log one grasp rollout under ``/designs/{label}``."""
+        """Log one grasp rollout under ``/designs/{label}``.
+
+        Three record batches (:class:`viz.batch.ColumnBatch`): the static parts, everything on the
+        logged time points, and the phase starts.
+        """
         root = f"/designs/{_safe(r.label)}"
         m = r.model
         scene = r.scene
         log_e = np.asarray(scene.built.stiffness.log_e) if r.model is scene.built.model else _log_e_of(r)
-        self._legend(r.label, log_e)
-        self.rec.log(
-            root, rr.Transform3D(translation=[_SPACING_DESIGNS * self._n_rollouts, 0.0, 0.0]), static=True
-        )
+        static = ColumnBatch()
+        self._legend(r.label, log_e, static)
+        static.add(root, "Transform3D", "translation", [[_SPACING_DESIGNS * self._n_rollouts, 0.0, 0.0]])
         self._n_rollouts += 1
         steps = logged_steps(len(r.states), m.opt.timestep, r.starts, self.decimation)
-        times = np.r_[0.0, (steps + 1) * m.opt.timestep]
-        index = [rr.TimeColumn(TIMELINE, duration=times)]
         edges = np.array([b.x1 for b in scene.built.design.blocks()[:-1]])
         fingers = finger_surfaces(m, scene.built.fingers, edges)
         rigid = [
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in ("palm", "A_carriage", "B_carriage")
         ]
         gripper = body_geom_surface(m, rigid)
-        self._static_geometry(root, r, fingers, gripper, log_e)
-        frames = _Replay(r, fingers, gripper, self._data(m)).frames(steps)
+        self._static_geometry(static, root, r, fingers, gripper, log_e)
+        for name, names in _SERIES_NAMES.items():
+            static.add(f"{root}/series/{name}", "SeriesLines", "names", names)
+        static.add(f"{root}/outcome", "TextDocument", "text", [json.dumps(r.outcome.as_dict(), indent=1)])
+        static.add(f"{root}/outcome", "TextDocument", "media_type", ["text/plain"])
+        static.send(self.rec)
+
+        frames = _Replay(r, fingers, gripper, self._data(r)).frames(steps)
+        timed = ColumnBatch(np.r_[0.0, (steps + 1) * m.opt.timestep], TIMELINE)
         for name, pos in frames.surfaces.items():
-            self.rec.send_columns(
-                f"{root}/{name}",
-                indexes=index,
-                columns=rr.Mesh3D.columns(vertex_positions=pos.reshape(-1, 3)).partition(
-                    [pos.shape[1]] * len(pos)
-                ),
+            timed.add(
+                f"{root}/{name}", "Mesh3D", "vertex_positions", pos.reshape(-1, 3), [pos.shape[1]] * len(pos)
             )
-        self.rec.send_columns(
-            f"{root}/object",
-            indexes=index,
-            columns=rr.Transform3D.columns(
-                translation=frames.object_pos, quaternion=frames.object_quat[:, [1, 2, 3, 0]]
-            ),
+        timed.add(f"{root}/object", "Transform3D", "translation", frames.object_pos)
+        timed.add(f"{root}/object", "Transform3D", "quaternion", frames.object_quat[:, [1, 2, 3, 0]])
+        timed.add(
+            f"{root}/tendon",
+            "LineStrips3D",
+            "strips",
+            [s for row in frames.tendon for s in row],
+            _lengths(frames.tendon),
         )
-        self._send_ragged(root + "/tendon", index, frames.tendon, _strips)
-        self._send_ragged(root + "/contacts", index, frames.contacts, _arrows)
+        pos, vec, on_object = (np.concatenate(c) for c in zip(*frames.contacts, strict=True))
+        counts = _lengths(frames.contacts, 0)
+        timed.add(f"{root}/contacts", "Arrows3D", "origins", pos, counts)
+        timed.add(f"{root}/contacts", "Arrows3D", "vectors", vec * _ARROW_M_PER_N, counts)
+        colours = rgba32(np.where(on_object[:, None], _FINGER_CONTACT_RGB, _OTHER_CONTACT_RGB))
+        timed.add(f"{root}/contacts", "Arrows3D", "colors", colours, counts)
         for name, values in frames.series.items():
-            if name in _SERIES_NAMES:
-                self.rec.log(f"{root}/series/{name}", rr.SeriesLines(names=_SERIES_NAMES[name]), static=True)
-            self.rec.send_columns(
-                f"{root}/series/{name}", indexes=index, columns=rr.Scalars.columns(scalars=values)
+            values = values.reshape(len(values), -1)
+            timed.add(
+                f"{root}/series/{name}",
+                "Scalars",
+                "scalars",
+                values.reshape(-1),
+                [values.shape[1]] * len(values),
             )
+        timed.send(self.rec)
+
         phases = {k: v for k, v in r.starts.items() if k != "end" and v < len(r.states)}
-        self.rec.send_columns(
-            f"{root}/phases",
-            indexes=[rr.TimeColumn(TIMELINE, duration=[v * m.opt.timestep for v in phases.values()])],
-            columns=rr.TextLog.columns(text=[f"{k} (step {v})" for k, v in phases.items()]),
-        )
-        self.rec.log(
-            f"{root}/outcome",
-            rr.TextDocument(json.dumps(r.outcome.as_dict(), indent=1), media_type="text/plain"),
-            static=True,
-        )
+        starts = ColumnBatch(np.array([v * m.opt.timestep for v in phases.values()]), TIMELINE)
+        starts.add(f"{root}/phases", "TextLog", "text", [f"{k} (step {v})" for k, v in phases.items()])
+        starts.send(self.rec)
 
     def snapshot(self, s: Snapshot) -> None:
         """Log one rest shape under ``/crosscheck/{label}`` (static)."""
         root = f"/crosscheck/{_safe(s.label)}"
-        self._legend(f"crosscheck {s.label}", np.asarray(s.log_e)[None])
+        static = ColumnBatch()
+        self._legend(f"crosscheck {s.label}", np.asarray(s.log_e)[None], static)
+        static.send(self.rec)
         self.rec.log(
             root, rr.Transform3D(translation=[0.0, _SPACING_SHAPES * self._n_shapes, 0.0]), static=True
         )
@@ -204,14 +215,11 @@ class RerunRecorder:
         self.rec.disconnect()
 
     # -- helpers ----------------------------------------------------------------------------------
-    def _legend(self, name: str, log_e: np.ndarray) -> None:
+    def _legend(self, name: str, log_e: np.ndarray, static: ColumnBatch) -> None:
         first = not self._designs
         self._designs[name] = log_e
-        self.rec.log(
-            "/legend",
-            rr.TextDocument(legend_markdown(self._designs), media_type="text/markdown"),
-            static=True,
-        )
+        static.add("/legend", "TextDocument", "text", [legend_markdown(self._designs)])
+        static.add("/legend", "TextDocument", "media_type", ["text/markdown"])
         if first:
             ticks = legend_ticks()
             self.rec.log(
@@ -226,54 +234,33 @@ class RerunRecorder:
                 static=True,
             )
 
-    def _static_geometry(self, root, r: Rollout, fingers, gripper, log_e) -> None:
+    def _static_geometry(self, static: ColumnBatch, root, r: Rollout, fingers, gripper, log_e) -> None:
         g = _GROUND_HALF
-        self.rec.log(
-            f"{root}/ground",
-            rr.Mesh3D(
-                vertex_positions=[[-g, -g, 0], [g, -g, 0], [g, g, 0], [-g, g, 0]],
-                triangle_indices=[[0, 1, 2], [0, 2, 3]],
-                albedo_factor=_GROUND_RGB,
-            ),
-            static=True,
-        )
         mesh = r.scene.obj.mesh
-        self.rec.log(
-            f"{root}/object/mesh",
-            rr.Mesh3D(
-                vertex_positions=np.asarray(mesh.vertices),
-                triangle_indices=np.asarray(mesh.faces),
-                albedo_factor=_OBJECT_RGB,
-            ),
-            static=True,
-        )
-        for i, (letter, surf) in enumerate(fingers.items()):
-            self.rec.log(
-                f"{root}/fingers/{letter}",
-                rr.Mesh3D.from_fields(
-                    triangle_indices=surf.triangles,
-                    vertex_colors=_block_colours(stiffness_rgb(log_e[i]), surf.vertex_block),
-                ),
-                static=True,
-            )
+        for name, vertices, triangles, rgb in (
+            ("ground", [[-g, -g, 0], [g, -g, 0], [g, g, 0], [-g, g, 0]], [[0, 1, 2], [0, 2, 3]], _GROUND_RGB),
+            ("object/mesh", mesh.vertices, mesh.faces, _OBJECT_RGB),
+        ):
+            static.add(f"{root}/{name}", "Mesh3D", "vertex_positions", np.asarray(vertices))
+            static.add(f"{root}/{name}", "Mesh3D", "triangle_indices", np.asarray(triangles))
+            static.add(f"{root}/{name}", "Mesh3D", "albedo_factor", [rgba32(rgb)])
+        parts = {f"fingers/{k}": (s, stiffness_rgb(log_e[i])) for i, (k, s) in enumerate(fingers.items())}
         if gripper is not None:
-            self.rec.log(
-                f"{root}/gripper",
-                rr.Mesh3D.from_fields(
-                    triangle_indices=gripper.triangles,
-                    vertex_colors=np.tile(NEUTRAL_RGB, (len(gripper.local), 1)),
-                ),
-                static=True,
-            )
+            parts["gripper"] = (gripper, None)
+        for name, (surf, block_rgb) in parts.items():
+            rgb = _block_colours(block_rgb, surf.vertex_block) if block_rgb is not None else NEUTRAL_RGB
+            static.add(f"{root}/{name}", "Mesh3D", "triangle_indices", surf.triangles)
+            colours = np.broadcast_to(rgba32(rgb), len(surf.vertex_block))
+            static.add(f"{root}/{name}", "Mesh3D", "vertex_colors", colours)
 
-    def _data(self, m: mujoco.MjModel) -> mujoco.MjData:
-        """A scratch ``MjData`` of ``m``, reused while rollouts of the same model follow each other."""
+    def _data(self, r: Rollout) -> mujoco.MjData:
+        """The rollout's spare ``MjData``, else one of its model, reused while rollouts of one model follow."""
+        m = r.model
+        if r.scratch is not None:
+            return r.scratch
         if self._scratch is None or self._scratch[0] is not m:
             self._scratch = (m, mujoco.MjData(m))
         return self._scratch[1]
-
-    def _send_ragged(self, path, index, rows, columns) -> None:
-        self.rec.send_columns(path, indexes=index, columns=columns(rows))
 
 
 class _Frames:
@@ -408,20 +395,9 @@ def _index_of(steps: np.ndarray, step: int) -> int | None:
     return int(hit[0]) + 1 if hit.size else None
 
 
-def _strips(rows) -> rr.ComponentColumnList:
-    flat = [s for row in rows for s in row]
-    if len({len(s) for s in flat}) == 1:  # site-only tendons: one array converts ~10x faster than a list
-        flat = np.asarray(flat)
-    return rr.LineStrips3D.columns(strips=flat).partition([len(row) for row in rows])
-
-
-def _arrows(rows) -> rr.ComponentColumnList:
-    pos = np.concatenate([p for p, _, _ in rows])
-    vec = np.concatenate([v for _, v, _ in rows]) * _ARROW_M_PER_N
-    rgb = np.concatenate(
-        [np.where(mask[:, None], _FINGER_CONTACT_RGB, _OTHER_CONTACT_RGB) for _, _, mask in rows]
-    ).astype(np.uint8)
-    return rr.Arrows3D.columns(origins=pos, vectors=vec, colors=rgb).partition([len(p) for p, _, _ in rows])
+def _lengths(rows, axis: int | None = None) -> list[int]:
+    """Items per row of a ragged list (or of each row's ``axis``-th member)."""
+    return [len(row if axis is None else row[axis]) for row in rows]
 
 
 def _block_colours(block_rgb: np.ndarray, vertex_block: np.ndarray) -> np.ndarray:
