@@ -222,17 +222,17 @@ class RerunRecorder:
         static.add("/legend", "TextDocument", "media_type", ["text/markdown"])
         if first:
             ticks = legend_ticks()
-            self.rec.log(
+            centers = _COLORBAR_ORIGIN + np.outer(np.arange(len(ticks)), [_COLORBAR_STEP, 0, 0])
+            static.add("/legend/colorbar", "Boxes3D", "centers", centers)
+            static.add(
                 "/legend/colorbar",
-                rr.Boxes3D(
-                    centers=_COLORBAR_ORIGIN + np.outer(np.arange(len(ticks)), [_COLORBAR_STEP, 0, 0]),
-                    half_sizes=[[0.5 * _COLORBAR_STEP, 0.005, 0.002]] * len(ticks),
-                    colors=stiffness_rgb(ticks),
-                    labels=[f"{v:.1f}" for v in ticks],
-                    fill_mode="solid",
-                ),
-                static=True,
+                "Boxes3D",
+                "half_sizes",
+                [[0.5 * _COLORBAR_STEP, 0.005, 0.002]] * len(ticks),
             )
+            static.add("/legend/colorbar", "Boxes3D", "colors", rgba32(stiffness_rgb(ticks)))
+            static.add("/legend/colorbar", "Boxes3D", "labels", [f"{v:.1f}" for v in ticks])
+            static.add("/legend/colorbar", "Boxes3D", "fill_mode", [rr.components.FillMode.Solid.value])
 
     def _static_geometry(self, static: ColumnBatch, root, r: Rollout, fingers, gripper, log_e) -> None:
         g = _GROUND_HALF
