@@ -131,6 +131,31 @@ class ColumnBatch:
         )
         self._arrays.append(_lists(t, lengths, items))
 
+    def add_once(self, entity: str, archetype: str, field: str, items) -> None:
+        """Add ``field`` of ``entity`` at the first time point only (null cells after it).
+
+        What never changes over a rollout (triangles, colours, series names) then shares the entity's
+        chunk of per-step data instead of a static chunk of its own: each chunk costs Rerun ~0.2 ms of
+        CPU, and a latest-at query from the first time point on finds the values all the same.
+        """
+        if self.timeline is None:
+            raise ValueError("add_once needs a timeline; use add for static data")
+        meta, t = _component(archetype, field)
+        values = _items(t.value_type, items)
+        offsets = np.full(self.n_rows + 1, len(values), dtype=np.int32)
+        offsets[0] = 0
+        valid = np.zeros(self.n_rows, dtype=bool)
+        valid[0] = True
+        bits = pa.py_buffer(np.packbits(valid, bitorder="little"))
+        self._fields.append(
+            pa.field(f"{entity}:{meta['rerun:component']}", t, metadata={**meta, "rerun:entity_path": entity})
+        )
+        self._arrays.append(
+            pa.Array.from_buffers(
+                t, self.n_rows, [bits, pa.py_buffer(offsets)], null_count=self.n_rows - 1, children=[values]
+            )
+        )
+
     def send(self, rec: rr.RecordingStream) -> None:
         """Send every column added (one chunk per entity); nothing if none were."""
         if len(self._arrays) > (self.timeline is not None):

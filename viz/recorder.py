@@ -109,7 +109,8 @@ class RerunRecorder:
         """Log one grasp rollout under ``/designs/{label}``.
 
         Three record batches (:class:`viz.batch.ColumnBatch`): the static parts, everything on the
-        logged time points, and the phase starts.
+        logged time points (with the triangles, colours and series names that never change at the first
+        one), and the phase starts.
         """
         root = f"/designs/{_safe(r.label)}"
         m = r.model
@@ -126,15 +127,15 @@ class RerunRecorder:
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in ("palm", "A_carriage", "B_carriage")
         ]
         gripper = body_geom_surface(m, rigid)
-        self._static_geometry(static, root, r, fingers, gripper, log_e)
+        timed = ColumnBatch(np.r_[0.0, (steps + 1) * m.opt.timestep], TIMELINE)
+        self._geometry(static, timed, root, r, fingers, gripper, log_e)
         for name, names in _SERIES_NAMES.items():
-            static.add(f"{root}/series/{name}", "SeriesLines", "names", names)
+            timed.add_once(f"{root}/series/{name}", "SeriesLines", "names", names)
         static.add(f"{root}/outcome", "TextDocument", "text", [json.dumps(r.outcome.as_dict(), indent=1)])
         static.add(f"{root}/outcome", "TextDocument", "media_type", ["text/plain"])
         static.send(self.rec)
 
         frames = _Replay(r, fingers, gripper, self._data(r)).frames(steps)
-        timed = ColumnBatch(np.r_[0.0, (steps + 1) * m.opt.timestep], TIMELINE)
         for name, pos in frames.surfaces.items():
             timed.add(
                 f"{root}/{name}", "Mesh3D", "vertex_positions", pos.reshape(-1, 3), [pos.shape[1]] * len(pos)
@@ -234,7 +235,8 @@ class RerunRecorder:
             static.add("/legend/colorbar", "Boxes3D", "labels", [f"{v:.1f}" for v in ticks])
             static.add("/legend/colorbar", "Boxes3D", "fill_mode", [rr.components.FillMode.Solid.value])
 
-    def _static_geometry(self, static: ColumnBatch, root, r: Rollout, fingers, gripper, log_e) -> None:
+    def _geometry(self, static: ColumnBatch, timed: ColumnBatch, root, r, fingers, gripper, log_e) -> None:
+        """Ground and object mesh (static); the fingers' and gripper's triangles and colours (first step)."""
         g = _GROUND_HALF
         mesh = r.scene.obj.mesh
         for name, vertices, triangles, rgb in (
@@ -249,9 +251,9 @@ class RerunRecorder:
             parts["gripper"] = (gripper, None)
         for name, (surf, block_rgb) in parts.items():
             rgb = _block_colours(block_rgb, surf.vertex_block) if block_rgb is not None else NEUTRAL_RGB
-            static.add(f"{root}/{name}", "Mesh3D", "triangle_indices", surf.triangles)
+            timed.add_once(f"{root}/{name}", "Mesh3D", "triangle_indices", surf.triangles)
             colours = np.broadcast_to(rgba32(rgb), len(surf.vertex_block))
-            static.add(f"{root}/{name}", "Mesh3D", "vertex_colors", colours)
+            timed.add_once(f"{root}/{name}", "Mesh3D", "vertex_colors", colours)
 
     def _data(self, r: Rollout) -> mujoco.MjData:
         """The rollout's spare ``MjData``, else one of its model, reused while rollouts of one model follow."""
