@@ -65,22 +65,37 @@ def _items(t: pa.DataType, data) -> pa.Array:
     Numeric data is wrapped as Arrow buffers without a copy once it has the column's dtype
     (``pa.array`` costs ~10 us a call, which adds up over some 40 arrays per grasp).
     """
-    if pa.types.is_fixed_size_list(t):
-        values = np.asarray(data, dtype=t.value_type.to_pandas_dtype()).reshape(-1)
-        return pa.Array.from_buffers(
-            t, len(values) // t.list_size, [None], children=[_items(t.value_type, values)]
-        )
-    if pa.types.is_list(t):
+    kind, dtype, width = _layout(t)
+    if kind == "fixed":
+        values = np.asarray(data, dtype=dtype).reshape(-1)
+        buffers = [None, pa.py_buffer(values)]
+        child = pa.Array.from_buffers(t.value_type, len(values), buffers)
+        return pa.Array.from_buffers(t, len(values) // width, [None], children=[child])
+    if kind == "list":
         return _lists(t, [len(x) for x in data], np.concatenate(data) if len(data) else [])
-    if pa.types.is_string(t):
+    if kind == "string":
         return pa.array(list(data), type=t)
-    values = np.ascontiguousarray(data, dtype=t.to_pandas_dtype()).reshape(-1)
+    values = np.ascontiguousarray(data, dtype=dtype).reshape(-1)
     return pa.Array.from_buffers(t, len(values), [None, pa.py_buffer(values)])
+
+
+@cache
+def _layout(t: pa.DataType) -> tuple[str, np.dtype | None, int]:
+    """How :func:`_items` builds ``t``: kind, numpy dtype of the values, fixed list size."""
+    if pa.types.is_fixed_size_list(t):
+        if not pa.types.is_primitive(t.value_type):
+            raise ValueError(f"fixed-size lists of {t.value_type} are not supported")
+        return "fixed", np.dtype(t.value_type.to_pandas_dtype()), t.list_size
+    if pa.types.is_list(t):
+        return "list", None, 0
+    if pa.types.is_string(t):
+        return "string", None, 0
+    return "primitive", np.dtype(t.to_pandas_dtype()), 0
 
 
 def _lists(t: pa.ListType, lengths, items) -> pa.ListArray:
     offsets = np.zeros(len(lengths) + 1, dtype=np.int32)
-    np.cumsum(lengths, out=offsets[1:])
+    np.asarray(lengths, dtype=np.int32).cumsum(out=offsets[1:])
     values = _items(t.value_type, items)
     if len(values) != offsets[-1]:
         raise ValueError(f"{len(values)} values for rows of {offsets[-1]} in all")

@@ -26,7 +26,7 @@ BOX_TRIANGLES = np.array(
 )  # fmt: skip
 """Outward triangles of the 8 corners ``_BOX_CORNERS`` (x slowest, z fastest)."""
 _MESH = int(mujoco.mjtGeom.mjGEOM_MESH)
-_DRAWN = (_MESH, int(mujoco.mjtGeom.mjGEOM_BOX))
+_BOX = int(mujoco.mjtGeom.mjGEOM_BOX)
 
 
 @dataclass
@@ -62,30 +62,36 @@ class Surface:
         return self.positions(d.geom_xpos, d.geom_xmat, d.flexvert_xpos)
 
 
+def _ranges(counts: np.ndarray) -> np.ndarray:
+    """``0..n-1`` for every n in ``counts``, concatenated."""
+    ends = np.cumsum(counts)
+    return np.arange(ends[-1]) - np.repeat(ends - counts, counts)
+
+
 def _from_geoms(m: mujoco.MjModel, geoms: list[int], blocks: list[int]) -> Surface:
-    # Model arrays fetched once: every attribute access builds a new numpy view (~10 us).
-    gtype, gsize, gdata = m.geom_type[geoms], m.geom_size[geoms], m.geom_dataid[geoms]
-    vert, vadr, vnum = m.mesh_vert, m.mesh_vertadr, m.mesh_vertnum
-    face, fadr, fnum = m.mesh_face, m.mesh_faceadr, m.mesh_facenum
-    bad = ~np.isin(gtype, _DRAWN)
+    gtype, size, mesh = m.geom_type[geoms], m.geom_size[geoms], m.geom_dataid[geoms]
+    bad = (gtype != _MESH) & (gtype != _BOX)
     if bad.any():
         g = np.asarray(geoms)[bad][0]
         raise ValueError(f"geom {g} has type {m.geom_type[g]}: only mesh and box geoms are drawn")
-    local, tris, n = [], [], 0
-    for t, size, k in zip(gtype.tolist(), gsize, gdata.tolist(), strict=True):
-        if t == _MESH:
-            v, f = vert[vadr[k] : vadr[k] + vnum[k]], face[fadr[k] : fadr[k] + fnum[k]]
-        else:
-            v, f = _BOX_CORNERS * size, BOX_TRIANGLES
-        local.append(v)
-        tris.append(f + n)
-        n += len(v)
-    counts = [len(v) for v in local]
+    is_mesh = gtype == _MESH
+    k = np.where(is_mesh, mesh, 0)  # a box has no mesh: its rows below are replaced
+    nv = np.where(is_mesh, m.mesh_vertnum[k], len(_BOX_CORNERS))
+    nf = np.where(is_mesh, m.mesh_facenum[k], len(BOX_TRIANGLES))
+    # Every geom's vertices (faces) in turn: j is the index inside its geom, i the geom's position.
+    j, i = _ranges(nv), np.repeat(np.arange(len(geoms)), nv)
+    local = np.where(
+        is_mesh[i, None], m.mesh_vert[m.mesh_vertadr[k][i] + j], _BOX_CORNERS[j % len(_BOX_CORNERS)] * size[i]
+    )
+    jf, f = _ranges(nf), np.repeat(np.arange(len(geoms)), nf)
+    tris = np.where(
+        is_mesh[f, None], m.mesh_face[m.mesh_faceadr[k][f] + jf], BOX_TRIANGLES[jf % len(BOX_TRIANGLES)]
+    )
     return Surface(
-        triangles=np.vstack(tris),
-        vertex_block=np.repeat(blocks, counts),
-        geom=np.repeat(geoms, counts),
-        local=np.vstack(local).astype(float),
+        triangles=tris + (np.cumsum(nv) - nv)[f, None],
+        vertex_block=np.repeat(blocks, nv),
+        geom=np.repeat(geoms, nv),
+        local=local.astype(float),
     )
 
 
@@ -132,7 +138,10 @@ def finger_surfaces(m: mujoco.MjModel, fingers, block_edges: np.ndarray) -> dict
 
 def body_geom_surface(m: mujoco.MjModel, bodies: list[int]) -> Surface | None:
     """Every mesh and box geom of ``bodies`` as one rigid-part surface (no blocks), or None."""
-    geoms = np.flatnonzero(np.isin(m.geom_bodyid, bodies) & np.isin(m.geom_type, _DRAWN)).tolist()
+    mine = np.zeros(m.nbody, dtype=bool)
+    mine[bodies] = True
+    gtype = m.geom_type
+    geoms = np.flatnonzero(mine[m.geom_bodyid] & ((gtype == _MESH) | (gtype == _BOX))).tolist()
     return _from_geoms(m, geoms, [-1] * len(geoms)) if geoms else None
 
 
