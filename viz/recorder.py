@@ -1,11 +1,13 @@
 """The Rerun observer: grasp rollouts and crosscheck rest shapes, side by side in one recording.
 
 A grasp rollout is replayed from its states (``mj_setState`` + ``mj_forward`` at the logged steps) and
-logged on the ``sim_time`` timeline [s] with one columnar ``send_columns`` call per entity:
+logged on the ``sim_time`` timeline [s] in three Arrow record batches (:mod:`viz.batch`: the static
+parts, the logged time points, the phase starts), which Rerun splits into one chunk per entity:
 
 * ``/designs/{label}``: a static offset (runs side by side along world x), ``ground``, ``object``
   (pose per step, mesh static), ``fingers/A``, ``fingers/B`` (deformed surface per step, coloured per
-  block by stiffness), ``gripper`` (palm and carriages), ``tendon`` (native wrap path per step),
+  block by stiffness; triangles and colours at the first time point), ``gripper`` (palm and
+  carriages), ``tendon`` (native wrap path per step),
   ``contacts`` (force arrows), ``phases`` (a text log entry at every phase start), ``outcome``;
 * ``/designs/{label}/series/``: ``tendon_force`` (fingers A, B) [N], ``object_height`` (COM) [m],
   ``contact_force`` (norm of the fingers' force on the object) [N], ``displacement`` (object COM
@@ -35,8 +37,8 @@ __all__ = ["RerunRecorder", "DEFAULT_FRAME_RATE", "TIMELINE", "logged_steps"]
 
 TIMELINE = "sim_time"
 DEFAULT_FRAME_RATE = 10.0
-"""Logged states per simulated second by default [Hz]: smooth playback, and the logging overhead of a
-chain grasp stays under 20% of its rollout time (``mjcodesign bench viz``)."""
+"""Logged states per simulated second by default [Hz], for smooth playback. The cost of a recording is
+mostly fixed (stream, chunks, geometry), not per state; ``mjcodesign bench viz`` measures it."""
 _SPACING_DESIGNS = 0.25  # runs side by side along world x [m]: gripper is 0.09 m wide along y, 0.04 along x
 _SPACING_SHAPES = 0.06  # crosscheck fingers side by side along world y [m] (finger width 20 mm)
 _ARROW_M_PER_N = 0.01  # force arrows: 1 N is drawn 10 mm long
