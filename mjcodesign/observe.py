@@ -58,6 +58,9 @@ class Rollout:
     starts: dict[str, int]
     """First step of every phase, and ``end`` (:func:`mjcodesign.scenario.phase_controls`)."""
     outcome: Outcome
+    scratch: mujoco.MjData | None = field(default=None, compare=False, repr=False)
+    """An ``MjData`` of ``model`` that the simulator is done with (None if it has none to spare): an
+    observer may overwrite it instead of allocating its own (the arena of a scene is ~15 MB)."""
 
     def __post_init__(self) -> None:
         if self.states.ndim != 2 or self.states.shape[1] != self.x0.size:

@@ -167,6 +167,44 @@ def test_finger_colours_follow_stiffness(recorded):
         assert _rgb(colours[0]) == _want(stiffness_rgb(scene.built.stiffness.log_e[i]))
 
 
+def test_column_batch_matches_rerun_columns(tmp_path):
+    """A ColumnBatch writes the same column types and values as Rerun's own send_columns, and
+    add_once fills the first time point only."""
+    rr = pytest.importorskip("rerun")
+    from viz.batch import ColumnBatch
+
+    times = np.array([0.0, 0.1, 0.2])
+    pos = np.arange(18, dtype=float).reshape(6, 3) / 7.0
+    tris = np.array([[0, 1, 2]])
+    path = tmp_path / "batch.rrd"
+    rec = rr.RecordingStream("test", recording_id="batch")
+    rec.set_sinks(rr.FileSink(str(path)))
+    rec.send_columns(
+        "/ref",
+        indexes=[rr.TimeColumn("sim_time", duration=times)],
+        columns=[
+            *rr.Mesh3D.columns(vertex_positions=pos).partition([1, 2, 3]),
+            *rr.Scalars.columns(scalars=times),
+        ],
+    )
+    b = ColumnBatch(times, "sim_time")
+    b.add("/ours", "Mesh3D", "vertex_positions", pos, [1, 2, 3])
+    b.add("/ours", "Scalars", "scalars", times)
+    b.add_once("/ours", "Mesh3D", "triangle_indices", tris)
+    b.send(rec)
+    rec.flush()
+    rec.disconnect()
+    data = _read(path)
+    (ref,), (ours,) = data["/ref"], data["/ours"]
+    for name in ("Mesh3D:vertex_positions", "Scalars:scalars"):
+        mine, theirs = ours.schema.field(name), ref.schema.field(name)
+        assert mine.type == theirs.type
+        assert mine.metadata[b"rerun:component_type"] == theirs.metadata[b"rerun:component_type"]
+        assert ours.column(name).to_pylist() == ref.column(name).to_pylist()
+    assert ours.column("Mesh3D:triangle_indices").to_pylist() == [tris.tolist(), None, None]
+    _verify(path)
+
+
 def test_colormap_ends_and_monotone():
     pytest.importorskip("rerun")
     from viz.colormap import stiffness_rgb

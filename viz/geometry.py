@@ -25,7 +25,8 @@ BOX_TRIANGLES = np.array(
     ]
 )  # fmt: skip
 """Outward triangles of the 8 corners ``_BOX_CORNERS`` (x slowest, z fastest)."""
-_DRAWN = (int(mujoco.mjtGeom.mjGEOM_MESH), int(mujoco.mjtGeom.mjGEOM_BOX))
+_MESH = int(mujoco.mjtGeom.mjGEOM_MESH)
+_BOX = int(mujoco.mjtGeom.mjGEOM_BOX)
 
 
 @dataclass
@@ -61,30 +62,36 @@ class Surface:
         return self.positions(d.geom_xpos, d.geom_xmat, d.flexvert_xpos)
 
 
+def _ranges(counts: np.ndarray) -> np.ndarray:
+    """``0..n-1`` for every n in ``counts``, concatenated."""
+    ends = np.cumsum(counts)
+    return np.arange(ends[-1]) - np.repeat(ends - counts, counts)
+
+
 def _from_geoms(m: mujoco.MjModel, geoms: list[int], blocks: list[int]) -> Surface:
-    # Model arrays fetched once: every attribute access builds a new numpy view (~10 us).
-    gtype, gsize, gdata = m.geom_type, m.geom_size, m.geom_dataid
-    vert, vadr, vnum = m.mesh_vert, m.mesh_vertadr, m.mesh_vertnum
-    face, fadr, fnum = m.mesh_face, m.mesh_faceadr, m.mesh_facenum
-    local, gid, vblock, tris, n = [], [], [], [], 0
-    for g, b in zip(geoms, blocks, strict=True):
-        if gtype[g] == mujoco.mjtGeom.mjGEOM_MESH:
-            k = gdata[g]
-            v, f = vert[vadr[k] : vadr[k] + vnum[k]], face[fadr[k] : fadr[k] + fnum[k]]
-        elif gtype[g] == mujoco.mjtGeom.mjGEOM_BOX:
-            v, f = _BOX_CORNERS * gsize[g], BOX_TRIANGLES
-        else:
-            raise ValueError(f"geom {g} has type {gtype[g]}: only mesh and box geoms are drawn")
-        local.append(v)
-        gid.append(np.full(len(v), g))
-        vblock.append(np.full(len(v), b))
-        tris.append(f + n)
-        n += len(v)
+    gtype, size, mesh = m.geom_type[geoms], m.geom_size[geoms], m.geom_dataid[geoms]
+    bad = (gtype != _MESH) & (gtype != _BOX)
+    if bad.any():
+        g = np.asarray(geoms)[bad][0]
+        raise ValueError(f"geom {g} has type {m.geom_type[g]}: only mesh and box geoms are drawn")
+    is_mesh = gtype == _MESH
+    k = np.where(is_mesh, mesh, 0)  # a box has no mesh: its rows below are replaced
+    nv = np.where(is_mesh, m.mesh_vertnum[k], len(_BOX_CORNERS))
+    nf = np.where(is_mesh, m.mesh_facenum[k], len(BOX_TRIANGLES))
+    # Every geom's vertices (faces) in turn: j is the index inside its geom, i the geom's position.
+    j, i = _ranges(nv), np.repeat(np.arange(len(geoms)), nv)
+    local = np.where(
+        is_mesh[i, None], m.mesh_vert[m.mesh_vertadr[k][i] + j], _BOX_CORNERS[j % len(_BOX_CORNERS)] * size[i]
+    )
+    jf, f = _ranges(nf), np.repeat(np.arange(len(geoms)), nf)
+    tris = np.where(
+        is_mesh[f, None], m.mesh_face[m.mesh_faceadr[k][f] + jf], BOX_TRIANGLES[jf % len(BOX_TRIANGLES)]
+    )
     return Surface(
-        triangles=np.vstack(tris),
-        vertex_block=np.concatenate(vblock),
-        geom=np.concatenate(gid),
-        local=np.vstack(local).astype(float),
+        triangles=tris + (np.cumsum(nv) - nv)[f, None],
+        vertex_block=np.repeat(blocks, nv),
+        geom=np.repeat(geoms, nv),
+        local=local.astype(float),
     )
 
 
@@ -113,9 +120,7 @@ def finger_surfaces(m: mujoco.MjModel, fingers, block_edges: np.ndarray) -> dict
     ``fingers`` are the model's :class:`~mjcodesign.mjcf.FingerHandle`; ``block_edges`` the inner
     block boundaries along the finger [m] (``[b.x1 for b in blocks[:-1]]``).
     """
-    parsed = [
-        _CHAIN_GEOM.match(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or "") for g in range(m.ngeom)
-    ]
+    parsed = [_CHAIN_GEOM.match(name) for name in _geom_names(m)]
     out = {}
     for h in fingers:
         letter = h.prefix.rstrip("_")
@@ -133,12 +138,10 @@ def finger_surfaces(m: mujoco.MjModel, fingers, block_edges: np.ndarray) -> dict
 
 def body_geom_surface(m: mujoco.MjModel, bodies: list[int]) -> Surface | None:
     """Every mesh and box geom of ``bodies`` as one rigid-part surface (no blocks), or None."""
-    geoms = [
-        g
-        for g in range(m.ngeom)
-        if m.geom_bodyid[g] in bodies
-        and int(m.geom_type[g]) in _DRAWN  # numpy ints never equal pybind enums inside `in`
-    ]
+    mine = np.zeros(m.nbody, dtype=bool)
+    mine[bodies] = True
+    gtype = m.geom_type
+    geoms = np.flatnonzero(mine[m.geom_bodyid] & ((gtype == _MESH) | (gtype == _BOX))).tolist()
     return _from_geoms(m, geoms, [-1] * len(geoms)) if geoms else None
 
 

@@ -1,11 +1,13 @@
 """The Rerun observer: grasp rollouts and crosscheck rest shapes, side by side in one recording.
 
 A grasp rollout is replayed from its states (``mj_setState`` + ``mj_forward`` at the logged steps) and
-logged on the ``sim_time`` timeline [s] with one columnar ``send_columns`` call per entity:
+logged on the ``sim_time`` timeline [s] in three Arrow record batches (:mod:`viz.batch`: the static
+parts, the logged time points, the phase starts), which Rerun splits into one chunk per entity:
 
 * ``/designs/{label}``: a static offset (runs side by side along world x), ``ground``, ``object``
   (pose per step, mesh static), ``fingers/A``, ``fingers/B`` (deformed surface per step, coloured per
-  block by stiffness), ``gripper`` (palm and carriages), ``tendon`` (native wrap path per step),
+  block by stiffness; triangles and colours at the first time point), ``gripper`` (palm and
+  carriages), ``tendon`` (native wrap path per step),
   ``contacts`` (force arrows), ``phases`` (a text log entry at every phase start), ``outcome``;
 * ``/designs/{label}/series/``: ``tendon_force`` (fingers A, B) [N], ``object_height`` (COM) [m],
   ``contact_force`` (norm of the fingers' force on the object) [N], ``displacement`` (object COM
@@ -27,6 +29,7 @@ import rerun as rr
 from mjcodesign.errors import OutputError
 from mjcodesign.observe import Rollout, Snapshot
 from mjcodesign.scenario import STATE_SPEC, control_spec
+from viz.batch import ColumnBatch, rgba32
 from viz.colormap import NEUTRAL_RGB, legend_markdown, legend_ticks, stiffness_rgb
 from viz.geometry import Surface, body_geom_surface, finger_surfaces, tet_surface
 
@@ -34,8 +37,8 @@ __all__ = ["RerunRecorder", "DEFAULT_FRAME_RATE", "TIMELINE", "logged_steps"]
 
 TIMELINE = "sim_time"
 DEFAULT_FRAME_RATE = 10.0
-"""Logged states per simulated second by default [Hz]: smooth playback, and the logging overhead of a
-chain grasp stays under 20% of its rollout time (``mjcodesign bench viz``)."""
+"""Logged states per simulated second by default [Hz], for smooth playback. The cost of a recording is
+mostly fixed (stream, chunks, geometry), not per state; ``mjcodesign bench viz`` measures it."""
 _SPACING_DESIGNS = 0.25  # runs side by side along world x [m]: gripper is 0.09 m wide along y, 0.04 along x
 _SPACING_SHAPES = 0.06  # crosscheck fingers side by side along world y [m] (finger width 20 mm)
 _ARROW_M_PER_N = 0.01  # force arrows: 1 N is drawn 10 mm long
@@ -99,71 +102,83 @@ class RerunRecorder:
             sinks.append(rr.FileSink(str(self.path)))
         self.rec.set_sinks(*sinks)
         self._designs: dict[str, np.ndarray] = {}
+        self._scratch: tuple[mujoco.MjModel, mujoco.MjData] | None = None
         self._n_rollouts = 0
         self._n_shapes = 0
 
     # -- observer protocol ------------------------------------------------------------------------
     def rollout(self, r: Rollout) -> None:
-        """Log one grasp rollout under ``/designs/{label}``."""
+        """Log one grasp rollout under ``/designs/{label}``.
+
+        Three record batches (:class:`viz.batch.ColumnBatch`): the static parts, everything on the
+        logged time points (with the triangles, colours and series names that never change at the first
+        one), and the phase starts.
+        """
         root = f"/designs/{_safe(r.label)}"
         m = r.model
         scene = r.scene
         log_e = np.asarray(scene.built.stiffness.log_e) if r.model is scene.built.model else _log_e_of(r)
-        self._legend(r.label, log_e)
-        self.rec.log(
-            root, rr.Transform3D(translation=[_SPACING_DESIGNS * self._n_rollouts, 0.0, 0.0]), static=True
-        )
+        static = ColumnBatch()
+        self._legend(r.label, log_e, static)
+        static.add(root, "Transform3D", "translation", [[_SPACING_DESIGNS * self._n_rollouts, 0.0, 0.0]])
         self._n_rollouts += 1
         steps = logged_steps(len(r.states), m.opt.timestep, r.starts, self.decimation)
-        times = np.r_[0.0, (steps + 1) * m.opt.timestep]
-        index = [rr.TimeColumn(TIMELINE, duration=times)]
         edges = np.array([b.x1 for b in scene.built.design.blocks()[:-1]])
         fingers = finger_surfaces(m, scene.built.fingers, edges)
         rigid = [
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in ("palm", "A_carriage", "B_carriage")
         ]
         gripper = body_geom_surface(m, rigid)
-        self._static_geometry(root, r, fingers, gripper, log_e)
-        frames = _Replay(r, fingers, gripper).frames(steps)
+        timed = ColumnBatch(np.r_[0.0, (steps + 1) * m.opt.timestep], TIMELINE)
+        self._geometry(static, timed, root, r, fingers, gripper, log_e)
+        for name, names in _SERIES_NAMES.items():
+            timed.add_once(f"{root}/series/{name}", "SeriesLines", "names", names)
+        static.add(f"{root}/outcome", "TextDocument", "text", [json.dumps(r.outcome.as_dict(), indent=1)])
+        static.add(f"{root}/outcome", "TextDocument", "media_type", ["text/plain"])
+        static.send(self.rec)
+
+        frames = _Replay(r, fingers, gripper, self._data(r)).frames(steps)
         for name, pos in frames.surfaces.items():
-            self.rec.send_columns(
-                f"{root}/{name}",
-                indexes=index,
-                columns=rr.Mesh3D.columns(vertex_positions=pos.reshape(-1, 3)).partition(
-                    [pos.shape[1]] * len(pos)
-                ),
+            timed.add(
+                f"{root}/{name}", "Mesh3D", "vertex_positions", pos.reshape(-1, 3), [pos.shape[1]] * len(pos)
             )
-        self.rec.send_columns(
-            f"{root}/object",
-            indexes=index,
-            columns=rr.Transform3D.columns(
-                translation=frames.object_pos, quaternion=frames.object_quat[:, [1, 2, 3, 0]]
-            ),
+        timed.add(f"{root}/object", "Transform3D", "translation", frames.object_pos)
+        timed.add(f"{root}/object", "Transform3D", "quaternion", frames.object_quat[:, [1, 2, 3, 0]])
+        timed.add(
+            f"{root}/tendon",
+            "LineStrips3D",
+            "strips",
+            [s for row in frames.tendon for s in row],
+            _lengths(frames.tendon),
         )
-        self._send_ragged(root + "/tendon", index, frames.tendon, _strips)
-        self._send_ragged(root + "/contacts", index, frames.contacts, _arrows)
+        pos, vec, on_object = (np.concatenate(c) for c in zip(*frames.contacts, strict=True))
+        counts = _lengths(frames.contacts, 0)
+        timed.add(f"{root}/contacts", "Arrows3D", "origins", pos, counts)
+        timed.add(f"{root}/contacts", "Arrows3D", "vectors", vec * _ARROW_M_PER_N, counts)
+        colours = rgba32(np.where(on_object[:, None], _FINGER_CONTACT_RGB, _OTHER_CONTACT_RGB))
+        timed.add(f"{root}/contacts", "Arrows3D", "colors", colours, counts)
         for name, values in frames.series.items():
-            if name in _SERIES_NAMES:
-                self.rec.log(f"{root}/series/{name}", rr.SeriesLines(names=_SERIES_NAMES[name]), static=True)
-            self.rec.send_columns(
-                f"{root}/series/{name}", indexes=index, columns=rr.Scalars.columns(scalars=values)
+            values = values.reshape(len(values), -1)
+            timed.add(
+                f"{root}/series/{name}",
+                "Scalars",
+                "scalars",
+                values.reshape(-1),
+                [values.shape[1]] * len(values),
             )
+        timed.send(self.rec)
+
         phases = {k: v for k, v in r.starts.items() if k != "end" and v < len(r.states)}
-        self.rec.send_columns(
-            f"{root}/phases",
-            indexes=[rr.TimeColumn(TIMELINE, duration=[v * m.opt.timestep for v in phases.values()])],
-            columns=rr.TextLog.columns(text=[f"{k} (step {v})" for k, v in phases.items()]),
-        )
-        self.rec.log(
-            f"{root}/outcome",
-            rr.TextDocument(json.dumps(r.outcome.as_dict(), indent=1), media_type="text/plain"),
-            static=True,
-        )
+        starts = ColumnBatch(np.array([v * m.opt.timestep for v in phases.values()]), TIMELINE)
+        starts.add(f"{root}/phases", "TextLog", "text", [f"{k} (step {v})" for k, v in phases.items()])
+        starts.send(self.rec)
 
     def snapshot(self, s: Snapshot) -> None:
         """Log one rest shape under ``/crosscheck/{label}`` (static)."""
         root = f"/crosscheck/{_safe(s.label)}"
-        self._legend(f"crosscheck {s.label}", np.asarray(s.log_e)[None])
+        static = ColumnBatch()
+        self._legend(f"crosscheck {s.label}", np.asarray(s.log_e)[None], static)
+        static.send(self.rec)
         self.rec.log(
             root, rr.Transform3D(translation=[0.0, _SPACING_SHAPES * self._n_shapes, 0.0]), static=True
         )
@@ -203,70 +218,53 @@ class RerunRecorder:
         self.rec.disconnect()
 
     # -- helpers ----------------------------------------------------------------------------------
-    def _legend(self, name: str, log_e: np.ndarray) -> None:
+    def _legend(self, name: str, log_e: np.ndarray, static: ColumnBatch) -> None:
         first = not self._designs
         self._designs[name] = log_e
-        self.rec.log(
-            "/legend",
-            rr.TextDocument(legend_markdown(self._designs), media_type="text/markdown"),
-            static=True,
-        )
+        static.add("/legend", "TextDocument", "text", [legend_markdown(self._designs)])
+        static.add("/legend", "TextDocument", "media_type", ["text/markdown"])
         if first:
             ticks = legend_ticks()
-            self.rec.log(
+            centers = _COLORBAR_ORIGIN + np.outer(np.arange(len(ticks)), [_COLORBAR_STEP, 0, 0])
+            static.add("/legend/colorbar", "Boxes3D", "centers", centers)
+            static.add(
                 "/legend/colorbar",
-                rr.Boxes3D(
-                    centers=_COLORBAR_ORIGIN + np.outer(np.arange(len(ticks)), [_COLORBAR_STEP, 0, 0]),
-                    half_sizes=[[0.5 * _COLORBAR_STEP, 0.005, 0.002]] * len(ticks),
-                    colors=stiffness_rgb(ticks),
-                    labels=[f"{v:.1f}" for v in ticks],
-                    fill_mode="solid",
-                ),
-                static=True,
+                "Boxes3D",
+                "half_sizes",
+                [[0.5 * _COLORBAR_STEP, 0.005, 0.002]] * len(ticks),
             )
+            static.add("/legend/colorbar", "Boxes3D", "colors", rgba32(stiffness_rgb(ticks)))
+            static.add("/legend/colorbar", "Boxes3D", "labels", [f"{v:.1f}" for v in ticks])
+            static.add("/legend/colorbar", "Boxes3D", "fill_mode", [rr.components.FillMode.Solid.value])
 
-    def _static_geometry(self, root, r: Rollout, fingers, gripper, log_e) -> None:
+    def _geometry(self, static: ColumnBatch, timed: ColumnBatch, root, r, fingers, gripper, log_e) -> None:
+        """Ground and object mesh (static); the fingers' and gripper's triangles and colours (first step)."""
         g = _GROUND_HALF
-        self.rec.log(
-            f"{root}/ground",
-            rr.Mesh3D(
-                vertex_positions=[[-g, -g, 0], [g, -g, 0], [g, g, 0], [-g, g, 0]],
-                triangle_indices=[[0, 1, 2], [0, 2, 3]],
-                albedo_factor=_GROUND_RGB,
-            ),
-            static=True,
-        )
         mesh = r.scene.obj.mesh
-        self.rec.log(
-            f"{root}/object/mesh",
-            rr.Mesh3D(
-                vertex_positions=np.asarray(mesh.vertices),
-                triangle_indices=np.asarray(mesh.faces),
-                albedo_factor=_OBJECT_RGB,
-            ),
-            static=True,
-        )
-        for i, (letter, surf) in enumerate(fingers.items()):
-            self.rec.log(
-                f"{root}/fingers/{letter}",
-                rr.Mesh3D.from_fields(
-                    triangle_indices=surf.triangles,
-                    vertex_colors=_block_colours(stiffness_rgb(log_e[i]), surf.vertex_block),
-                ),
-                static=True,
-            )
+        for name, vertices, triangles, rgb in (
+            ("ground", [[-g, -g, 0], [g, -g, 0], [g, g, 0], [-g, g, 0]], [[0, 1, 2], [0, 2, 3]], _GROUND_RGB),
+            ("object/mesh", mesh.vertices, mesh.faces, _OBJECT_RGB),
+        ):
+            static.add(f"{root}/{name}", "Mesh3D", "vertex_positions", np.asarray(vertices))
+            static.add(f"{root}/{name}", "Mesh3D", "triangle_indices", np.asarray(triangles))
+            static.add(f"{root}/{name}", "Mesh3D", "albedo_factor", [rgba32(rgb)])
+        parts = {f"fingers/{k}": (s, stiffness_rgb(log_e[i])) for i, (k, s) in enumerate(fingers.items())}
         if gripper is not None:
-            self.rec.log(
-                f"{root}/gripper",
-                rr.Mesh3D.from_fields(
-                    triangle_indices=gripper.triangles,
-                    vertex_colors=np.tile(NEUTRAL_RGB, (len(gripper.local), 1)),
-                ),
-                static=True,
-            )
+            parts["gripper"] = (gripper, None)
+        for name, (surf, block_rgb) in parts.items():
+            rgb = _block_colours(block_rgb, surf.vertex_block) if block_rgb is not None else NEUTRAL_RGB
+            timed.add_once(f"{root}/{name}", "Mesh3D", "triangle_indices", surf.triangles)
+            colours = np.broadcast_to(rgba32(rgb), len(surf.vertex_block))
+            timed.add_once(f"{root}/{name}", "Mesh3D", "vertex_colors", colours)
 
-    def _send_ragged(self, path, index, rows, columns) -> None:
-        self.rec.send_columns(path, indexes=index, columns=columns(rows))
+    def _data(self, r: Rollout) -> mujoco.MjData:
+        """The rollout's spare ``MjData``, else one of its model, reused while rollouts of one model follow."""
+        m = r.model
+        if r.scratch is not None:
+            return r.scratch
+        if self._scratch is None or self._scratch[0] is not m:
+            self._scratch = (m, mujoco.MjData(m))
+        return self._scratch[1]
 
 
 class _Frames:
@@ -283,12 +281,16 @@ class _Frames:
 
 
 class _Replay:
-    """Replays a rollout's states and extracts what is logged (no Rerun calls here)."""
+    """Replays a rollout's states and extracts what is logged (no Rerun calls here).
 
-    def __init__(self, r: Rollout, fingers: dict[str, Surface], gripper: Surface | None):
+    The loop over the logged states only runs ``mj_forward`` and copies ``MjData`` arrays; everything
+    derived from them (surfaces, series, contact forces in world axes) is computed for all states at once.
+    """
+
+    def __init__(self, r: Rollout, fingers: dict[str, Surface], gripper: Surface | None, d: mujoco.MjData):
         self.r = r
         self.m = r.model
-        self.d = mujoco.MjData(self.m)
+        self.d = d
         self.surfaces = {f"fingers/{k}": s for k, s in fingers.items()}
         if gripper is not None:
             self.surfaces["gripper"] = gripper
@@ -300,78 +302,95 @@ class _Replay:
         }
         self.is_finger = np.zeros(m.nbody, dtype=bool)
         self.is_finger[r.scene.finger_bodies] = True
-
-    def _load(self, x: np.ndarray, t: int) -> None:
-        # As mjcodesign.scenario.outcome_from_states: the state under the control of the next step.
-        m, d, ctrl = self.m, self.d, self.r.ctrl
-        mujoco.mj_setState(m, d, x, STATE_SPEC)
-        mujoco.mj_setState(m, d, ctrl[min(t + 1, len(ctrl) - 1)], control_spec())
-        mujoco.mj_forward(m, d)
+        self.elliptic = m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
 
     def frames(self, steps: np.ndarray) -> _Frames:
         r, m, d = self.r, self.m, self.d
         ob, palm = r.scene.object_body, r.scene.palm_body
-        n = len(steps) + 1
+        ts = np.r_[-1, steps]
+        n = len(ts)
         out = _Frames(n, list(self.surfaces))
         gpos, gmat = np.empty((n, m.ngeom, 3)), np.empty((n, m.ngeom, 9))
         fpos = np.empty((n, m.nflexvert, 3))
-        tension = np.empty((n, len(self.acts)))
-        height, force, rel = np.empty(n), np.empty(n), np.empty((n, 3))
-        for i, t in enumerate(np.r_[-1, steps]):
-            self._load(r.x0 if t < 0 else r.states[t], int(t))
+        xpos, xquat, xipos = np.empty((n, m.nbody, 3)), np.empty((n, m.nbody, 4)), np.empty((n, m.nbody, 3))
+        palm_mat, act = np.empty((n, 9)), np.empty((n, m.nu))
+        wrap = np.empty((n, 2 * m.nwrap, 3))
+        wrap_adr, wrap_num = np.empty((n, m.ntendon), dtype=int), np.empty((n, m.ntendon), dtype=int)
+        contacts = []  # per state: (pos, frame, geom1, geom2, force in the contact frame)
+        ctrl, spec = r.ctrl, control_spec()
+        for i, t in enumerate(ts):
+            # As mjcodesign.scenario.outcome_from_states: the state under the control of the next step.
+            mujoco.mj_setState(m, d, r.x0 if t < 0 else r.states[t], STATE_SPEC)
+            mujoco.mj_setState(m, d, ctrl[min(t + 1, len(ctrl) - 1)], spec)
+            mujoco.mj_forward(m, d)
             gpos[i], gmat[i], fpos[i] = d.geom_xpos, d.geom_xmat, d.flexvert_xpos
-            out.object_pos[i] = d.xpos[ob]
-            out.object_quat[i] = d.xquat[ob]
-            wrap = d.wrap_xpos.reshape(-1, 3)  # nwrap x 6: two points per wrap object
-            adr, num = d.ten_wrapadr, d.ten_wrapnum
-            out.tendon.append([wrap[adr[j] : adr[j] + num[j]].copy() for j in range(m.ntendon)])
-            pos, vec, on_object = self._contacts()
-            out.contacts.append((pos, vec, on_object))
-            tension[i] = [d.actuator_force[ids].sum() for ids in self.acts.values()]
-            height[i] = d.xipos[ob][2]
-            force[i] = float(np.linalg.norm(vec[on_object].sum(axis=0))) if len(vec) else 0.0
-            R = d.xmat[palm].reshape(3, 3)
-            rel[i] = R.T @ (d.xipos[ob] - d.xpos[palm])
+            xpos[i], xquat[i], xipos[i] = d.xpos, d.xquat, d.xipos
+            palm_mat[i], act[i] = d.xmat[palm], d.actuator_force
+            wrap[i], wrap_adr[i], wrap_num[i] = d.wrap_xpos.reshape(-1, 3), d.ten_wrapadr, d.ten_wrapnum
+            contacts.append(self._contacts())
         for name, surf in self.surfaces.items():
             out.surfaces[name] = surf.positions(gpos, gmat, fpos)
+        out.object_pos, out.object_quat = xpos[:, ob], xquat[:, ob]
+        out.tendon = [
+            [wrap[i, a : a + k] for a, k in zip(wrap_adr[i], wrap_num[i], strict=True)] for i in range(n)
+        ]
+        out.contacts, force = self._world_contacts(contacts)
         grasp = _index_of(steps, r.starts["lift"] - 1)
-        out.series["tendon_force"] = tension
-        out.series["object_height"] = height
+        out.series["tendon_force"] = np.stack([act[:, ids].sum(axis=1) for ids in self.acts.values()], axis=1)
+        out.series["object_height"] = xipos[:, ob, 2]
         out.series["contact_force"] = force
-        # Relative to the grasp (end of tightening), as Outcome.displacement; before it, vs the same state.
+        # Object COM in the palm frame; relative to the grasp (end of tightening), as Outcome.displacement,
+        # and before it, vs the same state.
+        rel = np.einsum("nji,nj->ni", palm_mat.reshape(n, 3, 3), xipos[:, ob] - xpos[:, palm])
         out.series["displacement"] = rel - (rel[grasp] if grasp is not None else rel[0])
         return out
 
-    def _contacts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Contact points [m], force on the object (or on geom2's body) [N], finger-object mask."""
+    def _contacts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Contacts of the loaded state: points [m], frames (normal, tangents), geoms, local forces [N]."""
         m, d = self.m, self.d
         nc = d.ncon
-        if nc == 0:
-            return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=bool)
         con = d.contact
-        b1, b2 = m.geom_bodyid[con.geom1[:nc]], m.geom_bodyid[con.geom2[:nc]]
-        world = np.einsum("kji,kj->ki", np.asarray(con.frame[:nc]).reshape(-1, 3, 3), self._local_forces(nc))
+        if nc == 0:
+            return (
+                np.zeros((0, 3)),
+                np.zeros((0, 9)),
+                np.zeros(0, dtype=int),
+                np.zeros(0, dtype=int),
+                np.zeros((0, 3)),
+            )
+        dim = con.dim
+        if not self.elliptic or np.any(dim == 1):
+            local, f6 = np.zeros((nc, 3)), np.zeros(6)
+            for i in range(nc):
+                mujoco.mj_contactForce(m, d, i, f6)
+                local[i] = f6[:3]
+        else:
+            # Elliptic cones: the first three efc rows of a contact are its normal and tangent forces.
+            adr = con.efc_address
+            local = d.efc_force[np.maximum(adr, 0)[:, None] + np.arange(3)]
+            local[adr < 0] = 0.0  # excluded contacts carry no force
+        return con.pos.copy(), con.frame.copy(), con.geom1.copy(), con.geom2.copy(), local
+
+    def _world_contacts(self, rows) -> tuple[list, np.ndarray]:
+        """Contacts in world axes, and the norm of the fingers' total force on the object [N], shape (n,).
+
+        Per state: points [m], force on the object (or on geom2's body) [N], finger-object mask.
+        """
+        counts = np.array([len(p) for p, *_ in rows])
+        pos, frame, g1, g2, local = (np.concatenate(c) for c in zip(*rows, strict=True))
+        b1, b2 = self.m.geom_bodyid[g1], self.m.geom_bodyid[g2]
+        world = np.einsum("kji,kj->ki", frame.reshape(-1, 3, 3), local)
         ob = self.r.scene.object_body
         world[b1 == ob] *= -1.0  # show the force acting on the object
         other = np.where(b1 == ob, b2, b1)
         on_object = ((b1 == ob) | (b2 == ob)) & self.is_finger[other]
-        return np.asarray(con.pos[:nc]).copy(), world, on_object
-
-    def _local_forces(self, nc: int) -> np.ndarray:
-        """Contact forces of geom1 on geom2 in each contact frame [N], shape (nc, 3) (mj_contactForce)."""
-        m, d = self.m, self.d
-        con = d.contact
-        adr, dim = np.asarray(con.efc_address[:nc]), np.asarray(con.dim[:nc])
-        if m.opt.cone != mujoco.mjtCone.mjCONE_ELLIPTIC or np.any(dim == 1):
-            out, f6 = np.zeros((nc, 3)), np.zeros(6)
-            for i in range(nc):
-                mujoco.mj_contactForce(m, d, i, f6)
-                out[i] = f6[:3]
-            return out
-        # Elliptic cones: the first three efc rows of a contact are its normal and tangent forces.
-        out = d.efc_force[np.maximum(adr, 0)[:, None] + np.arange(3)]
-        out[adr < 0] = 0.0  # excluded contacts carry no force
-        return out
+        state = np.repeat(np.arange(len(rows)), counts)
+        total = np.zeros((len(rows), 3))
+        np.add.at(total, state[on_object], world[on_object])
+        cuts = np.cumsum(counts)[:-1]
+        return list(
+            zip(np.split(pos, cuts), np.split(world, cuts), np.split(on_object, cuts), strict=True)
+        ), (np.linalg.norm(total, axis=1))
 
 
 def _index_of(steps: np.ndarray, step: int) -> int | None:
@@ -380,20 +399,9 @@ def _index_of(steps: np.ndarray, step: int) -> int | None:
     return int(hit[0]) + 1 if hit.size else None
 
 
-def _strips(rows) -> rr.ComponentColumnList:
-    flat = [s for row in rows for s in row]
-    if len({len(s) for s in flat}) == 1:  # site-only tendons: one array converts ~10x faster than a list
-        flat = np.asarray(flat)
-    return rr.LineStrips3D.columns(strips=flat).partition([len(row) for row in rows])
-
-
-def _arrows(rows) -> rr.ComponentColumnList:
-    pos = np.concatenate([p for p, _, _ in rows])
-    vec = np.concatenate([v for _, v, _ in rows]) * _ARROW_M_PER_N
-    rgb = np.concatenate(
-        [np.where(mask[:, None], _FINGER_CONTACT_RGB, _OTHER_CONTACT_RGB) for _, _, mask in rows]
-    ).astype(np.uint8)
-    return rr.Arrows3D.columns(origins=pos, vectors=vec, colors=rgb).partition([len(p) for p, _, _ in rows])
+def _lengths(rows, axis: int | None = None) -> list[int]:
+    """Items per row of a ragged list (or of each row's ``axis``-th member)."""
+    return [len(row if axis is None else row[axis]) for row in rows]
 
 
 def _block_colours(block_rgb: np.ndarray, vertex_block: np.ndarray) -> np.ndarray:

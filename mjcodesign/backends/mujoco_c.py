@@ -170,7 +170,7 @@ class MujocoBackend:
             return out
         out = outcome_from_states(_scene_with(scene, m), scenario, x0, states, ctrl, starts)
         out.wall_time_s = time.perf_counter() - t0
-        _observe(observer, label, scene, scenario, m, x0, states, ctrl, starts, out)
+        _observe(observer, label, scene, scenario, m, x0, states, ctrl, starts, out, scratch=d)
         return out
 
     def run_batch(
@@ -281,9 +281,10 @@ class MujocoBackend:
         return outs
 
 
-def _observe(observer, label, scene, scenario, m, x0, states, ctrl, starts, out) -> None:
+def _observe(observer, label, scene, scenario, m, x0, states, ctrl, starts, out, scratch=None) -> None:
     if observer is not None:
-        observer.rollout(Rollout(label, _scene_with(scene, m), scenario, m, x0, states, ctrl, starts, out))
+        sc = _scene_with(scene, m)
+        observer.rollout(Rollout(label, sc, scenario, m, x0, states, ctrl, starts, out, scratch=scratch))
 
 
 def _diverged(states: np.ndarray, x0: np.ndarray, dt: float) -> np.ndarray:
