@@ -80,7 +80,7 @@ def bench_poses(
     *,
     seed: int = 0,
     density: float = 100.0,
-    impulse: float = 0.0,
+    impulse: float | None = None,
     top_fraction: float = 0.5,
     anygrasp_dir: str | Path | None = None,
     simulate: bool = True,
@@ -92,7 +92,7 @@ def bench_poses(
     from mjcodesign.poses import SamplerOptions, import_anygrasp, load_external, sample_poses
     from mjcodesign.scenario import GraspScenario
 
-    scenario = GraspScenario(impulse=impulse)
+    scenario = GraspScenario() if impulse is None else GraspScenario(impulse=impulse)
     sim = get_backend("mujoco")
     options = SamplerOptions(top_fraction=top_fraction)
     rows = []
@@ -121,7 +121,7 @@ def bench_poses(
         "per_object": per_object,
         "seed": seed,
         "density_kg_m3": density,
-        "impulse_ns": impulse,
+        "impulse_ns": scenario.impulse,
         "sampler": _aggregate(rows, "sampler"),
         "anygrasp": _aggregate(rows, "anygrasp"),
         "objects": rows,

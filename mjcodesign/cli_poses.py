@@ -63,7 +63,12 @@ def add_bench_parser(bench_subparsers) -> argparse.ArgumentParser:
     p.add_argument("--per-object", type=int, default=4, help="poses per object")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--density", default="light", help="object density [kg/m³] or light / heavy")
-    p.add_argument("--impulse", type=float, default=0.0, help="disturbance impulse [N s] of the grasp motion")
+    p.add_argument(
+        "--impulse",
+        type=float,
+        default=None,
+        help="disturbance impulse [N s] of the grasp motion (default: the grasp scenario's, 0.0179)",
+    )
     p.add_argument("--top-fraction", type=float, default=0.5)
     p.add_argument(
         "--anygrasp", default=None, help="folder of the authors' pose_info/*.npz, imported beside the sampler"
