@@ -72,7 +72,11 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--tension", type=float, default=None, help="tendon tension per finger [N]")
     p.add_argument("--lift", type=float, default=None, help="lift distance [m]")
-    p.add_argument("--backend", choices=_BACKENDS, default="mujoco")
+    p.add_argument(
+        "--backend",
+        default="mujoco",
+        help="mujoco or mjwarp; several comma-separated (mujoco,mjwarp) run side by side",
+    )
     p.add_argument(
         "--seed", type=int, default=0, help="seeds CoACD and egad-like shapes; MuJoCo is deterministic"
     )
@@ -156,7 +160,7 @@ def grasp(
 ) -> dict:
     """One grasp rollout; returns the JSON-ready outcome plus the object's facts.
 
-    ``observer`` (:mod:`mjcodesign.observe`, MuJoCo backend only) receives the rollout as ``label``.
+    ``observer`` (:mod:`mjcodesign.observe`) receives the rollout as ``label``.
     """
     from mjcodesign.backends import get_backend
     from mjcodesign.errors import DesignError, MeshError
@@ -170,8 +174,8 @@ def grasp(
     rho = parse_density(density)
     if Path(source).is_dir():
         raise MeshError(f"{source} is a folder: grasp() takes one object (see object_sources)")
-    if observer is not None and backend != "mujoco":
-        raise DesignError(f"recording a grasp needs --backend mujoco, not {backend}")
+    if backend not in _BACKENDS:
+        raise DesignError(f"unknown backend {backend!r}: choose from {', '.join(_BACKENDS)}")
     sim = get_backend(backend)
     obj = load_object(source, rho, allow_open=allow_open, seed=seed)
     convex_decomposition(obj, CoacdSettings(seed=seed), cache_dir=cache_dir)
@@ -248,12 +252,25 @@ def run(args: argparse.Namespace) -> int:
     designs = split_designs(args.design)
     if len(set(designs)) != len(designs):
         raise StiffnessError(f"--design lists a preset twice: {args.design}")
-    if (args.rrd or args.spawn) and args.backend != "mujoco":
-        raise DesignError(f"recording a grasp needs --backend mujoco, not {args.backend}")
+    backends = [b.strip() for b in args.backend.split(",")]
+    for b in backends:
+        if b not in _BACKENDS:
+            raise DesignError(f"unknown backend {b!r}: choose from {', '.join(_BACKENDS)}")
+    if len(set(backends)) != len(backends):
+        raise DesignError(f"--backend lists a backend twice: {args.backend}")
+    # Every design on every backend; the keys that tell the runs apart are added to their records.
+    variants = []
+    for design in designs:
+        for backend in backends:
+            keys = {"design": design} if len(designs) > 1 else {}
+            keys.update({"backend": backend} if len(backends) > 1 else {})
+            label = "/".join([design] + ([backend] if len(backends) > 1 else []))
+            variants.append((design, backend, label, keys))
     sources = object_sources(args.object)
     recorder = open_recorder(args)
 
-    def one(source: str, design: str, label: str) -> dict:
+    def one(source: str, variant: tuple, prefix: str = "") -> dict:
+        design, backend, label, keys = variant
         out = grasp(
             source,
             design,
@@ -263,18 +280,18 @@ def run(args: argparse.Namespace) -> int:
             impulse=args.impulse,
             tension=args.tension,
             lift=args.lift,
-            backend=args.backend,
+            backend=backend,
             seed=args.seed,
             allow_open=args.allow_open,
             cache_dir=user_cache_dir(),
             observer=recorder,
-            label=label,
+            label=prefix + label,
         )
-        return out if len(designs) == 1 else {"design": design, **out}
+        return {**keys, **out}
 
     try:
         if sources is None:
-            outs = [one(args.object, design, design) for design in designs]
+            outs = [one(args.object, v) for v in variants]
             if len(outs) == 1:
                 _print(outs[0], args.json)
             elif args.json:
@@ -289,16 +306,15 @@ def run(args: argparse.Namespace) -> int:
 
         results = []
         with Progress(console=Console(stderr=True), transient=True) as bar:
-            task = bar.add_task(f"grasp {args.object}", total=len(sources) * len(designs))
+            task = bar.add_task(f"grasp {args.object}", total=len(sources) * len(variants))
             for source in sources:
                 name = Path(source).stem if Path(source).suffix else source
-                for design in designs:
-                    bar.update(task, description=f"grasp {name} ({design})")
+                for variant in variants:
+                    bar.update(task, description=f"grasp {name} ({variant[2]})")
                     try:
-                        results.append(one(source, design, f"{name}/{design}"))
+                        results.append(one(source, variant, f"{name}/"))
                     except MjcodesignError as exc:
-                        failed = _failed_object(source, exc)
-                        results.append(failed if len(designs) == 1 else {"design": design, **failed})
+                        results.append({**variant[3], **_failed_object(source, exc)})
                     bar.advance(task)
     finally:
         if recorder is not None:

@@ -406,7 +406,7 @@ def test_cli_single_design_json_is_one_object(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "case", ["unwritable", "folder", "decimation", "rerun_missing", "view_missing", "mjwarp", "twice"]
+    "case", ["unwritable", "folder", "decimation", "rerun_missing", "view_missing", "backend", "twice"]
 )
 def test_bad_recording_input_exits_2_with_one_line(tmp_path, case):
     box = _box_file(tmp_path)
@@ -421,8 +421,8 @@ def test_bad_recording_input_exits_2_with_one_line(tmp_path, case):
         code = f"import sys; sys.modules['rerun'] = None; from mjcodesign.cli import main; sys.exit(main({args!r}))"
     elif case == "view_missing":
         args = ["view", str(tmp_path / "none.rrd")]
-    elif case == "mjwarp":
-        args += ["--backend", "mjwarp"]
+    elif case == "backend":
+        args += ["--backend", "mujoco,bullet"]
     elif case == "twice":
         args += ["--design", "soft,soft"]
     r = _cli(tmp_path, *args, code=code)
@@ -431,7 +431,7 @@ def test_bad_recording_input_exits_2_with_one_line(tmp_path, case):
     assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
     if case == "rerun_missing":
         assert "rerun" in lines[0]
-    if case in ("mjwarp", "twice"):
+    if case in ("backend", "twice"):
         assert not (tmp_path / "x.rrd").exists()  # refused before the recording is opened
 
 

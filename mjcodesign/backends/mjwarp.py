@@ -23,6 +23,7 @@ import numpy as np
 from mjcodesign.backends.mujoco_c import _initial_state, with_stiffness
 from mjcodesign.errors import DesignError, UnsupportedError
 from mjcodesign.mjcf import GripperPose
+from mjcodesign.observe import Observer, Rollout
 from mjcodesign.scenario import (
     STATE_SPEC,
     GraspScenario,
@@ -54,13 +55,22 @@ class MjwarpBackend:
         except ImportError as exc:
             raise DesignError("the mjwarp backend needs mujoco-warp and warp-lang") from exc
         self.device = device
-        wp.config.quiet = True
+        from mjcodesign.fem import _warp
+
+        _warp()  # quiet (module loads would land on stdout and break --json) and initialised
         if device is not None:
             wp.set_device(device)
 
-    def run(self, scene: GraspScene, scenario: GraspScenario) -> Outcome:
-        """One world with the scene's own design."""
-        return self.run_scenes([scene], scenario)[0]
+    def run(
+        self,
+        scene: GraspScene,
+        scenario: GraspScenario,
+        *,
+        observer: Observer | None = None,
+        label: str = "grasp",
+    ) -> Outcome:
+        """One world with the scene's own design; ``observer`` receives it as ``label``."""
+        return self.run_scenes([scene], scenario, observer=observer, labels=[label])[0]
 
     def run_batch(
         self, scene: GraspScene, scenario: GraspScenario, stiffnesses: list[Stiffness]
@@ -78,8 +88,19 @@ class MjwarpBackend:
         """One world per pose of the scene's design (batched ``body_pos``/``body_quat``, chain only)."""
         return self.run_scenes([scene_at_pose(scene, p) for p in poses], scenario)
 
-    def run_scenes(self, scenes: list[GraspScene], scenario: GraspScenario) -> list[Outcome]:
+    def run_scenes(
+        self,
+        scenes: list[GraspScene],
+        scenario: GraspScenario,
+        *,
+        observer: Observer | None = None,
+        labels: list[str] | None = None,
+    ) -> list[Outcome]:
         """Scenes of one model structure as worlds: per-world model fields, initial state and controls.
+
+        Without an observer only the states the outcome reads are copied back from the device; with
+        one, every step's state is (a device-to-host copy per step), and world ``w`` is handed over
+        as ``labels[w]`` (default ``world{w}``).
 
         Flex is refused (:class:`UnsupportedError`): MJWarp 4.0 runs this trilinear flex with the
         discrete integrator on Warp's CPU device, but a 2-world grasp step took 3.3 s there after 194 s
@@ -113,7 +134,7 @@ class MjwarpBackend:
         d = mjw.put_data(mjm, mjd, nworld=n, nconmax=_NCONMAX_PER_WORLD * n, njmax=_NJMAX_PER_WORLD)
         d.qpos.assign(x0[:, 1 : 1 + nq])  # state = (time, qpos, qvel, act, ...)
         d.qvel.assign(x0[:, 1 + nq : 1 + nq + nv])
-        keep = outcome_steps(starts)
+        keep = set(range(ctrl.shape[1])) if observer is not None else outcome_steps(starts)
         nu, nbody = mjm.nu, mjm.nbody
         states = np.zeros((n, ctrl.shape[1], x0.shape[1]))
         scratch = mujoco.MjData(mjm)
@@ -141,6 +162,13 @@ class MjwarpBackend:
         wall = (time.perf_counter() - t0) / n
         for o in outs:
             o.wall_time_s = wall
+        labels = labels or [f"world{w}" for w in range(n)]
+        for w, sc in enumerate(scenes if observer is not None else ()):
+            finite = np.all(np.isfinite(states[w]), axis=1)
+            valid = len(finite) if finite.all() else int(np.argmin(finite))  # up to the first bad state
+            observer.rollout(
+                Rollout(labels[w], sc, scenario, sc.model, x0[w], states[w][:valid], ctrl[w], starts, outs[w])
+            )
         return outs
 
 
