@@ -42,8 +42,18 @@ _CLOCK_TOL = 0.5  # [steps]: a rollout's time off by half a step means MuJoCo re
 class GraspBackend(Protocol):
     """What every grasp simulator offers."""
 
-    def run(self, scene: GraspScene, scenario: GraspScenario) -> Outcome:
-        """One rollout of the scenario; a divergence is a failed outcome, never an exception."""
+    def run(
+        self,
+        scene: GraspScene,
+        scenario: GraspScenario,
+        *,
+        observer: Observer | None = None,
+        label: str = "grasp",
+    ) -> Outcome:
+        """One rollout of the scenario; a divergence is a failed outcome, never an exception.
+
+        ``observer`` receives the whole rollout (:class:`mjcodesign.observe.Rollout`) as ``label``.
+        """
         ...
 
     def run_batch(
