@@ -107,7 +107,7 @@ def poses(
     if point_cloud is not None:
         try:
             cloud = np.load(point_cloud)
-        except (OSError, ValueError) as exc:
+        except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
             raise PoseError(f"{point_cloud}: cannot read the point cloud ({type(exc).__name__})") from exc
         if cloud.ndim != 2 or cloud.shape[1] != 6:
             raise PoseError(f"{point_cloud}: point cloud must have shape (n, 6), got {cloud.shape}")
@@ -118,7 +118,7 @@ def poses(
 
 def run(args: argparse.Namespace) -> int:
     """Run ``poses``; library errors propagate to the caller (exit 2 there)."""
-    from mjcodesign.errors import OutputError
+    from mjcodesign.errors import OutputError, PoseError
 
     obj, cands = poses(
         args.object,
@@ -130,6 +130,13 @@ def run(args: argparse.Namespace) -> int:
         point_cloud=args.point_cloud,
         allow_open=args.allow_open,
     )
+    if not cands.as_dicts():  # e.g. an object wider than every opening once refined
+        top = sorted(cands.rejected.items(), key=lambda kv: -kv[1])[:3]
+        raise PoseError(
+            f"no grasp pose accepted for {obj.name} (most rejections: "
+            + ", ".join(f"{k} {v}" for k, v in top)
+            + ")"
+        )
     if args.out is not None:
         out = Path(args.out)
         if out.suffix != ".npz":

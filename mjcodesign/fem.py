@@ -52,7 +52,6 @@ Warp is imported lazily: ``import mjcodesign.fem`` does not import it, building 
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -65,6 +64,7 @@ from mjcodesign.errors import DesignError, SimulationDiverged
 from mjcodesign.femmesh import FingerMesh, mesh_finger, to_quadratic
 from mjcodesign.finger import FingerDesign
 from mjcodesign.stiffness import Stiffness
+from mjcodesign.warp_setup import import_warp
 
 __all__ = ["FemOptions", "FemDynamics", "FemFinger", "tendon_forces", "TENDON_VARIANTS"]
 
@@ -139,15 +139,6 @@ class FemDynamics:
             raise DesignError(f"dt must be positive, got {self.dt}")
 
 
-def _warp():
-    import warp as wp
-
-    # Keep stdout clean for ``--json``: Warp logs its banner and module loads at INFO level.
-    wp.config.log_level = logging.WARNING
-    wp.init()
-    return wp
-
-
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-15)
 
@@ -207,7 +198,7 @@ class FemFinger:
             waypoint_layers=o.waypoint_layers,
         )
         self.mesh: FingerMesh = mesh if o.order == 1 else to_quadratic(mesh, design.length)
-        wp = self.wp = _warp()
+        wp = self.wp = import_warp()
         m = self.mesh
         dev = o.device
         x = m.vertices[m.tets[:, :4]]

@@ -8,11 +8,10 @@ construction (repaired, or replaced by their convex hull).
 
 from __future__ import annotations
 
-import logging
-
 import numpy as np
 
 from mjcodesign.errors import MeshError
+from mjcodesign.warp_setup import import_warp
 
 __all__ = ["MeshSDF"]
 
@@ -71,7 +70,7 @@ class MeshSDF:
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray) -> None:
         try:
-            import warp as wp
+            wp = import_warp()
         except ImportError as exc:
             raise MeshError("signed distances need warp-lang (pip install 'mjcodesign[poses]')") from exc
 
@@ -81,8 +80,6 @@ class MeshSDF:
             raise MeshError("signed distance needs a closed triangle mesh (vertices (n, 3), faces (k, 3))")
         if not np.all(np.isfinite(v)):
             raise MeshError("signed distance: mesh has NaN or inf vertices")
-        wp.config.log_level = logging.WARNING  # no banner on stdout (it would break --json)
-        wp.init()
         self._device = "cpu"
         self._points = wp.array(v, dtype=wp.vec3, device=self._device)
         self._indices = wp.array(f.ravel(), dtype=wp.int32, device=self._device)

@@ -272,7 +272,7 @@ def test_cli_poses_json_then_grasp(tmp_path):
     np.testing.assert_allclose(g["openings"], res["poses"][0]["openings"])
 
 
-@pytest.mark.parametrize("case", ["nan", "big"])
+@pytest.mark.parametrize("case", ["nan", "big", "empty_cloud"])
 def test_cli_bad_input_exit_2(tmp_path, case):
     if case == "nan":
         bad = tmp_path / "bad.npy"
@@ -280,6 +280,10 @@ def test_cli_bad_input_exit_2(tmp_path, case):
         M[0, 0] = np.nan
         np.save(bad, M)
         args = ["poses", "--object", "012_strawberry", "--import", str(bad), "--json"]
+    elif case == "empty_cloud":
+        empty = tmp_path / "cloud.npy"
+        empty.write_bytes(b"")
+        args = ["poses", "--object", "012_strawberry", "--point-cloud", str(empty), "--json"]
     else:
         big = tmp_path / "big.stl"
         trimesh.creation.box(extents=(0.2, 0.2, 0.2)).export(big)

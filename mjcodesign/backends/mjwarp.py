@@ -36,6 +36,7 @@ from mjcodesign.scenario import (
     scene_at_pose,
 )
 from mjcodesign.stiffness import Stiffness
+from mjcodesign.warp_setup import import_warp
 
 __all__ = ["MjwarpBackend"]
 
@@ -55,9 +56,7 @@ class MjwarpBackend:
         except ImportError as exc:
             raise DesignError("the mjwarp backend needs mujoco-warp and warp-lang") from exc
         self.device = device
-        from mjcodesign.fem import _warp
-
-        _warp()  # quiet (module loads would land on stdout and break --json) and initialised
+        import_warp()
         if device is not None:
             wp.set_device(device)
 
