@@ -62,8 +62,13 @@ def crosscheck(
     *,
     fem_options=None,
     tensions: list[float] | None = None,
+    observer=None,
 ) -> tuple[list[dict], dict]:
-    """Run ``scenario`` in every backend of ``models``; return (rows, curves for plotting)."""
+    """Run ``scenario`` in every backend of ``models``; return (rows, curves for plotting).
+
+    ``observer`` (:class:`mjcodesign.observe.Observer`), if given, receives every model's rest shape as
+    it is computed (:class:`_Shapes` names them), so recording costs no extra simulation.
+    """
     from mjcodesign.errors import DesignError
     from mjcodesign.finger import FingerDesign
     from mjcodesign.stiffness import Stiffness
@@ -75,32 +80,43 @@ def crosscheck(
             raise DesignError(f"unknown model {m!r}; choose from {_MODELS}")
     design = FingerDesign()
     stiffness = Stiffness.parse(design_name)
+    shapes = _Shapes(observer, stiffness)
     rows: list[dict] = []
     curves: dict[str, dict] = {}
     if scenario == "cantilever":
         from mjcodesign.validate import validate_beam
 
         for m in models:
+            label = f"cantilever/{m}"
             if m == "fem":
                 from mjcodesign.fem import FemFinger
 
-                r = FemFinger(design, stiffness, options=fem_options).cantilever()
+                fem = FemFinger(design, stiffness, options=fem_options)
+                r = fem.cantilever()
+                tip = fem.mesh.tip_face_weight @ r["positions"][fem.mesh.tip_face]
+                load = (tip, [0.0, 0.0, r["force_n"]])
+                shapes.fem(label, fem, r["positions"], _beam_metrics(r), forces=load)
             else:
-                r = validate_beam(design, stiffness, m)
+                r = validate_beam(design, stiffness, m, observe=shapes.mujoco(label, tip_load=True))
+                shapes.set_metrics(label, _beam_metrics(r), tip_force=[0.0, 0.0, r["force_n"]])
             rows.append(
                 _row(scenario, m, design_name, "tip_deflection_m", r["tip_deflection_m"], r["analytic_m"])
             )
+        shapes.flush()
         return rows, curves
     if scenario == "press":
-        return _press_rows(models, design_name, stiffness, fem_options, tensions), curves
+        rows = _press_rows(models, design_name, stiffness, fem_options, tensions, shapes)
+        shapes.flush()
+        return rows, curves
 
     from mjcodesign.fem import FemFinger
 
     tensions = tensions or default_tensions(stiffness)
-    fem = FemFinger(design, stiffness, options=fem_options)
+    fem = FemFinger(design, stiffness, options=fem_options)  # the reference, with or without "fem"
     ref = {}
     for t in tensions:
         r = fem.curl(t)
+        shapes.fem(f"curl/fem/{t:.4g}N", fem, r["positions"], _curl_metrics(r), group="curl/fem")
         ref[t] = (
             r["bend_angle_rad"],
             float(np.linalg.norm(r["tip_displacement_m"])),
@@ -112,7 +128,9 @@ def crosscheck(
             if m == "fem":
                 bend, tip, tip_xyz = ref[t]
             else:
-                r = _curl(design, stiffness, m, t)
+                label = f"curl/{m}/{t:.4g}N"
+                r = _curl(design, stiffness, m, t, observe=shapes.mujoco(label, group=f"curl/{m}"))
+                shapes.set_metrics(label, _curl_metrics(r))
                 tip_xyz = r["tip_displacement_m"]
                 bend, tip = r["bend_angle_rad"], float(np.linalg.norm(tip_xyz))
             bends.append(bend)
@@ -120,36 +138,134 @@ def crosscheck(
             rows.append(_row(scenario, m, design_name, f"bend_angle_rad@{t:.4g}N", bend, ref[t][0]))
             rows.append(_row(scenario, m, design_name, f"tip_displacement_m@{t:.4g}N", tip, ref[t][1]))
         curves[m] = {"tension": list(tensions), "bend": bends, "tip": tips}
+    shapes.flush()
     return rows, curves
 
 
-def _curl(design, stiffness, model: str, tension: float) -> dict:
+def _curl(design, stiffness, model: str, tension: float, *, observe=None) -> dict:
     """Free curl of finger A at ``tension`` [N].
 
     Chain and flex: point-force tendon dynamics to rest. Flex-quadratic: its linear static solve
     (`mjcodesign.flex.linear_curl`; its dynamics runs at 3.4 steps/s), valid for bends of a few tenths
-    of a radian only.
+    of a radian only. ``observe(built, data)`` as in `mjcodesign.validate.curl`.
     """
+    import mujoco
+
     from mjcodesign.mjcf import FingerModel, SimOptions, TendonMode, build_finger
     from mjcodesign.validate import curl
 
     if FingerModel(model) is not FingerModel.FLEX_QUADRATIC:
-        return curl(design, stiffness, model, tension, tendon_mode=TendonMode.POINT_FORCE)
-    from mjcodesign.flex import linear_curl
+        return curl(design, stiffness, model, tension, tendon_mode=TendonMode.POINT_FORCE, observe=observe)
+    from mjcodesign.flex import linear_curl, load_nodes
 
     opts = SimOptions(gravity=False)
     built = build_finger(design, stiffness, model, tendon_mode=TendonMode.POINT_FORCE, options=opts)
-    return linear_curl(built.model, built.fingers[0], design, tension)
+    r = linear_curl(built.model, built.fingers[0], design, tension)
+    if observe is not None:
+        d = mujoco.MjData(built.model)
+        load_nodes(built.model, d, built.fingers[0], r["node_displacement"])
+        observe(built, d)
+    return r
 
 
-def _press_rows(models, design_name, stiffness, fem_options, tensions) -> list[dict]:
+class _Shapes:
+    """Hands crosscheck rest shapes to an observer as :class:`~mjcodesign.observe.Snapshot` (finger A).
+
+    Labels: ``{scenario}/{model}``, ``curl/{model}/{tension}N`` (grouped per model: one model's curls are
+    drawn over each other), ``press/{routing}/{model}``. A MuJoCo shape is kept until its metrics are
+    known (:meth:`set_metrics`) and :meth:`flush` hands everything over. Does nothing without observer.
+    """
+
+    def __init__(self, observer, stiffness):
+        self.observer = observer
+        self.log_e = np.asarray(stiffness.log_e[0])
+        self._pending: dict[str, dict] = {}
+
+    def mujoco(self, label: str, *, group=None, tip_load=False, plate=False):
+        """An ``observe(built, data)`` callback for a MuJoCo model at rest (None without observer)."""
+        if self.observer is None:
+            return None
+
+        def keep(built, data) -> None:
+            import mujoco
+
+            extra: dict = {}
+            if tip_load:
+                sid = mujoco.mj_name2id(built.model, mujoco.mjtObj.mjOBJ_SITE, built.fingers[0].tip_site)
+                extra["forces"] = (data.site_xpos[sid][None].copy(), None)  # force set with the metrics
+            if plate:
+                from mjcodesign.press import plate_contacts, plate_pose
+
+                pts, f, _ = plate_contacts(built.model, data)
+                extra["forces"] = (pts, f)
+                extra["obstacle"] = plate_pose(built.design)
+            d = mujoco.MjData(built.model)  # the caller may go on using its data
+            mujoco.mj_copyData(d, built.model, data)
+            self._pending[label] = dict(label=label, group=group, built=built, data=d, **extra)
+
+        return keep
+
+    def set_metrics(self, label: str, metrics: dict, *, tip_force=None) -> None:
+        """Metrics of a kept MuJoCo shape; ``tip_force`` [N] (3,): the load at its tip point."""
+        kept = self._pending.get(label)
+        if kept is None:
+            return
+        kept["metrics"] = metrics
+        if tip_force is not None:
+            kept["forces"] = (kept["forces"][0], np.asarray(tip_force, dtype=float)[None])
+
+    def fem(self, label: str, fem, x: np.ndarray, metrics: dict, *, group=None, forces=None, obstacle=None):
+        if self.observer is None:
+            return
+        self._pending[label] = dict(
+            label=label,
+            group=group,
+            metrics=metrics,
+            positions=x,
+            tets=fem.mesh.tets,
+            tet_block=fem.mesh.tet_block,
+            tendon=fem.mesh.waypoint_weights @ x,
+            forces=None if forces is None else tuple(np.atleast_2d(np.asarray(v, float)) for v in forces),
+            obstacle=obstacle,
+        )
+
+    def flush(self) -> None:
+        from mjcodesign.observe import Snapshot
+
+        for kw in self._pending.values():
+            self.observer.snapshot(Snapshot(log_e=self.log_e, **kw))
+        self._pending.clear()
+
+
+def _curl_metrics(r: dict) -> dict[str, float]:
+    return {
+        "tension_n": float(r["tension_n"]),
+        "bend_angle_rad": float(r["bend_angle_rad"]),
+        "tip_displacement_m": float(np.linalg.norm(r["tip_displacement_m"])),
+    }
+
+
+def _keep_rest(rest: dict, x: np.ndarray, f: np.ndarray) -> None:
+    rest.update(x=x, f=f)
+
+
+def _press_metrics(r: dict) -> dict[str, float]:
+    return {k: float(r[k]) for k in ("total_force_n", "distal_third_fraction", "centroid_over_length")}
+
+
+def _beam_metrics(r: dict) -> dict[str, float]:
+    return {k: float(r[k]) for k in ("force_n", "tip_deflection_m", "analytic_m")}
+
+
+def _press_rows(models, design_name, stiffness, fem_options, tensions, shapes) -> list[dict]:
     """Press rows per routing and model; the FEM (linear tets) is the reference."""
     from dataclasses import replace
+    from functools import partial
 
     from mjcodesign.errors import SimulationDiverged
     from mjcodesign.fem import FemFinger, FemOptions
     from mjcodesign.finger import FingerDesign, Routing
-    from mjcodesign.press import press_fem, press_mujoco
+    from mjcodesign.press import plate_pose, press_fem, press_mujoco
 
     tension = tensions[0] if tensions else _PRESS_TENSION_FRACTION * default_tensions(stiffness)[-1]
     fem_options = replace(fem_options or FemOptions(), order=1)
@@ -158,11 +274,26 @@ def _press_rows(models, design_name, stiffness, fem_options, tensions) -> list[d
         design = FingerDesign(routing=routing)
         res = {}
         if "fem" in models:
-            res["fem"] = press_fem(FemFinger(design, stiffness, options=fem_options), tension)
+            fem = FemFinger(design, stiffness, options=fem_options)
+            rest: dict = {}
+            res["fem"] = press_fem(fem, tension, observe=partial(_keep_rest, rest))
+            on = np.linalg.norm(rest["f"], axis=1) > 0
+            shapes.fem(
+                f"press/{routing.value}/fem",
+                fem,
+                rest["x"],
+                _press_metrics(res["fem"]),
+                forces=(rest["x"][on], rest["f"][on]),
+                obstacle=plate_pose(design),
+            )
         for m in models:
             if m != "fem":
+                label = f"press/{routing.value}/{m}"
                 try:
-                    res[m] = press_mujoco(design, stiffness, m, tension)
+                    res[m] = press_mujoco(
+                        design, stiffness, m, tension, observe=shapes.mujoco(label, plate=True)
+                    )
+                    shapes.set_metrics(label, _press_metrics(res[m]))
                 except SimulationDiverged as exc:
                     print(f"note: {m} press ({routing.value}) gave no rest state: {exc}", file=sys.stderr)
         for m in res:
@@ -299,10 +430,19 @@ def _cmd_crosscheck(args) -> int:
     from mjcodesign.cli import _emit
 
     tensions = [float(v) for v in args.tensions.split(",")] if args.tensions else None
-    cli_viz.record_crosscheck(args, tensions)
-    rows, curves = crosscheck(
-        args.scenario, args.models.split(","), args.design, fem_options=_fem_options(args), tensions=tensions
-    )
+    rec = cli_viz.open_recorder(args)
+    try:
+        rows, curves = crosscheck(
+            args.scenario,
+            args.models.split(","),
+            args.design,
+            fem_options=_fem_options(args),
+            tensions=tensions,
+            observer=rec,
+        )
+    finally:
+        if rec is not None:
+            rec.close()
     if args.plot:
         plot_curves(curves, args.plot)
     _emit(rows, args.json)
@@ -352,9 +492,11 @@ def add_parser(subparsers) -> None:
     p.add_argument("--plot", default=None, help="curl: write tip paths and bend against tension to this PNG")
     # Quadratic tets, 2 spine layers: within 4% of Euler–Bernoulli on the cantilever (mjcodesign.fem).
     _fem_flags(p, h=4e-3, layers=2, order=2)
-    p.add_argument("--rrd", default=None, help="curl: record every model's rest shape (Rerun .rrd)")
+    from mjcodesign.cli_viz import add_recording_flags
+
+    add_recording_flags(p, decimation=False)
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=_cmd_crosscheck, decimation=None)
+    p.set_defaults(func=_cmd_crosscheck)
 
 
 def add_bench_parser(bench_subparsers) -> None:

@@ -18,24 +18,34 @@ __all__ = [
     "add_bench_parser",
     "add_recording_flags",
     "open_recorder",
-    "record_crosscheck",
     "view_command",
 ]
 
 _LOOPBACK = "127.0.0.1"
+DEFAULT_VIEWER_PORT = 9876
+"""Rerun's default viewer port."""
 
 
-def add_recording_flags(p: argparse.ArgumentParser, *, spawn: bool = True) -> None:
-    """``--rrd FILE`` (offline recording, no viewer), ``--spawn`` (desktop viewer) and ``--decimation``."""
+def add_recording_flags(p: argparse.ArgumentParser, *, decimation: bool = True) -> None:
+    """The recording flags: ``--rrd``, ``--spawn``, ``--viewer-port`` and, for rollouts, ``--decimation``.
+
+    ``--rrd FILE`` writes an offline recording (no viewer); ``--spawn`` streams to a desktop viewer.
+    """
     p.add_argument("--rrd", default=None, help="write a Rerun recording to this .rrd file (no viewer)")
-    if spawn:
-        p.add_argument("--spawn", action="store_true", help="also stream to a desktop Rerun viewer")
+    p.add_argument("--spawn", action="store_true", help="also stream to a desktop Rerun viewer")
     p.add_argument(
-        "--decimation",
+        "--viewer-port",
         type=int,
-        default=None,
-        help="log every N-th simulation step (default: 10 states per simulated second)",
+        default=DEFAULT_VIEWER_PORT,
+        help=f"--spawn: the viewer's gRPC port on {_LOOPBACK}; a viewer already there is reused",
     )
+    if decimation:
+        p.add_argument(
+            "--decimation",
+            type=int,
+            default=None,
+            help="log every N-th simulation step (default: 10 states per simulated second)",
+        )
 
 
 def open_recorder(args: argparse.Namespace):
@@ -45,34 +55,30 @@ def open_recorder(args: argparse.Namespace):
         return None
     from mjcodesign.observe import load_observer
 
-    return load_observer("rerun", path=args.rrd, spawn=spawn, decimation=args.decimation)
+    return load_observer(
+        "rerun",
+        path=args.rrd,
+        spawn=spawn,
+        port=getattr(args, "viewer_port", DEFAULT_VIEWER_PORT),
+        decimation=getattr(args, "decimation", None),
+    )
 
 
-def record_crosscheck(args: argparse.Namespace, tensions: list[float] | None) -> None:
-    """``crosscheck --rrd``: the curl of every model at the largest tension, side by side (static)."""
-    if not args.rrd:
-        return
-    from mjcodesign.errors import DesignError
+def view_command(
+    path: str | Path, *, web: bool = False, port: int | None = None, web_port: int | None = None
+) -> list[str]:
+    """The viewer's command line: desktop, or web viewer + gRPC server bound to 127.0.0.1.
 
-    if args.scenario != "curl":
-        raise DesignError(f"--rrd records the curl scenario only, not {args.scenario!r}")
-    from mjcodesign.cli_crosscheck import _fem_options, default_tensions
-    from mjcodesign.observe import observe_curl
-    from mjcodesign.stiffness import Stiffness
-
-    tension = max(tensions or default_tensions(Stiffness.parse(args.design)))
-    rec = open_recorder(args)
-    try:
-        observe_curl(rec, args.models.split(","), args.design, tension, fem_options=_fem_options(args))
-    finally:
-        rec.close()
-
-
-def view_command(path: str | Path, *, web: bool = False) -> list[str]:
-    """The viewer's command line: desktop, or web viewer + gRPC server bound to 127.0.0.1."""
+    ``port``: the viewer's (or the web viewer's gRPC server's) port; ``web_port``: the web viewer's
+    HTTP port. None keeps Rerun's defaults (9876, 9090).
+    """
     cmd = [sys.executable, "-m", "rerun"]
     if web:
         cmd += ["--serve-web", "--bind", _LOOPBACK]
+        if web_port is not None:
+            cmd += ["--web-viewer-port", str(web_port)]
+    if port is not None:
+        cmd += ["--port", str(port)]
     return cmd + [str(path)]
 
 
@@ -86,7 +92,7 @@ def _cmd_view(args) -> int:
         raise ObserverError(f"recording not found: {path}")
     if importlib.util.find_spec("rerun") is None:
         raise ObserverError("the Rerun viewer is not installed (pip install 'mjcodesign[viz]')")
-    return subprocess.call(view_command(path, web=args.web))
+    return subprocess.call(view_command(path, web=args.web, port=args.port, web_port=args.web_port))
 
 
 def _cmd_bench_viz(args) -> int:
@@ -132,6 +138,8 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("view", help="open a Rerun recording (.rrd) in the desktop or web viewer")
     p.add_argument("file", help="a .rrd file written with --rrd")
     p.add_argument("--web", action="store_true", help=f"serve the web viewer on {_LOOPBACK} instead")
+    p.add_argument("--port", type=int, default=None, help="viewer / gRPC server port (default 9876)")
+    p.add_argument("--web-port", type=int, default=None, help="--web: HTTP port (default 9090)")
     p.set_defaults(func=_cmd_view)
 
 

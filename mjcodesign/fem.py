@@ -410,7 +410,10 @@ class FemFinger:
         )
 
     def cantilever(self, force: float | None = None) -> dict:
-        """Tip load along +z on the tip face; mean tip-face deflection [m] against Euler–Bernoulli."""
+        """Tip load along +z on the tip face; mean tip-face deflection [m] against Euler–Bernoulli.
+
+        ``positions`` are the deformed vertices [m] (n, 3).
+        """
         young = np.exp(self.log_e.numpy().reshape(-1, self._n_blocks)[self.finger])
         if force is None:
             from mjcodesign.validate import AUTO_DEFLECTION
@@ -427,6 +430,7 @@ class FemFinger:
             "rel_error": abs(delta - analytic) / analytic,
             "n_vertices": self.mesh.n_vertices,
             "n_tets": self.mesh.n_tets,
+            "positions": x,
         }
 
     def section_angles(self, x: np.ndarray) -> np.ndarray:

@@ -51,6 +51,8 @@ __all__ = [
     "assemble_stiffness",
     "static_tip_deflection",
     "linear_curl",
+    "static_tip_solve",
+    "load_nodes",
 ]
 
 _E_REF = 1e6
@@ -334,6 +336,11 @@ def static_tip_deflection(m: mujoco.MjModel, handle: FingerHandle, force: float)
     Solves ``K u = f`` with MuJoCo's compiled stiffness (small-deflection limit of the dynamics);
     the tip load is spread over the tip face with the consistent weights of :class:`TipLoad`.
     """
+    return static_tip_solve(m, handle, force)[0]
+
+
+def static_tip_solve(m: mujoco.MjModel, handle: FingerHandle, force: float) -> tuple[float, np.ndarray]:
+    """:func:`static_tip_deflection` [m] and the free nodes' displacement [m] (for :func:`load_nodes`)."""
     nx, ny, nz, _, order = handle.grid
     K = assemble_stiffness(m, handle)
     w1 = node_weights(order)
@@ -347,7 +354,27 @@ def static_tip_deflection(m: mujoco.MjModel, handle: FingerHandle, force: float)
     free = np.arange(3 * ny * nz, K.shape[0])  # gi = 0 is clamped
     u = np.zeros_like(f)
     u[free] = np.linalg.solve(K[np.ix_(free, free)], f[free])
-    return float(sum(u[i] * w for i, w in tip))
+    return float(sum(u[i] * w for i, w in tip)), u[free]
+
+
+def load_nodes(m: mujoco.MjModel, d: mujoco.MjData, handle: FingerHandle, displacement: np.ndarray) -> None:
+    """Put a linear solve's free-node displacement [m] into ``d`` (slide joints) and run ``mj_forward``.
+
+    The free nodes (``gi >= 1``) are bodies with three slide joints each, in the order of the stiffness
+    dofs (:func:`assemble_stiffness`), so their joints' ``qpos`` are the displacement itself.
+    """
+    nx, ny, nz, _, _ = handle.grid
+    names = [f"{handle.prefix}n{gi}_{gj}_{gk}" for gi in range(1, nx) for gj in range(ny) for gk in range(nz)]
+    adr = []
+    for name in names:
+        b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
+        if b < 0 or m.body_jntnum[b] != 3:
+            raise ValueError(f"flex node body {name!r} with three slide joints not found")
+        adr += [int(m.jnt_qposadr[m.body_jntadr[b] + k]) for k in range(3)]
+    if len(adr) != len(displacement):
+        raise ValueError(f"{len(displacement)} displacements for {len(adr)} node dofs")
+    d.qpos[adr] = displacement
+    mujoco.mj_forward(m, d)
 
 
 def linear_curl(m: mujoco.MjModel, handle: FingerHandle, design: FingerDesign, tension: float) -> dict:
@@ -358,7 +385,8 @@ def linear_curl(m: mujoco.MjModel, handle: FingerHandle, design: FingerDesign, t
     It is the first-order rest state of the dynamics: on the soft trilinear flex the tip rises 29.4 mm
     against 28.9 mm from the dynamics at 0.02 N (0.3 rad), but 118 mm against 90 mm at 0.08 N
     (1.1 rad), so use it for bends of a few tenths of a radian. Returns ``tip_displacement_m`` of the
-    tip point (L, 0, t/2) and ``bend_angle_rad``, the direction of the spine's last cell.
+    tip point (L, 0, t/2), ``bend_angle_rad``, the direction of the spine's last cell, and
+    ``node_displacement`` [m] of the free nodes (:func:`load_nodes` draws the rest shape from it).
     """
     from mjcodesign.fem import tendon_forces
 
@@ -385,6 +413,7 @@ def linear_curl(m: mujoco.MjModel, handle: FingerHandle, design: FingerDesign, t
         "tension_n": float(tension),
         "tip_displacement_m": [float(v) for v in (tip @ u.reshape(-1, 3))[0]],
         "bend_angle_rad": float(np.arctan2(d[2], d[0])),
+        "node_displacement": u[free],
     }
 
 

@@ -29,7 +29,6 @@ __all__ = [
     "Observer",
     "observer_class",
     "load_observer",
-    "observe_curl",
 ]
 
 ENTRY_POINT_GROUP = "mjcodesign.observers"
@@ -78,6 +77,7 @@ class Snapshot:
     """
 
     label: str
+    """Name of the shape, '/'-separated (``curl/chain/0.08N``); observers keep labels apart."""
     log_e: np.ndarray
     """ln(E / Pa) of the finger's blocks, base to tip, shape (n_blocks,)."""
     metrics: dict[str, float] = field(default_factory=dict)
@@ -91,8 +91,17 @@ class Snapshot:
     """Block index of every tet, shape (n_tets,)."""
     tendon: np.ndarray | None = None
     """Tendon waypoints [m], base to tip, shape (n_waypoints, 3)."""
+    group: str | None = None
+    """Shapes of one group (a prefix of ``label``, e.g. one model's curls at several tensions) are drawn
+    in one place; None: the label alone."""
+    forces: tuple[np.ndarray, np.ndarray] | None = None
+    """External forces on the finger: points [m] (k, 3) and forces [N] (k, 3) (contacts, a tip load)."""
+    obstacle: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    """A box the finger rests against: centre [m] (3,), rotation (3, 3), half extents [m] (3,)."""
 
     def __post_init__(self) -> None:
+        if self.group is not None and not (self.label + "/").startswith(self.group + "/"):
+            raise ValueError(f"group {self.group!r} is not a prefix of the label {self.label!r}")
         mujoco_given = self.built is not None and self.data is not None
         mesh_given = self.positions is not None and self.tets is not None and self.tet_block is not None
         if mujoco_given == mesh_given:
@@ -136,57 +145,3 @@ def observer_class(name: str) -> type:
 def load_observer(name: str, **options) -> Observer:
     """The observer registered as ``name``, constructed with ``options`` (see :func:`observer_class`)."""
     return observer_class(name)(**options)
-
-
-def observe_curl(
-    observer: Observer, models: list[str], design_name: str, tension: float, *, fem_options=None
-) -> None:
-    """Free tendon curl of finger A at ``tension`` [N] in every model, handed to ``observer`` at rest.
-
-    The same cases as the crosscheck's curl rows (point-force tendon for the MuJoCo models), run again.
-    """
-    from mjcodesign.finger import FingerDesign
-    from mjcodesign.mjcf import TendonMode
-    from mjcodesign.stiffness import Stiffness
-    from mjcodesign.validate import curl
-
-    design = FingerDesign()
-    stiffness = Stiffness.parse(design_name)
-    log_e = np.asarray(stiffness.log_e[0])
-    for m in models:
-        if m == "fem":
-            from mjcodesign.fem import FemFinger
-
-            fem = FemFinger(design, stiffness, options=fem_options)
-            r = fem.curl(tension)
-            x = r["positions"]
-            observer.snapshot(
-                Snapshot(
-                    label=m,
-                    log_e=log_e,
-                    metrics=_curl_metrics(r),
-                    positions=x,
-                    tets=fem.mesh.tets,
-                    tet_block=fem.mesh.tet_block,
-                    tendon=fem.mesh.waypoint_weights @ x,
-                )
-            )
-            continue
-        rest: dict = {}
-        r = curl(design, stiffness, m, tension, tendon_mode=TendonMode.POINT_FORCE, observe=_keep(rest))
-        observer.snapshot(Snapshot(label=m, log_e=log_e, metrics=_curl_metrics(r), **rest))
-
-
-def _keep(rest: dict):
-    def keep(built, data) -> None:
-        rest.update(built=built, data=data)
-
-    return keep
-
-
-def _curl_metrics(r: dict) -> dict[str, float]:
-    return {
-        "tension_n": float(r["tension_n"]),
-        "bend_angle_rad": float(r["bend_angle_rad"]),
-        "tip_displacement_m": float(np.linalg.norm(r["tip_displacement_m"])),
-    }

@@ -27,7 +27,7 @@ from mjcodesign.errors import SimulationDiverged
 from mjcodesign.finger import FingerDesign
 from mjcodesign.stiffness import Stiffness
 
-__all__ = ["plate_pose", "force_distribution", "press_mujoco", "press_fem", "PLATE_GAP"]
+__all__ = ["plate_pose", "plate_contacts", "force_distribution", "press_mujoco", "press_fem", "PLATE_GAP"]
 
 PLATE_GAP = 5e-4
 """Gap between the plate and the segment tops at rest [m]."""
@@ -70,9 +70,18 @@ _MAX_TIME = 10.0
 
 
 def press_mujoco(
-    design: FingerDesign, stiffness: Stiffness, model: str, tension: float, *, max_time: float = _MAX_TIME
+    design: FingerDesign,
+    stiffness: Stiffness,
+    model: str,
+    tension: float,
+    *,
+    max_time: float = _MAX_TIME,
+    observe=None,
 ) -> dict:
-    """Chain or flex finger pressed onto the plate: dynamics to rest, then the contact forces."""
+    """Chain or flex finger pressed onto the plate: dynamics to rest, then the contact forces.
+
+    ``observe(built, data)``, if given, is called with the model (plate included) and its data at rest.
+    """
     from mjcodesign.mjcf import CONTYPE_FINGER, CONTYPE_WORLD, FingerModel, TendonMode, _compile, _finalise
     from mjcodesign.mjcf import build_finger as _build
     from mjcodesign.tendon import TendonDriver
@@ -99,25 +108,44 @@ def press_mujoco(
     d = mujoco.MjData(m)
     drv = TendonDriver(built)
     drv.set_tension(d, tension)
-    plate = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "plate")
     sid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, built.fingers[0].tip_site)
     run_to_rest(m, d, drv.apply, lambda d: d.site_xpos[sid].copy(), max_time=max_time)
-    xs, fs = [], []
+    if observe is not None:
+        observe(built, d)
+    pts, _, fs = plate_contacts(m, d)
+    out = force_distribution(pts[:, 0], fs, design.length)
+    out["n_contacts"] = len(fs)
+    return out
+
+
+def plate_contacts(m: mujoco.MjModel, d: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Contacts with the geom named ``plate``: points, forces on the finger, normal forces.
+
+    Points [m] (k, 3); the plate's force on the finger [N] (k, 3), in world (here the finger frame)
+    axes; its normal component [N] (k,).
+    """
+    plate = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "plate")
+    pts, forces, normal = [], [], []
     f6 = np.zeros(6)
     for i in range(d.ncon):
         c = d.contact[i]
         if plate not in (c.geom[0], c.geom[1]):
             continue
         mujoco.mj_contactForce(m, d, i, f6)
-        xs.append(float(c.pos[0]))
-        fs.append(float(f6[0]))
-    out = force_distribution(np.array(xs), np.array(fs), design.length)
-    out["n_contacts"] = len(xs)
-    return out
+        # f6[:3] (normal, tangents) acts on geom2, in the contact frame whose normal runs geom1 -> geom2.
+        f = c.frame.reshape(3, 3).T @ f6[:3]
+        pts.append(c.pos.copy())
+        forces.append(f if c.geom[0] == plate else -f)
+        normal.append(f6[0])
+    return np.reshape(pts, (-1, 3)), np.reshape(forces, (-1, 3)), np.asarray(normal, dtype=float)
 
 
-def press_fem(fem, tension: float, *, steps: int = 4) -> dict:
-    """FEM finger (linear tets) pressed onto the plate: static equilibrium, frictionless contact."""
+def press_fem(fem, tension: float, *, steps: int = 4, observe=None) -> dict:
+    """FEM finger (linear tets) pressed onto the plate: static equilibrium, frictionless contact.
+
+    ``observe(positions, contact_forces)``, if given, is called with the rest positions [m] (n, 3) and the
+    plate's force on every vertex [N] (n, 3).
+    """
     from mjcodesign.fem_grasp import FemContact, RigidObject
 
     centre, R, half = plate_pose(fem.design)
@@ -132,6 +160,8 @@ def press_fem(fem, tension: float, *, steps: int = 4) -> dict:
 
     x, _ = fem.solve_static(load, steps=steps)
     f_c, _ = contact.contact_static(x)
+    if observe is not None:
+        observe(x, f_c)
     fn = f_c @ (R @ np.array([0.0, 0.0, -1.0]))  # along the outward normal of the plate's lower face
     out = force_distribution(fem.mesh.vertices[:, 0], fn, fem.design.length)
     out["n_contacts"] = int(np.count_nonzero(fn > 0))

@@ -97,12 +97,15 @@ def validate_beam(
     force: float | None = None,
     options: SimOptions | None = None,
     dynamic: bool | None = None,
+    observe=None,
 ) -> dict:
     """Clamp finger A at its base, load its tip, and compare the deflection with Euler–Bernoulli.
 
     The chain runs its dynamics to rest. Flex models by default solve ``K u = f`` with MuJoCo's compiled
     cell stiffness, the small-deflection rest state of the same model (a test checks that both agree);
-    ``dynamic=True`` runs them to rest instead (minutes for the quadratic flex).
+    ``dynamic=True`` runs them to rest instead (minutes for the quadratic flex). ``observe(built,
+    data)``, if given, is called with the model and its data at rest (the linear solve's displacement
+    loaded into the flex nodes).
     """
     model = FingerModel(model)
     young = stiffness.finger(0)
@@ -121,9 +124,14 @@ def validate_beam(
         delta = run_to_rest(built.model, d, apply, metric, max_time=max(30.0, 40 * opts.damping_time))
         settled = float(d.time)
     else:
-        from mjcodesign.flex import static_tip_deflection
+        from mjcodesign.flex import load_nodes, static_tip_solve
 
-        delta = static_tip_deflection(built.model, built.fingers[0], force)
+        delta, u = static_tip_solve(built.model, built.fingers[0], force)
+        if observe is not None:
+            d = mujoco.MjData(built.model)
+            load_nodes(built.model, d, built.fingers[0], u)
+    if observe is not None:
+        observe(built, d)
     analytic = cantilever_tip_deflection(design, young, force)
     return {
         "model": model.value,

@@ -301,26 +301,84 @@ def test_flex_fingers_deform_and_are_coloured(tmp_path):
     _verify(path)
 
 
-def test_crosscheck_curl_shape(tmp_path):
-    pytest.importorskip("rerun")
-    from mjcodesign.observe import load_observer, observe_curl
+def _crosscheck_recorded(tmp_path, scenario, models, design, **kw):
+    from mjcodesign.cli_crosscheck import crosscheck
+    from mjcodesign.fem import FemOptions
+    from mjcodesign.observe import load_observer
 
-    path = tmp_path / "curl.rrd"
+    path = tmp_path / f"{scenario}.rrd"
     rec = load_observer("rerun", path=path)
-    observe_curl(rec, ["chain"], "semi-rigid", 1.6)  # about 1 rad of curl (cli_crosscheck)
+    # Coarse linear tets: the FEM shape, not its accuracy, is under test here (seconds, not minutes).
+    rows, _ = crosscheck(
+        scenario, models, design, fem_options=FemOptions(h=4e-3, spine_layers=2), observer=rec, **kw
+    )
     rec.close()
-    data = _read(path)
-    _, pos = _column(data["/crosscheck/chain/finger"], "Mesh3D:vertex_positions")
-    pos = np.array(pos[0])
-    _, doc = _column(data["/crosscheck/chain/metrics"], "TextDocument:text")
-    bend = float(doc[0].split("bend_angle_rad: ")[1].split()[0])
-    assert bend > 0.5
-    # Curled towards +z: the tip comes back from x = L and rises.
-    length = FingerDesign().length
-    assert pos[:, 0].max() < length - 0.01 and pos[:, 2].max() > 0.03
-    _, strips = _column(data["/crosscheck/chain/tendon"], "LineStrips3D:strips")
-    assert len(strips[0][0]) == 11  # one waypoint per block
     _verify(path)
+    return rows, _read(path)
+
+
+def _metric(data, root: str, name: str) -> float:
+    _, doc = _column(data[f"{root}/metrics"], "TextDocument:text")
+    return float(doc[0].split(f"{name}: ")[1].split()[0])
+
+
+def test_crosscheck_curl_records_every_model_and_tension(tmp_path):
+    pytest.importorskip("rerun")
+    tensions = [0.8, 1.6]  # semi-rigid: about 0.5 and 1 rad of curl (cli_crosscheck)
+    rows, data = _crosscheck_recorded(tmp_path, "curl", ["chain", "fem"], "semi-rigid", tensions=tensions)
+    length = FingerDesign().length
+    offsets = []
+    for model in ("chain", "fem"):
+        group = f"/crosscheck/curl/{model}"
+        (offset,) = _column(data[group], "Transform3D:translation")[1]
+        offsets.append(np.array(offset).ravel())
+        for t in tensions:
+            root = f"{group}/{t:.4g}N"
+            row = next(r for r in rows if r["model"] == model and r["metric"] == f"bend_angle_rad@{t:.4g}N")
+            assert _metric(data, root, "bend_angle_rad") == pytest.approx(row["value"], rel=1e-5)
+            _, pos = _column(data[f"{root}/finger"], "Mesh3D:vertex_positions")
+            pos = np.array(pos[0])
+            assert pos[:, 2].max() > 0.02  # curled towards +z
+        # Curled at 1.6 N: the tip comes back from x = L.
+        assert pos[:, 0].max() < length - 0.01
+    # One place per model, side by side along y; a model's tensions overlap in it.
+    assert abs(offsets[0][1] - offsets[1][1]) == pytest.approx(0.06)
+    _, strips = _column(data["/crosscheck/curl/chain/1.6N/tendon"], "LineStrips3D:strips")
+    assert len(strips[0][0]) == 11  # one waypoint per block
+
+
+def test_crosscheck_cantilever_records_tip_loads(tmp_path):
+    pytest.importorskip("rerun")
+    rows, data = _crosscheck_recorded(tmp_path, "cantilever", ["chain", "flex-quadratic"], "paper-optimized")
+    for r in rows:
+        root = f"/crosscheck/cantilever/{r['model']}"
+        assert _metric(data, root, "tip_deflection_m") == pytest.approx(r["value"], rel=1e-5)
+        _, pos = _column(data[f"{root}/finger"], "Mesh3D:vertex_positions")
+        _, origin = _column(data[f"{root}/forces"], "Arrows3D:origins")
+        _, vec = _column(data[f"{root}/forces"], "Arrows3D:vectors")
+        # The load arrow points up at the tip, and the tip rose by the deflection (linear flex included).
+        assert np.array(vec[0])[0, 2] > 0 and np.array(origin[0])[0, 0] > 0.13
+        assert np.array(pos[0])[:, 2].max() == pytest.approx(
+            FingerDesign().height_base, abs=1e-6
+        )  # the base block does not move
+        tip = np.array(pos[0])[np.array(pos[0])[:, 0] > FingerDesign().length - 1e-3]
+        assert tip[:, 2].min() == pytest.approx(r["value"], rel=0.05, abs=2e-5)
+
+
+def test_crosscheck_press_records_contact_forces_and_plate(tmp_path):
+    pytest.importorskip("rerun")
+    rows, data = _crosscheck_recorded(tmp_path, "press", ["chain"], "paper-optimized")
+    for routing in ("uniform-pressure", "uniform-height"):
+        root = f"/crosscheck/press/{routing}/chain"
+        total = next(r["value"] for r in rows if r["metric"].startswith(f"total_force_n[{routing}]"))
+        _, vec = _column(data[f"{root}/forces"], "Arrows3D:vectors")
+        _, doc = _column(data[f"{root}/metrics"], "TextDocument:text")
+        mm_per_n = float(doc[0].split("arrows: ")[1].split()[0])
+        # The arrows are the plate's forces on the finger: their normal parts sum to the row's total.
+        force = np.array(vec[0]) / (1e-3 * mm_per_n)
+        assert -force[:, 2].sum() == pytest.approx(total, rel=0.02)
+        _, corners = _column(data[f"{root}/obstacle"], "Mesh3D:vertex_positions")
+        assert len(corners[0]) == 8
 
 
 def test_tet_snapshot_is_a_closed_coloured_surface(tmp_path):
@@ -435,23 +493,133 @@ def test_bad_recording_input_exits_2_with_one_line(tmp_path, case):
         assert not (tmp_path / "x.rrd").exists()  # refused before the recording is opened
 
 
-def test_crosscheck_rrd_records_the_curl_only(tmp_path):
-    import argparse
+def _free_port() -> int:
+    import socket
 
-    from mjcodesign.cli_viz import record_crosscheck
-    from mjcodesign.errors import DesignError
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
 
-    args = argparse.Namespace(rrd=str(tmp_path / "c.rrd"), scenario="cantilever", decimation=None)
-    with pytest.raises(DesignError, match="curl scenario only"):
-        record_crosscheck(args, None)
-    assert not (tmp_path / "c.rrd").exists()
+
+def _listening(port: int) -> list[str]:
+    """Local addresses (hex, as in /proc/net/tcp*) of the sockets listening on ``port``."""
+    out = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        if not os.path.exists(table):
+            continue
+        for line in Path(table).read_text().splitlines()[1:]:
+            local, state = line.split()[1], line.split()[3]
+            if state == "0A" and int(local.split(":")[1], 16) == port:  # 0A: LISTEN
+                out.append(local.split(":")[0])
+    return out
+
+
+def _wait_listening(port: int, proc, timeout: float = 60.0) -> list[str]:
+    import time
+
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout:
+        if got := _listening(port):
+            return got
+        if proc.poll() is not None:
+            raise AssertionError(f"server exited early ({proc.returncode}): {proc.stderr.read()}")
+        time.sleep(0.2)
+    raise AssertionError(f"nothing listens on port {port} after {timeout} s")
+
+
+def _stop(proc) -> None:
+    import signal
+
+    proc.send_signal(signal.SIGINT)  # rerun flushes --save files on Ctrl-C
+    try:
+        proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+
+
+_LOOPBACK_HEX = "0100007F"  # 127.0.0.1 in /proc/net/tcp
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/net/tcp"), reason="reads listening sockets from /proc (Linux)")
+def test_view_web_serves_on_loopback_only(tmp_path):
+    pytest.importorskip("rerun")
+    import urllib.request
+
+    rrd = tmp_path / "one.rrd"
+    assert (
+        _cli(
+            tmp_path, "grasp", "--object", _box_file(tmp_path), "--impulse", "0", "--rrd", str(rrd)
+        ).returncode
+        == 0
+    )
+    port, web_port = _free_port(), _free_port()
+    env = {**os.environ, "RERUN_ANALYTICS": "0"}
+    cmd = [sys.executable, "-m", "mjcodesign.cli", "view", str(rrd), "--web", "--port", str(port)]
+    proc = subprocess.Popen(
+        [*cmd, "--web-port", str(web_port)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
+    try:
+        for p in (port, web_port):
+            assert set(_wait_listening(p, proc)) == {_LOOPBACK_HEX}, f"port {p} listens beyond 127.0.0.1"
+        with urllib.request.urlopen(f"http://127.0.0.1:{web_port}/", timeout=10) as page:
+            assert page.status == 200 and b"<html" in page.read(4096).lower()
+    finally:
+        _stop(proc)
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/net/tcp"), reason="reads listening sockets from /proc (Linux)")
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")  # the proxy's --save file, not one of ours
+def test_spawn_streams_the_grasp_to_the_viewer_on_its_port(tmp_path):
+    """``--spawn`` reuses a viewer already on ``--viewer-port``: here a headless gRPC proxy saving to a file."""
+    pytest.importorskip("rerun")
+    exe = shutil.which("rerun")
+    if exe is None:
+        pytest.skip("the rerun CLI is not installed")
+    port, saved = _free_port(), tmp_path / "viewer.rrd"
+    server = subprocess.Popen(
+        [exe, "--serve-grpc", "--bind", "127.0.0.1", "--port", str(port), "--save", str(saved)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "RERUN_ANALYTICS": "0"},
+    )
+    try:
+        _wait_listening(port, server)
+        box = _box_file(tmp_path)
+        r = _cli(
+            tmp_path,
+            "grasp",
+            "--object",
+            box,
+            "--impulse",
+            "0",
+            "--spawn",
+            "--viewer-port",
+            str(port),
+            "--json",
+        )
+        assert r.returncode == 0, r.stderr
+    finally:
+        _stop(server)
+    out = json.loads(r.stdout)
+    data = _read(saved)
+    for part in ("fingers/A", "fingers/B", "object", "tendon", "contacts", "outcome"):
+        assert f"{_ROOT}/{part}" in data, part
+    _, doc = _column(data[f"{_ROOT}/outcome"], "TextDocument:text")
+    assert json.loads(doc[0])["success"] == out["success"]
 
 
 def test_view_binds_loopback():
     from mjcodesign.cli_viz import view_command
 
-    web = view_command("f.rrd", web=True)
+    web = view_command("f.rrd", web=True, port=1234, web_port=5678)
     assert web[web.index("--bind") + 1] == "127.0.0.1" and "--serve-web" in web
+    assert web[web.index("--port") + 1] == "1234" and web[web.index("--web-viewer-port") + 1] == "5678"
     assert "--serve-web" not in view_command("f.rrd")
 
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-__all__ = ["Surface", "finger_surfaces", "body_geom_surface", "tet_surface", "BOX_TRIANGLES"]
+__all__ = ["Surface", "finger_surfaces", "body_geom_surface", "tet_surface", "box_corners", "BOX_TRIANGLES"]
 
 _CHAIN_GEOM = re.compile(r"^([AB])_b(\d+)_[pd]$")
 """Chain block pieces are named ``{finger}_b{block}_{p|d}`` (:mod:`mjcodesign.chain`)."""
@@ -25,6 +25,13 @@ BOX_TRIANGLES = np.array(
     ]
 )  # fmt: skip
 """Outward triangles of the 8 corners ``_BOX_CORNERS`` (x slowest, z fastest)."""
+
+
+def box_corners(half: np.ndarray) -> np.ndarray:
+    """The 8 corners [m] of a box with ``half`` extents (3,) about its centre, in ``BOX_TRIANGLES`` order."""
+    return _BOX_CORNERS * np.asarray(half, dtype=float)
+
+
 _MESH = int(mujoco.mjtGeom.mjGEOM_MESH)
 _BOX = int(mujoco.mjtGeom.mjGEOM_BOX)
 

@@ -31,7 +31,7 @@ from mjcodesign.observe import Rollout, Snapshot
 from mjcodesign.scenario import STATE_SPEC, control_spec
 from viz.batch import ColumnBatch, rgba32
 from viz.colormap import NEUTRAL_RGB, legend_markdown, legend_ticks, stiffness_rgb
-from viz.geometry import Surface, body_geom_surface, finger_surfaces, tet_surface
+from viz.geometry import BOX_TRIANGLES, Surface, body_geom_surface, box_corners, finger_surfaces, tet_surface
 
 __all__ = ["RerunRecorder", "DEFAULT_FRAME_RATE", "TIMELINE", "logged_steps"]
 
@@ -43,6 +43,7 @@ _SPACING_DESIGNS = 0.25  # runs side by side along world x [m]: gripper is 0.09 
 _SPACING_SHAPES = 0.06  # crosscheck fingers side by side along world y [m] (finger width 20 mm)
 _ARROW_M_PER_N = 0.01  # force arrows: 1 N is drawn 10 mm long
 _ARROW_RADIUS = 0.0008  # [m]
+_SHAPE_ARROW_MAX = 0.015  # crosscheck forces (mN to N): the largest arrow is drawn 15 mm long [m]
 _TENDON_RADIUS = 0.0006  # [m]
 _GROUND_HALF = 0.12  # drawn ground square half-side [m]
 _COLORBAR_ORIGIN = np.array([-0.1, -0.15, 0.0])  # legend swatches in 3-D, away from the runs [m]
@@ -72,8 +73,10 @@ def logged_steps(n_steps: int, dt: float, starts: dict[str, int], decimation: in
 class RerunRecorder:
     """Write (``path``) and/or show (``spawn``) grasp rollouts and rest shapes in one Rerun recording.
 
-    ``decimation``: log every n-th step (None: :data:`DEFAULT_FRAME_RATE` per simulated second). Call
-    :meth:`close` to flush; the file is complete afterwards.
+    ``spawn`` starts a desktop viewer on ``port`` of 127.0.0.1, or reuses the viewer (or ``rerun
+    --serve-grpc`` proxy) already listening there. ``decimation``: log every n-th step (None:
+    :data:`DEFAULT_FRAME_RATE` per simulated second). Call :meth:`close` to flush; the file is complete
+    afterwards.
     """
 
     def __init__(
@@ -81,6 +84,7 @@ class RerunRecorder:
         path: str | Path | None = None,
         *,
         spawn: bool = False,
+        port: int = 9876,
         decimation: int | None = None,
         application_id: str = "mjcodesign",
         recording_id: str | None = None,
@@ -96,15 +100,16 @@ class RerunRecorder:
         self.rec = rr.RecordingStream(application_id, recording_id=recording_id or str(uuid.uuid4()))
         sinks = []
         if spawn:
-            self.rec.spawn(connect=False)
-            sinks.append(rr.GrpcSink())
+            self.rec.spawn(port=port, connect=False)
+            sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{port}/proxy"))
         if self.path is not None:
             sinks.append(rr.FileSink(str(self.path)))
         self.rec.set_sinks(*sinks)
         self._designs: dict[str, np.ndarray] = {}
         self._scratch: tuple[mujoco.MjModel, mujoco.MjData] | None = None
         self._n_rollouts = 0
-        self._n_shapes = 0
+        self._groups: dict[str, int] = {}
+        self._shape_arrow_scale: float | None = None
 
     # -- observer protocol ------------------------------------------------------------------------
     def rollout(self, r: Rollout) -> None:
@@ -174,15 +179,21 @@ class RerunRecorder:
         starts.send(self.rec)
 
     def snapshot(self, s: Snapshot) -> None:
-        """Log one rest shape under ``/crosscheck/{label}`` (static)."""
-        root = f"/crosscheck/{_safe(s.label)}"
+        """Log one rest shape under ``/crosscheck/{label}`` (static).
+
+        Shapes of one group share a place (groups side by side along world y); ``finger`` (coloured per
+        block), ``tendon``, ``forces`` (arrows on one scale for the whole recording, set by the first
+        shape with forces so that its largest is :data:`_SHAPE_ARROW_MAX` long; the scale is in
+        ``metrics``), ``obstacle`` and ``metrics``.
+        """
+        root = _path("/crosscheck", s.label)
+        group = s.group or s.label
         static = ColumnBatch()
-        self._legend(f"crosscheck {s.label}", np.asarray(s.log_e)[None], static)
-        static.send(self.rec)
-        self.rec.log(
-            root, rr.Transform3D(translation=[0.0, _SPACING_SHAPES * self._n_shapes, 0.0]), static=True
-        )
-        self._n_shapes += 1
+        self._legend(f"crosscheck {group}", np.asarray(s.log_e)[None], static)
+        if group not in self._groups:
+            self._groups[group] = len(self._groups)
+            offset = [0.0, _SPACING_SHAPES * self._groups[group], 0.0]
+            static.add(_path("/crosscheck", group), "Transform3D", "translation", [offset])
         colours = stiffness_rgb(s.log_e)
         if s.built is not None:
             edges = np.array([b.x1 for b in s.built.design.blocks()[:-1]])
@@ -198,19 +209,33 @@ class RerunRecorder:
             tris = np.arange(len(pos)).reshape(-1, 3)
             rgb = np.repeat(colours[block], 3, axis=0)
             tendon = s.tendon
-        self.rec.log(
-            f"{root}/finger",
-            rr.Mesh3D(vertex_positions=pos, triangle_indices=tris, vertex_colors=rgb),
-            static=True,
-        )
+        static.add(f"{root}/finger", "Mesh3D", "vertex_positions", pos)
+        static.add(f"{root}/finger", "Mesh3D", "triangle_indices", tris)
+        static.add(f"{root}/finger", "Mesh3D", "vertex_colors", rgba32(rgb))
         if tendon is not None and len(tendon):
-            self.rec.log(
-                f"{root}/tendon",
-                rr.LineStrips3D([tendon], radii=_TENDON_RADIUS, colors=_TENDON_RGB),
-                static=True,
-            )
-        text = "\n".join(f"- {k}: {v:.6g}" for k, v in s.metrics.items())
-        self.rec.log(f"{root}/metrics", rr.TextDocument(text, media_type="text/markdown"), static=True)
+            static.add(f"{root}/tendon", "LineStrips3D", "strips", [np.asarray(tendon, dtype=float)], [1])
+            static.add(f"{root}/tendon", "LineStrips3D", "colors", [rgba32(_TENDON_RGB)])
+        lines = [f"- {k}: {v:.6g}" for k, v in s.metrics.items()]
+        if s.forces is not None and len(s.forces[0]):
+            points, forces = (np.asarray(v, dtype=float).reshape(-1, 3) for v in s.forces)
+            if self._shape_arrow_scale is None:  # one scale for the recording, so that shapes compare
+                self._shape_arrow_scale = _SHAPE_ARROW_MAX / max(
+                    float(np.linalg.norm(forces, axis=1).max()), 1e-300
+                )
+            scale = self._shape_arrow_scale
+            static.add(f"{root}/forces", "Arrows3D", "origins", points)
+            static.add(f"{root}/forces", "Arrows3D", "vectors", forces * scale)
+            static.add(f"{root}/forces", "Arrows3D", "colors", [rgba32(_FINGER_CONTACT_RGB)] * len(points))
+            lines.append(f"- arrows: {1e3 * scale:.6g} mm per N ({len(points)} forces)")
+        if s.obstacle is not None:
+            centre, rot, half = (np.asarray(v, dtype=float) for v in s.obstacle)
+            corners = centre + (box_corners(half) @ rot.T)
+            static.add(f"{root}/obstacle", "Mesh3D", "vertex_positions", corners)
+            static.add(f"{root}/obstacle", "Mesh3D", "triangle_indices", BOX_TRIANGLES)
+            static.add(f"{root}/obstacle", "Mesh3D", "albedo_factor", [rgba32(_OBJECT_RGB)])
+        static.add(f"{root}/metrics", "TextDocument", "text", ["\n".join(lines)])
+        static.add(f"{root}/metrics", "TextDocument", "media_type", ["text/markdown"])
+        static.send(self.rec)
 
     def close(self) -> None:
         """Flush everything and close the sinks."""
@@ -429,6 +454,11 @@ def _log_e_of(r: Rollout) -> np.ndarray:
 
 def _site(m: mujoco.MjModel, name: str) -> int:
     return mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, name)
+
+
+def _path(prefix: str, label: str) -> str:
+    """``prefix`` and the '/'-separated parts of ``label``, each made an entity-path part (:func:`_safe`)."""
+    return "/".join([prefix, *(_safe(p) for p in label.split("/"))])
 
 
 def _safe(label: str) -> str:
