@@ -243,7 +243,11 @@ def press_results(wp):
     for routing in Routing:
         design = FingerDesign(routing=routing)
         fem = FemFinger(design, stiffness, options=FemOptions(h=4e-3, spine_layers=2))
-        out[routing] = (press_fem(fem, tension), press_mujoco(design, stiffness, "chain", tension))
+        out[routing] = (
+            press_fem(fem, tension),
+            press_mujoco(design, stiffness, "chain", tension),
+            press_mujoco(design, stiffness, "flex", tension),  # ~20 s per routing
+        )
     return out
 
 
@@ -251,15 +255,44 @@ def test_press_uniform_height_loads_the_tip(press_results):
     # Paper, Fig. 2: uniform-pressure routing spreads the contact force, uniform-height loads the tip.
     p = press_results[Routing.UNIFORM_PRESSURE]
     h = press_results[Routing.UNIFORM_HEIGHT]
-    for k in range(2):  # FEM, chain
+    for k in range(3):  # FEM, chain, flex
         assert h[k]["distal_third_fraction"] > p[k]["distal_third_fraction"] + _PRESS_MARGIN
         assert h[k]["centroid_over_length"] > p[k]["centroid_over_length"]
         assert h[k]["n_contacts"] < p[k]["n_contacts"]
 
 
-def test_press_chain_total_force_matches_fem(press_results):
-    for fem, chain in press_results.values():
-        assert chain["total_force_n"] == pytest.approx(fem["total_force_n"], rel=_TOL_CURL)
+_PRESS_METRICS = ("total_force_n", "distal_third_fraction", "centroid_over_length")
+
+
+def test_press_chain_matches_fem(press_results):
+    for fem, chain, _ in press_results.values():
+        for k in _PRESS_METRICS:
+            assert chain[k] == pytest.approx(fem[k], rel=_TOL_CURL), k
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="measured: the trilinear flex spreads the uniform-pressure press towards the base: total force "
+    "28.1 mN vs FEM 20.3 mN (+38%), distal share 0.49 vs 0.74, centroid 0.61 vs 0.75 L; uniform height "
+    "within 4% (9.95 vs 9.62 mN, 1.00, 0.986 vs 1.00)",
+)
+def test_press_flex_matches_fem(press_results):
+    for fem, _, flex in press_results.values():
+        for k in _PRESS_METRICS:
+            assert flex[k] == pytest.approx(fem[k], rel=_TOL_CURL), k
+
+
+def test_press_settling_tells_drift_from_jitter():
+    from mjcodesign.press import _settled
+
+    rng = np.random.default_rng(0)
+    t = np.arange(10) * 0.1
+    base = np.array([0.02, 0.5, 0.6])
+    jitter = base * (1 + 0.01 * rng.standard_normal((10, 3)))  # the flex: ~1% scatter, no trend
+    creep = base * (1 + 0.013 * t[:, None])  # the chain at 2 s: +1.3% per second, smooth
+    assert _settled(jitter)
+    assert not _settled(creep)
+    assert _settled(np.tile(base, (10, 1)))
 
 
 def test_plot_curves_writes_png(tmp_path):
