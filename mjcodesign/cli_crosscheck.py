@@ -186,19 +186,19 @@ class _Shapes:
         if self.observer is None:
             return None
 
-        def keep(built, data) -> None:
+        def keep(built, data, forces=None, obstacle=None) -> None:
             import mujoco
 
-            extra: dict = {}
+            extra: dict = {"forces": forces, "obstacle": obstacle}
             if tip_load:
                 sid = mujoco.mj_name2id(built.model, mujoco.mjtObj.mjOBJ_SITE, built.fingers[0].tip_site)
                 extra["forces"] = (data.site_xpos[sid][None].copy(), None)  # force set with the metrics
             if plate:
-                from mjcodesign.press import plate_contacts, plate_pose
+                from mjcodesign.press import plate_box, plate_contacts
 
                 pts, f, _ = plate_contacts(built.model, data)
                 extra["forces"] = (pts, f)
-                extra["obstacle"] = plate_pose(built.design)
+                extra["obstacle"] = plate_box(built.model, data)
             d = mujoco.MjData(built.model)  # the caller may go on using its data
             mujoco.mj_copyData(d, built.model, data)
             self._pending[label] = dict(label=label, group=group, built=built, data=d, **extra)
@@ -265,7 +265,8 @@ def _press_rows(models, design_name, stiffness, fem_options, tensions, shapes) -
     from mjcodesign.errors import SimulationDiverged
     from mjcodesign.fem import FemFinger, FemOptions
     from mjcodesign.finger import FingerDesign, Routing
-    from mjcodesign.press import plate_pose, press_fem, press_mujoco
+    from mjcodesign.mjcf import FingerModel
+    from mjcodesign.press import plate_pose, press_fem, press_linear, press_mujoco
 
     tension = tensions[0] if tensions else _PRESS_TENSION_FRACTION * default_tensions(stiffness)[-1]
     fem_options = replace(fem_options or FemOptions(), order=1)
@@ -290,9 +291,12 @@ def _press_rows(models, design_name, stiffness, fem_options, tensions, shapes) -
             if m != "fem":
                 label = f"press/{routing.value}/{m}"
                 try:
-                    res[m] = press_mujoco(
-                        design, stiffness, m, tension, observe=shapes.mujoco(label, plate=True)
-                    )
+                    if FingerModel(m) is FingerModel.FLEX_QUADRATIC:  # its dynamics: 3.4 steps/s
+                        res[m] = press_linear(design, stiffness, m, tension, observe=shapes.mujoco(label))
+                    else:
+                        res[m] = press_mujoco(
+                            design, stiffness, m, tension, observe=shapes.mujoco(label, plate=True)
+                        )
                     shapes.set_metrics(label, _press_metrics(res[m]))
                 except SimulationDiverged as exc:
                     print(f"note: {m} press ({routing.value}) gave no rest state: {exc}", file=sys.stderr)

@@ -51,6 +51,8 @@ __all__ = [
     "assemble_stiffness",
     "static_tip_deflection",
     "linear_curl",
+    "linear_tendon_load",
+    "grid_rest",
     "static_tip_solve",
     "load_nodes",
 ]
@@ -377,6 +379,33 @@ def load_nodes(m: mujoco.MjModel, d: mujoco.MjData, handle: FingerHandle, displa
     mujoco.mj_forward(m, d)
 
 
+def grid_rest(design: FingerDesign, handle: FingerHandle) -> np.ndarray:
+    """Rest positions [m] of a flex finger's node grid in the finger frame, shape (n_nodes, 3)."""
+    nx, ny, nz, _, _ = handle.grid
+    lo = np.array([0.0, -0.5 * design.width, 0.0])
+    ext = np.array([design.length, design.width, design.height_base])
+    g = np.stack(np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij"), axis=-1)
+    return lo + ext * g.reshape(-1, 3) / np.array([nx - 1, ny - 1, nz - 1])
+
+
+def linear_tendon_load(
+    design: FingerDesign, handle: FingerHandle, tension: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Node rest positions [m] (n_nodes, 3) and the frictionless tendon's nodal load [N] (3 n_nodes,).
+
+    The point-force law (`mjcodesign.fem.tendon_forces`) at the *rest* waypoints, spread to the nodes by
+    the interpolation weights: the first-order load of the linear solves.
+    """
+    from mjcodesign.fem import tendon_forces
+
+    _, _, _, n_cells, order = handle.grid
+    X = grid_rest(design, handle)
+    W = grid_weights(design, n_cells, order, design.waypoints())
+    P = W @ X
+    exit_p = design.tendon_exit() - np.array([0.004, 0.0, 0.0])  # the exit site of `mjcf._add_finger`
+    return X, (W.T @ tendon_forces(P, np.zeros_like(P), exit_p, tension, "frictionless")).ravel()
+
+
 def linear_curl(m: mujoco.MjModel, handle: FingerHandle, design: FingerDesign, tension: float) -> dict:
     """Small-deflection tendon curl of a base-clamped flex: ``K u = Wᵀ F`` with the compiled stiffness.
 
@@ -388,18 +417,9 @@ def linear_curl(m: mujoco.MjModel, handle: FingerHandle, design: FingerDesign, t
     tip point (L, 0, t/2), ``bend_angle_rad``, the direction of the spine's last cell, and
     ``node_displacement`` [m] of the free nodes (:func:`load_nodes` draws the rest shape from it).
     """
-    from mjcodesign.fem import tendon_forces
-
     nx, ny, nz, n_cells, order = handle.grid
     K = assemble_stiffness(m, handle)
-    lo = np.array([0.0, -0.5 * design.width, 0.0])
-    ext = np.array([design.length, design.width, design.height_base])
-    g = np.stack(np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij"), axis=-1)
-    X = lo + ext * g.reshape(-1, 3) / np.array([nx - 1, ny - 1, nz - 1])
-    W = grid_weights(design, n_cells, order, design.waypoints())
-    P = W @ X
-    exit_p = design.tendon_exit() - np.array([0.004, 0.0, 0.0])  # the exit site of `mjcf._add_finger`
-    f = (W.T @ tendon_forces(P, np.zeros_like(P), exit_p, tension, "frictionless")).ravel()
+    X, f = linear_tendon_load(design, handle, tension)
     free = np.arange(3 * ny * nz, K.shape[0])  # gi = 0 is clamped
     u = np.zeros(K.shape[0])
     u[free] = np.linalg.solve(K[np.ix_(free, free)], f[free])

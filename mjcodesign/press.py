@@ -28,7 +28,15 @@ from mjcodesign.finger import FingerDesign
 from mjcodesign.simulate import check_state
 from mjcodesign.stiffness import Stiffness
 
-__all__ = ["plate_pose", "plate_contacts", "force_distribution", "press_mujoco", "press_fem", "PLATE_GAP"]
+__all__ = [
+    "plate_pose",
+    "plate_box",
+    "plate_contacts",
+    "force_distribution",
+    "press_mujoco",
+    "press_fem",
+    "PLATE_GAP",
+]
 
 PLATE_GAP = 5e-4
 """Gap between the plate and the segment tops at rest [m]."""
@@ -108,7 +116,11 @@ def press_mujoco(
     model = FingerModel(model)
     opts = _rest_options(design, stiffness.finger(0), None)
     built = _build(design, stiffness, model, options=opts, tendon_mode=TendonMode.POINT_FORCE)
-    centre, R, half = plate_pose(design)
+    # The flex collides with a skin of its collision radius around its surface: the plate keeps the same
+    # gap from that skin as from the chain's and the FEM's surfaces (at the bare surface the skin would
+    # touch the plate from the start and load the proximal segments: 28.1 mN, distal share 0.49).
+    skin = float(built.model.flex_radius.max()) if model.is_flex else 0.0
+    centre, R, half = plate_pose(design, PLATE_GAP + skin)
     q = np.zeros(4)
     mujoco.mju_mat2Quat(q, R.ravel())
     built.spec.worldbody.add_geom(
@@ -183,6 +195,12 @@ def _settled(y: np.ndarray) -> bool:
     return bool(np.all(drift <= tol))
 
 
+def plate_box(m: mujoco.MjModel, d: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The plate of a press model as placed: centre [m], rotation (3, 3), half extents [m]."""
+    g = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "plate")
+    return d.geom_xpos[g].copy(), d.geom_xmat[g].reshape(3, 3).copy(), m.geom_size[g].copy()
+
+
 def plate_contacts(m: mujoco.MjModel, d: mujoco.MjData) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Contacts with the geom named ``plate``: points, forces on the finger, normal forces.
 
@@ -203,6 +221,83 @@ def plate_contacts(m: mujoco.MjModel, d: mujoco.MjData) -> tuple[np.ndarray, np.
         forces.append(f if c.geom[0] == plate else -f)
         normal.append(f6[0])
     return np.reshape(pts, (-1, 3)), np.reshape(forces, (-1, 3)), np.asarray(normal, dtype=float)
+
+
+_LCP_TOL = 1e-9
+"""Linear press: largest allowed penetration [m] and complementarity residual [m·N] of the contact
+solution (the NNLS active set solves it to round-off; 1 nm is far below the 0.5 mm gap)."""
+
+
+def press_linear(
+    design: FingerDesign, stiffness: Stiffness, model: str, tension: float, *, observe=None
+) -> dict:
+    """Flex finger pressed onto the plate by a linear static contact solve (small deflection).
+
+    ``K u = f + Gᵀλ`` with MuJoCo's compiled stiffness ``K`` (`mjcodesign.flex.assemble_stiffness`),
+    the tendon's first-order load ``f`` (`mjcodesign.flex.linear_tendon_load`) and unilateral
+    frictionless contacts at the flex surface vertices, which keep their collision radius from the
+    plate's lower face (gap ``s = s0 + G u ≥ 0``, normal force ``λ ≥ 0``, ``λ·s = 0``). Eliminating ``u``
+    leaves a strictly convex QP in ``λ`` (``A = G K⁻¹ Gᵀ``), solved exactly as a non-negative least
+    squares problem. The finger rises 0.5 mm onto the plate and barely bends, so the linear solve is the
+    press's own limit, not an approximation of a large deflection; a test checks it against the
+    trilinear flex's dynamics. ``observe(built, data, (points, forces), (centre, rotation, half))`` gets
+    the model with the displacement loaded, the contact forces on the finger [N] and the plate.
+    """
+    import scipy.linalg as sla
+    from scipy.optimize import nnls
+
+    from mjcodesign.flex import assemble_stiffness, grid_weights, linear_tendon_load, load_nodes
+    from mjcodesign.mjcf import FingerModel, SimOptions, TendonMode, build_finger
+
+    model = FingerModel(model)
+    if not model.is_flex:
+        raise ValueError(f"the linear press needs a flex model, not {model.value}")
+    built = build_finger(
+        design, stiffness, model, tendon_mode=TendonMode.POINT_FORCE, options=SimOptions(gravity=False)
+    )
+    m, h = built.model, built.fingers[0]
+    nx, ny, nz, n_cells, order = h.grid
+    K = assemble_stiffness(m, h)
+    _, f = linear_tendon_load(design, h, tension)
+    fid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_FLEX, h.flex)
+    a, nv = m.flex_vertadr[fid], m.flex_vertnum[fid]
+    verts = np.asarray(m.flex_vert[a : a + nv], dtype=float)  # rest positions, finger frame
+    skin = float(m.flex_radius[fid])
+    centre, R, half = plate_pose(design, PLATE_GAP + skin)
+    normal = R @ np.array([0.0, 0.0, -1.0])  # the lower face's outward normal, towards the finger
+    face = centre + half[2] * normal
+    local = (verts - face) @ R  # plate axes: candidates lie under the face's rectangle
+    under = (np.abs(local[:, 0]) <= half[0]) & (np.abs(local[:, 1]) <= half[1])
+    cand = np.flatnonzero(under)
+    Wv = grid_weights(design, n_cells, order, verts[cand])
+    G = np.kron(Wv, normal[None, :])  # row i: n · (displacement of vertex i)
+    s0 = (verts[cand] - face) @ normal - skin
+    free = np.arange(3 * ny * nz, K.shape[0])  # gi = 0 is clamped
+    Kf = sla.cho_factor(K[np.ix_(free, free)])
+    Gf = G[:, free]
+    KiG = sla.cho_solve(Kf, Gf.T)
+    A = Gf @ KiG
+    q = s0 + Gf @ sla.cho_solve(Kf, f[free])
+    # min ½λᵀAλ + qᵀλ, λ ≥ 0, with A = L Lᵀ: ½‖Lᵀλ + L⁻¹q‖² + const, an NNLS problem.
+    L = np.linalg.cholesky(A + 1e-12 * np.trace(A) / len(A) * np.eye(len(A)))
+    lam, _ = nnls(L.T, -sla.solve_triangular(L, q, lower=True), maxiter=50 * len(A))
+    gap = q + A @ lam
+    if gap.min() < -_LCP_TOL or abs(lam @ gap) > _LCP_TOL * max(lam.sum(), 1.0):
+        raise SimulationDiverged(
+            f"linear press contact solve did not converge: penetration {-gap.min():.2e} m, "
+            f"complementarity {abs(lam @ gap):.2e}"
+        )
+    u = np.zeros(K.shape[0])
+    u[free] = sla.cho_solve(Kf, f[free]) + KiG @ lam
+    if observe is not None:
+        d = mujoco.MjData(m)
+        load_nodes(m, d, h, u[free])
+        on = lam > 0
+        pts = verts[cand[on]] + (Wv[on] @ u.reshape(-1, 3))
+        observe(built, d, (pts, np.outer(lam[on], normal)), (centre, R, half))
+    out = force_distribution(verts[cand, 0], lam, design.length)
+    out["n_contacts"] = int(np.count_nonzero(lam > 0))
+    return out
 
 
 def press_fem(fem, tension: float, *, steps: int = 4, observe=None) -> dict:
