@@ -22,6 +22,7 @@ __all__ = [
     "add_parser",
     "add_bench_parser",
     "run",
+    "prepare_object",
     "run_bench",
     "grasp",
     "split_designs",
@@ -157,30 +158,31 @@ def grasp(
     cache_dir: Path | None = None,
     observer=None,
     label: str | None = None,
+    prepared: tuple | None = None,
 ) -> dict:
     """One grasp rollout; returns the JSON-ready outcome plus the object's facts.
 
-    ``observer`` (:mod:`mjcodesign.observe`) receives the rollout as ``label``.
+    ``observer`` (:mod:`mjcodesign.observe`) receives the rollout as ``label``. ``prepared``: the
+    result of :func:`prepare_object` for these ``source``, ``density`` and ``pose`` arguments, so that
+    several designs or backends on one object load, decompose and pose it once.
     """
     from mjcodesign.backends import get_backend
-    from mjcodesign.errors import DesignError, MeshError
+    from mjcodesign.errors import DesignError
     from mjcodesign.finger import FingerDesign
     from mjcodesign.mjcf import FingerModel
-    from mjcodesign.objects import CoacdSettings, convex_decomposition, load_object, parse_density
     from mjcodesign.scenario import GraspScenario, build_scene
     from mjcodesign.stiffness import Stiffness
 
     stiffness = Stiffness.parse(design)
-    rho = parse_density(density)
-    if Path(source).is_dir():
-        raise MeshError(f"{source} is a folder: grasp() takes one object (see object_sources)")
     if backend not in _BACKENDS:
         raise DesignError(f"unknown backend {backend!r}: choose from {', '.join(_BACKENDS)}")
     sim = get_backend(backend)
-    obj = load_object(source, rho, allow_open=allow_open, seed=seed)
-    convex_decomposition(obj, CoacdSettings(seed=seed), cache_dir=cache_dir)
+    if prepared is None:
+        prepared = prepare_object(
+            source, density, pose, seed=seed, allow_open=allow_open, cache_dir=cache_dir
+        )
+    obj, rho, gripper_pose = prepared
     finger_design = FingerDesign()
-    gripper_pose = _read_pose(pose, obj, finger_design, seed)
     kwargs = {k: v for k, v in (("tension", tension), ("lift", lift), ("impulse", impulse)) if v is not None}
     scenario = GraspScenario(**kwargs)
     scene = build_scene(obj, finger_design, stiffness, FingerModel(model), gripper_pose)
@@ -197,6 +199,28 @@ def grasp(
         palm_position=list(gripper_pose.position),
     )
     return out
+
+
+def prepare_object(
+    source: str,
+    density: str = "light",
+    pose: str = "auto",
+    *,
+    seed: int = 0,
+    allow_open: bool = False,
+    cache_dir: Path | None = None,
+) -> tuple:
+    """(object with its convex decomposition, density [kg/m³], gripper pose) for :func:`grasp`."""
+    from mjcodesign.errors import MeshError
+    from mjcodesign.finger import FingerDesign
+    from mjcodesign.objects import CoacdSettings, convex_decomposition, load_object, parse_density
+
+    rho = parse_density(density)
+    if Path(source).is_dir():
+        raise MeshError(f"{source} is a folder: grasp() takes one object (see object_sources)")
+    obj = load_object(source, rho, allow_open=allow_open, seed=seed)
+    convex_decomposition(obj, CoacdSettings(seed=seed), cache_dir=cache_dir)
+    return obj, rho, _read_pose(pose, obj, FingerDesign(), seed)
 
 
 def split_designs(text: str) -> list[str]:
@@ -269,7 +293,7 @@ def run(args: argparse.Namespace) -> int:
     sources = object_sources(args.object)
     recorder = open_recorder(args)
 
-    def one(source: str, variant: tuple, prefix: str = "") -> dict:
+    def one(source: str, variant: tuple, prefix: str = "", prepared=None) -> dict:
         design, backend, label, keys = variant
         out = grasp(
             source,
@@ -286,12 +310,24 @@ def run(args: argparse.Namespace) -> int:
             cache_dir=user_cache_dir(),
             observer=recorder,
             label=prefix + label,
+            prepared=prepared,
         )
         return {**keys, **out}
 
+    def prepare(source: str):
+        return prepare_object(
+            source,
+            args.density,
+            args.pose,
+            seed=args.seed,
+            allow_open=args.allow_open,
+            cache_dir=user_cache_dir(),
+        )
+
     try:
         if sources is None:
-            outs = [one(args.object, v) for v in variants]
+            prepared = prepare(args.object)
+            outs = [one(args.object, v, prepared=prepared) for v in variants]
             if len(outs) == 1:
                 _print(outs[0], args.json)
             elif args.json:
@@ -309,10 +345,17 @@ def run(args: argparse.Namespace) -> int:
             task = bar.add_task(f"grasp {args.object}", total=len(sources) * len(variants))
             for source in sources:
                 name = Path(source).stem if Path(source).suffix else source
+                bar.update(task, description=f"grasp {name} (loading)")
+                try:
+                    prepared = prepare(source)
+                except MjcodesignError as exc:  # every variant fails alike on an object that does not load
+                    results += [{**v[3], **_failed_object(source, exc)} for v in variants]
+                    bar.advance(task, len(variants))
+                    continue
                 for variant in variants:
                     bar.update(task, description=f"grasp {name} ({variant[2]})")
                     try:
-                        results.append(one(source, variant, f"{name}/"))
+                        results.append(one(source, variant, f"{name}/", prepared))
                     except MjcodesignError as exc:
                         results.append({**variant[3], **_failed_object(source, exc)})
                     bar.advance(task)

@@ -110,3 +110,24 @@ def test_mjwarp_flex_is_refused_with_one_line(tmp_path):
     # Warp itself may print a CUDA-driver notice on a CPU-only machine; ours is the one error line.
     lines = [ln for ln in r.stderr.splitlines() if ln.startswith("error:")]
     assert len(lines) == 1 and "flex" in lines[0] and "Traceback" not in r.stderr
+
+
+def test_several_designs_load_and_pose_the_object_once(tmp_path, monkeypatch, capsys):
+    import argparse
+
+    import mjcodesign.cli_grasp as cg
+    import mjcodesign.objects as objects
+
+    calls = []
+    load = objects.load_object
+    monkeypatch.setattr(objects, "load_object", lambda *a, **k: calls.append(a) or load(*a, **k))
+    monkeypatch.setattr(cg, "user_cache_dir", lambda: tmp_path / "cache")
+    box = _mesh(tmp_path, "box.stl", trimesh.creation.box(extents=(0.05, 0.05, 0.05)))
+    p = argparse.ArgumentParser()
+    cg._arguments(p)
+    args = p.parse_args(["--object", box, "--design", "soft,semi-rigid", "--impulse", "0", "--json"])
+    assert cg.run(args) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert [o["design"] for o in out] == ["soft", "semi-rigid"]
+    assert len(calls) == 1
+    assert out[0]["palm_position"] == out[1]["palm_position"]
