@@ -72,7 +72,7 @@ def view_command(
     ``port``: the viewer's (or the web viewer's gRPC server's) port; ``web_port``: the web viewer's
     HTTP port. None keeps Rerun's defaults (9876, 9090).
     """
-    cmd = [sys.executable, "-m", "rerun"]
+    cmd = _viewer_executable()
     if web:
         cmd += ["--serve-web", "--bind", _LOOPBACK]
         if web_port is not None:
@@ -80,6 +80,25 @@ def view_command(
     if port is not None:
         cmd += ["--port", str(port)]
     return cmd + [str(path)]
+
+
+def _viewer_executable() -> list[str]:
+    """The ``rerun`` binary of the installed ``rerun-sdk`` itself (``RERUN_CLI_PATH`` overrides it).
+
+    Not ``python -m rerun``: that wrapper runs the binary as its own child, which a signal to the wrapper
+    alone (a supervisor, a test) leaves running with its servers open.
+    """
+    import os
+
+    override = os.environ.get("RERUN_CLI_PATH")
+    if override:
+        return [override]
+    try:
+        import rerun_cli
+    except ImportError:
+        return [sys.executable, "-m", "rerun"]
+    exe = Path(rerun_cli.__file__).with_name("rerun.exe" if sys.platform.startswith("win") else "rerun")
+    return [str(exe)] if exe.is_file() else [sys.executable, "-m", "rerun"]
 
 
 def _cmd_view(args) -> int:
@@ -92,7 +111,17 @@ def _cmd_view(args) -> int:
         raise ObserverError(f"recording not found: {path}")
     if importlib.util.find_spec("rerun") is None:
         raise ObserverError("the Rerun viewer is not installed (pip install 'mjcodesign[viz]')")
-    return subprocess.call(view_command(path, web=args.web, port=args.port, web_port=args.web_port))
+    proc = subprocess.Popen(view_command(path, web=args.web, port=args.port, web_port=args.web_port))
+    try:
+        return proc.wait()
+    except KeyboardInterrupt:  # let the viewer close its servers, then go
+        proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        return 130
 
 
 def _cmd_bench_viz(args) -> int:

@@ -577,16 +577,25 @@ def test_view_web_serves_on_loopback_only(tmp_path):
 def test_spawn_streams_the_grasp_to_the_viewer_on_its_port(tmp_path):
     """``--spawn`` reuses a viewer already on ``--viewer-port``: here a headless gRPC proxy saving to a file."""
     pytest.importorskip("rerun")
-    exe = shutil.which("rerun")
-    if exe is None:
-        pytest.skip("the rerun CLI is not installed")
+    from mjcodesign.cli_viz import _viewer_executable
+
     port, saved = _free_port(), tmp_path / "viewer.rrd"
     server = subprocess.Popen(
-        [exe, "--serve-grpc", "--bind", "127.0.0.1", "--port", str(port), "--save", str(saved)],
+        [
+            *_viewer_executable(),
+            "--serve-grpc",
+            "--bind",
+            "127.0.0.1",
+            "--port",
+            str(port),
+            "--save",
+            str(saved),
+        ],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
         env={**os.environ, "RERUN_ANALYTICS": "0"},
+        start_new_session=True,
     )
     try:
         _wait_listening(port, server)
@@ -606,6 +615,8 @@ def test_spawn_streams_the_grasp_to_the_viewer_on_its_port(tmp_path):
         assert r.returncode == 0, r.stderr
     finally:
         _stop(server)
+        if server.poll() is None:
+            os.killpg(server.pid, 9)
     out = json.loads(r.stdout)
     data = _read(saved)
     for part in ("fingers/A", "fingers/B", "object", "tendon", "contacts", "outcome"):
