@@ -79,6 +79,12 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         help="mujoco or mjwarp; several comma-separated (mujoco,mjwarp) run side by side",
     )
     p.add_argument(
+        "--device",
+        choices=("auto", "cpu", "cuda"),
+        default="auto",
+        help="mjwarp: Warp device (auto: CUDA when present, else the CPU)",
+    )
+    p.add_argument(
         "--seed", type=int, default=0, help="seeds CoACD and egad-like shapes; MuJoCo is deterministic"
     )
     p.add_argument(
@@ -153,6 +159,7 @@ def grasp(
     tension: float | None = None,
     lift: float | None = None,
     backend: str = "mujoco",
+    device: str = "auto",
     seed: int = 0,
     allow_open: bool = False,
     cache_dir: Path | None = None,
@@ -176,7 +183,10 @@ def grasp(
     stiffness = Stiffness.parse(design)
     if backend not in _BACKENDS:
         raise DesignError(f"unknown backend {backend!r}: choose from {', '.join(_BACKENDS)}")
-    sim = get_backend(backend)
+    if backend == "mjwarp":
+        sim = get_backend(backend, device=_warp_device(device, FingerModel(model)))
+    else:
+        sim = get_backend(backend)
     if prepared is None:
         prepared = prepare_object(
             source, density, pose, seed=seed, allow_open=allow_open, cache_dir=cache_dir
@@ -199,6 +209,39 @@ def grasp(
         palm_position=list(gripper_pose.position),
     )
     return out
+
+
+_MJWARP_FLEX_NOTE = (
+    "note: MJWarp 4.0's flex does not track MuJoCo C's (flex nodes 0.70 mm apart after 13 steps on the "
+    "CPU; tests/test_mjwarp_parity.py): compare its flex outcomes with --backend mujoco"
+)
+
+
+def _warp_device(device: str, model) -> str:
+    """The Warp device for ``--device`` (auto: CUDA when present); flex needs CUDA.
+
+    Raises :class:`UnsupportedError` for flex on the CPU: one grasp step of the flex fingers took 3.3 s
+    on Warp's CPU device (a rollout ~20 min), so the command refuses rather than seem to hang.
+    """
+    from mjcodesign.errors import DesignError, UnsupportedError
+    from mjcodesign.warp_setup import import_warp
+
+    try:
+        wp = import_warp()
+    except ImportError as exc:
+        raise DesignError("the mjwarp backend needs mujoco-warp and warp-lang") from exc
+    has_cuda = wp.get_cuda_device_count() > 0
+    if device == "cuda" and not has_cuda:
+        raise UnsupportedError("--device cuda: Warp finds no CUDA device here")
+    chosen = "cuda" if device == "cuda" or (device == "auto" and has_cuda) else "cpu"
+    if model.is_flex:
+        if chosen == "cpu":
+            raise UnsupportedError(
+                "mjwarp flex on Warp's CPU device takes ~20 min a rollout (3.3 s a step): "
+                "use --backend mujoco, or a CUDA device"
+            )
+        print(_MJWARP_FLEX_NOTE, file=sys.stderr)
+    return chosen
 
 
 def prepare_object(
@@ -305,6 +348,7 @@ def run(args: argparse.Namespace) -> int:
             tension=args.tension,
             lift=args.lift,
             backend=backend,
+            device=args.device,
             seed=args.seed,
             allow_open=args.allow_open,
             cache_dir=user_cache_dir(),

@@ -3,10 +3,12 @@
 Per-world designs and poses (chain): ``jnt_stiffness``, ``dof_damping``, ``geom_solref`` and the mount
 and palm ``body_pos``/``body_quat`` are batched (``put_model(batch_sizes=...)``) and filled from
 :func:`with_stiffness` and :func:`scene_at_pose`; each world gets its own initial state and controls.
-Flex is refused with :class:`UnsupportedError`: MJWarp shares ``flex_stiffness`` across worlds (so a
-flex design would be one model batched over poses), and although MJWarp 4.0 runs this trilinear flex on
-Warp's CPU device, a 2-world grasp step took 3.3 s there (194 s of kernel compilation first), too slow
-for a parity test; it is untested on CUDA. The phase controls are copied into ``ctrl`` and
+Flex: MJWarp shares ``flex_stiffness`` across worlds, so a flex design is one model batched over poses
+(``run_poses``), and ``run_batch`` runs one model per design in turn; a batch of different flex designs
+is refused with :class:`UnsupportedError`. MJWarp 4.0 runs the trilinear flex on Warp's CPU device
+(28 s for 13 steps of 2 worlds with compiled kernels), but its flex does not track MuJoCo C's: flex
+nodes 0.056 mm apart after 6 steps and 0.70 mm after 13 (a strict expected failure in
+``tests/test_mjwarp_parity.py``); untested on CUDA. The phase controls are copied into ``ctrl`` and
 ``xfrc_applied`` before every step. The states at the steps the outcome reads are copied back and
 the outcome (contact wrench included) is evaluated by :func:`outcome_from_states` with MuJoCo C's
 ``mj_forward`` on those states, so both backends share one outcome definition. On the CPU the first
@@ -74,11 +76,13 @@ class MjwarpBackend:
     def run_batch(
         self, scene: GraspScene, scenario: GraspScenario, stiffnesses: list[Stiffness]
     ) -> list[Outcome]:
-        """One world per design; a world whose state turns non-finite is a failed outcome."""
+        """One world per design; a world whose state turns non-finite is a failed outcome.
+
+        Flex: MJWarp shares ``flex_stiffness`` across worlds, so every design is a model of its own, run
+        one after the other (each one world); batch a flex design over poses with :meth:`run_poses`.
+        """
         if scene.built.finger_model.is_flex:
-            raise UnsupportedError(
-                "mjwarp shares flex stiffness across worlds: use --backend mujoco for flex designs"
-            )
+            return [self.run_scenes([_flex_design(scene, s)], scenario)[0] for s in stiffnesses]
         return self.run_scenes([_with_model(scene, with_stiffness(scene, s)) for s in stiffnesses], scenario)
 
     def run_poses(
@@ -99,19 +103,16 @@ class MjwarpBackend:
 
         Without an observer only the states the outcome reads are copied back from the device; with
         one, every step's state is (a device-to-host copy per step), and world ``w`` is handed over
-        as ``labels[w]`` (default ``world{w}``).
-
-        Flex is refused (:class:`UnsupportedError`): MJWarp 4.0 runs this trilinear flex with the
-        discrete integrator on Warp's CPU device, but a 2-world grasp step took 3.3 s there after 194 s
-        of kernel compilation, so a rollout takes ~20 min and no parity test fits; it is untested on CUDA.
+        as ``labels[w]`` (default ``world{w}``). Flex scenes must share one design (see the module
+        docstring).
         """
         import mujoco_warp as mjw
         import warp as wp
 
-        if scenes[0].built.finger_model.is_flex:
+        flex0 = scenes[0].model.flex_stiffness
+        if any(not np.array_equal(sc.model.flex_stiffness, flex0) for sc in scenes[1:]):
             raise UnsupportedError(
-                "mjwarp flex is not supported here: on Warp's CPU device one 2-world grasp step took 3.3 s "
-                "(a rollout ~20 min), too slow to test parity with MuJoCo C; use --backend mujoco"
+                "mjwarp shares flex stiffness across worlds: batch one flex design over poses"
             )
         t0 = time.perf_counter()
         n = len(scenes)
@@ -169,6 +170,14 @@ class MjwarpBackend:
                 Rollout(labels[w], sc, scenario, sc.model, x0[w], states[w][:valid], ctrl[w], starts, outs[w])
             )
         return outs
+
+
+def _flex_design(scene: GraspScene, stiffness: Stiffness) -> GraspScene:
+    """The scene rebuilt with a flex design of its own (the flex stiffness is compiled into the model)."""
+    from mjcodesign.scenario import build_scene
+
+    b = scene.built
+    return build_scene(scene.obj, b.design, stiffness, b.finger_model, scene.pose, options=b.options)
 
 
 def _with_model(scene: GraspScene, m: mujoco.MjModel) -> GraspScene:
