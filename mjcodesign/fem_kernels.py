@@ -241,9 +241,10 @@ def integrate(
 ):
     """Semi-implicit Euler step with gravity, mass-proportional damping and ground contact.
 
-    Ground z = 0: a penalty pressure ke·depth + kd·(approach speed) [Pa] on the vertex's lumped area,
-    and Coulomb friction of coefficient μ, regularised by the tangential speed. Pinned vertices follow
-    ``x_pinned_in + offset_in`` (clamped base, driven for lift).
+    Ground z = 0: the penalty contact of :func:`_penalty` (pressure ke·depth + kd·approach speed on the
+    vertex's lumped area, Coulomb friction μ, viscous below a speed that keeps one explicit step from
+    reversing the sliding velocity). Pinned vertices follow ``x_pinned_in + offset_in`` (clamped base,
+    driven for lift).
     """
     i = wp.tid()
     if pinned_in[i] != 0:
@@ -257,14 +258,8 @@ def integrate(
     x = x_in[i]
     depth = -x[2]
     if depth > _f64(0.0):
-        vn = v[2]
-        fn = area_in[i] * (ke_in * depth - kd_in * wp.min(vn, _f64(0.0)))
-        fn = wp.max(fn, _f64(0.0))
-        vt = wp.vec3d(v[0], v[1], _f64(0.0))
-        speed = wp.length(vt)
-        # Regularised Coulomb: full μ·fn above 1 mm/s, viscous below (keeps the explicit step stable).
-        scale = friction_in * fn / wp.max(speed, _f64(1e-3))
-        f = f + wp.vec3d(_f64(0.0), _f64(0.0), fn) - vt * scale
+        up = wp.vec3d(_f64(0.0), _f64(0.0), _f64(1.0))
+        f = f + _penalty(v, up, depth, area_in[i], ke_in, kd_in, friction_in, m, dt_in)
     v_new = v + dt_in * f / m
     v_out[i] = v_new
     x_out[i] = x + dt_in * v_new

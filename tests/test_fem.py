@@ -116,6 +116,21 @@ def test_explicit_dynamics_free_fall_start(coarse):
     assert tip[-1, 2] - tip[0, 2] == pytest.approx(-0.5 * 9.81 * t**2, rel=0.02)
 
 
+_TOL_GROUND = 1e-4  # [m]: a soft finger's weight on ke = 1e7 Pa/m presses vertices in by ~10 µm
+
+
+def test_explicit_dynamics_rests_on_the_ground(coarse):
+    from mjcodesign.fem import FemDynamics
+
+    # Clamped 0.5 mm above the ground: the finger sags onto it and stays there (bounded friction).
+    dyn = FemDynamics(dt=min(FemDynamics().dt, coarse.stable_dt()))
+    tip = coarse.rollout(0.02, dynamics=dyn, position=(0.0, 0.0, 5e-4), frames=4)
+    rest = coarse.mesh.vertices[coarse.mesh.tip, 2]  # the tip vertex's height above the bottom face
+    assert np.all(np.isfinite(tip))
+    assert tip[-1, 2] == pytest.approx(rest, abs=_TOL_GROUND)
+    assert abs(tip[-1, 0] - tip[0, 0]) < _TOL_GROUND
+
+
 @pytest.fixture(scope="module")
 def soft_curl(wp):
     from mjcodesign.fem import FemFinger, FemOptions
