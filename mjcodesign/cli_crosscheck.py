@@ -236,7 +236,7 @@ def bench_fem(
     steps_per_s = dyn_steps / (time.perf_counter() - t0)
     load = fem.tendon_load(0.5)
     t0 = time.perf_counter()
-    x, _ = fem.solve_static(load, steps=2)
+    x = fem.solve_static(load, steps=2)
     t1 = time.perf_counter()
     g = np.zeros((fem.mesh.n_vertices, 3))
     g[fem.mesh.tip, 2] = 1.0

@@ -130,7 +130,7 @@ def press_fem(fem, tension: float, *, steps: int = 4) -> dict:
         J_c = sp.block_diag(list(-k_c), format="csr")
         return f_t + f_c, J_t + J_c
 
-    x, _ = fem.solve_static(load, steps=steps)
+    x = fem.solve_static(load, steps=steps)
     f_c, _ = contact.contact_static(x)
     fn = f_c @ (R @ np.array([0.0, 0.0, -1.0]))  # along the outward normal of the plate's lower face
     out = force_distribution(fem.mesh.vertices[:, 0], fn, fem.design.length)
