@@ -347,7 +347,9 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("crosscheck", help="run one case in every backend (MuJoCo models, Warp FEM)")
     p.add_argument("--scenario", choices=SCENARIOS, required=True)
     p.add_argument("--models", default="chain,flex,fem", help=f"comma-separated, from {_MODELS}")
-    p.add_argument("--design", default="paper-optimized", help="preset name or 11/22 comma-separated log E")
+    p.add_argument(
+        "--design", default="paper-optimized", help="preset name, random:SEED or 11/22 comma-separated log E"
+    )
     p.add_argument("--tensions", default=None, help="curl tensions [N], comma-separated (press: the first)")
     p.add_argument("--plot", default=None, help="curl: write tip paths and bend against tension to this PNG")
     # Quadratic tets, 2 spine layers: within 4% of Euler–Bernoulli on the cantilever (mjcodesign.fem).

@@ -6,8 +6,8 @@ its base face clamped. Two solvers share the Warp kernels of `mjcodesign.fem_ker
 * `FemFinger.solve_static`: Newton on the free vertices with load stepping. The tangent is assembled from
   per-tet 12×12 blocks (central differences of the analytic forces in a Warp kernel, float64) plus the
   Jacobian of configuration-dependent (tendon) loads, and factorised by SuperLU (scipy). A factorisation
-  is reused as the preconditioner of GMRES on the current tangent (products by central differences of
-  the forces) until GMRES stalls; only then is the tangent refactorised. The first step of every load
+  is reused as the preconditioner of GMRES on the current tangent until GMRES stalls; only then is the
+  tangent refactorised. The first step of every load
   increment follows the equilibrium path (tangent at the previous load). A trust region on the step
   (at most 10% of the finger length per vertex) keeps large tendon curls on track.
 * `FemFinger.simulate`: explicit semi-implicit Euler with substeps, gravity, Rayleigh damping and ground
