@@ -9,7 +9,7 @@ its base face clamped. Two solvers share the Warp kernels of `mjcodesign.fem_ker
   is reused as the preconditioner of GMRES on the current tangent until GMRES stalls; only then is the
   tangent refactorised. The first step of every load
   increment follows the equilibrium path (tangent at the previous load). A trust region on the step
-  (at most 10% of the finger length per vertex) keeps large tendon curls on track.
+  (at most 5 mm per vertex; 10% of the finger length on the path) keeps large tendon curls on track.
 * `FemFinger.simulate`: explicit semi-implicit Euler with substeps, gravity, Rayleigh damping and ground
   penalty contact with friction (`fem_kernels.integrate`), the clamped base driven along a path.
 
@@ -79,13 +79,19 @@ _NEWTON_RTOL = 1e-5
 absolute (≈0.1 m, ulp 3e-17 m), so K·ulp puts a floor near 1e-6 of a δ = 1%·L tip load on the soft
 finger; quadratic convergence reaches it in 3–5 iterations."""
 _NEWTON_MAX_ITER = 40
-_MAX_STEP_REL = 0.1
-"""Largest vertex move of one Newton step, as a fraction of the finger length (13.6 mm); larger steps are
-scaled down (trust region). A rigid turn by 0.1 rad, linearised, stretches the tip by L·0.1²/2 = 0.5% of
-L, which one Newton step removes (measured). The soft 0.02 N curl in 4 load steps predicts 7.7 mm a step."""
+_MAX_STEP = 0.005
+"""Largest vertex move of one Newton step [m]; larger steps are scaled down (trust region)."""
+_MAX_PREDICTOR_REL = 0.1
+"""Largest vertex move of the first step of a load increment, which follows the equilibrium path, as a
+fraction of the finger length (13.6 mm). A rigid turn by 0.1 rad, linearised, stretches the tip by
+L·0.1²/2 = 0.5% of L, which one Newton step removes (measured). The soft 0.02 N curl in 4 increments
+predicts 7.7 mm each; clipped to 5 mm it took 8 iterations per increment, not 5."""
 _GMRES_ITER = 8
 """GMRES iterations on a reused factorisation before the tangent is refactorised; where it preconditions
 well GMRES reaches ``_GMRES_RTOL`` in 4–6 (soft quadratic curl, measured)."""
+_GMRES_PROBE = 3
+"""GMRES iterations before its rate is judged: it stops when that rate cannot reach ``_GMRES_RTOL``
+within ``_GMRES_ITER`` (far from equilibrium the tangent moves too much for a reused factorisation)."""
 _GMRES_RTOL = 1e-6
 """A step's linear residual, as a fraction of the Newton residual. At 1e-4 the bending part of the
 residual left in the last step moved the tip by ~1e-13 m, which shifted the finite-difference check of
@@ -445,7 +451,8 @@ class FemFinger:
                 break
             # A trust region on the step, not a residual line search: bending loads are tiny against
             # the axial stiffness, so a good step can raise the residual a thousandfold.
-            step = min(1.0, _MAX_STEP_REL * self.design.length / max(np.abs(dx).max(), 1e-300))
+            radius = _MAX_PREDICTOR_REL * self.design.length if it == 0 and done is not None else _MAX_STEP
+            step = min(1.0, radius / max(np.abs(dx).max(), 1e-300))
             xt = x.copy().ravel()
             xt[free] += step * dx
             x = xt.reshape(-1, 3)
@@ -470,13 +477,20 @@ class FemFinger:
         op = spla.LinearOperator((n, n), matvec=lambda v: A @ lu.solve(v), dtype=float)
         count = [0]
 
-        def tick(_):
+        def tick(rel_residual):
+            # Give up once the mean rate so far cannot reach the tolerance within the budget.
             count[0] += 1
+            k = count[0]
+            if k >= _GMRES_PROBE and rel_residual ** (_GMRES_ITER / k) > _GMRES_RTOL:
+                raise _KrylovStalled
 
-        y, info = spla.gmres(
-            op, r, x0=r.copy(), rtol=_GMRES_RTOL, atol=0.0, restart=_GMRES_ITER, maxiter=1,
-            callback=tick, callback_type="pr_norm",
-        )  # fmt: skip
+        try:
+            y, info = spla.gmres(
+                op, r, x0=r.copy(), rtol=_GMRES_RTOL, atol=0.0, restart=_GMRES_ITER, maxiter=1,
+                callback=tick, callback_type="pr_norm",
+            )  # fmt: skip
+        except _KrylovStalled:
+            info = 1
         self.solve_stats["gmres_iterations"] += count[0]
         return lu.solve(y) if info == 0 else None
 
@@ -666,6 +680,10 @@ class FemFinger:
         g = self.log_e.grad.numpy().copy()
         tape.zero()
         return g
+
+
+class _KrylovStalled(Exception):
+    """GMRES cannot converge in its budget (raised from its callback to stop it)."""
 
 
 def _kernels():
