@@ -113,7 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
     beam = vsub.add_parser("beam", help="cantilever tip load against Euler–Bernoulli")
     beam.add_argument("--model", choices=_MODELS, default="chain")
     beam.add_argument(
-        "--design", default="paper-optimized", help="preset name or 11/22 comma-separated log E"
+        "--design", default="paper-optimized", help="preset name, random:SEED or 11/22 comma-separated log E"
     )
     beam.add_argument("--force", type=float, default=None, help="tip force [N]; default gives δ = 1%% of L")
     beam.add_argument(

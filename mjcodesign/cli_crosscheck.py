@@ -371,7 +371,7 @@ def bench_fem(
     steps_per_s = dyn_steps / (time.perf_counter() - t0)
     load = fem.tendon_load(0.5)
     t0 = time.perf_counter()
-    x, _ = fem.solve_static(load, steps=2)
+    x = fem.solve_static(load, steps=2)
     t1 = time.perf_counter()
     g = np.zeros((fem.mesh.n_vertices, 3))
     g[fem.mesh.tip, 2] = 1.0
@@ -491,7 +491,9 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser("crosscheck", help="run one case in every backend (MuJoCo models, Warp FEM)")
     p.add_argument("--scenario", choices=SCENARIOS, required=True)
     p.add_argument("--models", default="chain,flex,fem", help=f"comma-separated, from {_MODELS}")
-    p.add_argument("--design", default="paper-optimized", help="preset name or 11/22 comma-separated log E")
+    p.add_argument(
+        "--design", default="paper-optimized", help="preset name, random:SEED or 11/22 comma-separated log E"
+    )
     p.add_argument("--tensions", default=None, help="curl tensions [N], comma-separated (press: the first)")
     p.add_argument("--plot", default=None, help="curl: write tip paths and bend against tension to this PNG")
     # Quadratic tets, 2 spine layers: within 4% of Euler–Bernoulli on the cantilever (mjcodesign.fem).

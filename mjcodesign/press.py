@@ -318,7 +318,7 @@ def press_fem(fem, tension: float, *, steps: int = 4, observe=None) -> dict:
         J_c = sp.block_diag(list(-k_c), format="csr")
         return f_t + f_c, J_t + J_c
 
-    x, _ = fem.solve_static(load, steps=steps)
+    x = fem.solve_static(load, steps=steps)
     f_c, _ = contact.contact_static(x)
     if observe is not None:
         observe(x, f_c)

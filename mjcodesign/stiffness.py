@@ -28,6 +28,8 @@ PRESETS: dict[str, np.ndarray] = {
     "paper-optimized": np.array(_PAPER_OPT_A + _PAPER_OPT_B),
 }
 """Named designs, each 22 values of ln(E / Pa): finger A base to tip, then finger B."""
+_RANDOM = "random:"
+"""Prefix of a seeded random design in `Stiffness.parse`."""
 
 
 @dataclass(frozen=True)
@@ -75,9 +77,20 @@ class Stiffness:
         return cls(values, n_blocks=n_blocks)
 
     @classmethod
+    def random(cls, seed: int, n_blocks: int = _BLOCKS_PER_FINGER) -> Stiffness:
+        """A random design: 2·n log E uniform in the printable range, from ``np.random.default_rng(seed)``."""
+        rng = np.random.default_rng(seed)
+        return cls(rng.uniform(LOG_E_MIN, LOG_E_MAX, _N_FINGERS * n_blocks), n_blocks=n_blocks)
+
+    @classmethod
     def parse(cls, text: str, n_blocks: int = _BLOCKS_PER_FINGER) -> Stiffness:
-        """Parse a preset name or a comma-separated list of log E values."""
+        """Parse a preset name, ``random:SEED`` (`Stiffness.random`) or a comma-separated list of log E."""
         text = text.strip()
+        if text.startswith(_RANDOM):
+            seed = text[len(_RANDOM) :]
+            if not seed.isdigit():
+                raise StiffnessError(f"random design needs a non-negative integer seed, got {text!r}")
+            return cls.random(int(seed), n_blocks)
         if "," not in text and not _is_number(text):
             return cls.preset(text, n_blocks)
         try:

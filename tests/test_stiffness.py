@@ -36,3 +36,13 @@ def test_bad_stiffness_raises(values):
 def test_unknown_preset():
     with pytest.raises(StiffnessError):
         Stiffness.parse("rubbery")
+
+
+def test_parse_random_is_seeded_and_printable():
+    s = Stiffness.parse("random:0")
+    assert s == Stiffness.random(0) and s != Stiffness.parse("random:1")
+    # The tests' random designs: 22 values uniform in the printable range from default_rng(seed).
+    np.testing.assert_array_equal(s.log_e.ravel(), np.random.default_rng(0).uniform(LOG_E_MIN, LOG_E_MAX, 22))
+    for bad in ("random:", "random:x", "random:-1"):
+        with pytest.raises(StiffnessError):
+            Stiffness.parse(bad)
