@@ -112,6 +112,21 @@ def test_mjwarp_flex_is_refused_with_one_line(tmp_path):
     assert len(lines) == 1 and "flex" in lines[0] and "Traceback" not in r.stderr
 
 
+def test_mjwarp_cuda_without_a_gpu_exits_2_with_one_line(tmp_path):
+    wp = pytest.importorskip("warp")
+    pytest.importorskip("mujoco_warp")
+    from mjcodesign.warp_setup import import_warp
+
+    import_warp()
+    if wp.get_cuda_device_count() > 0:
+        pytest.skip("a CUDA device is present")
+    box = _mesh(tmp_path, "box.stl", trimesh.creation.box(extents=(0.05, 0.05, 0.05)))
+    r = _run(tmp_path, "--object", box, "--backend", "mjwarp", "--device", "cuda", "--json")
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "CUDA" in lines[0] and "Traceback" not in r.stderr
+
+
 def test_several_designs_load_and_pose_the_object_once(tmp_path, monkeypatch, capsys):
     import argparse
 
