@@ -79,6 +79,11 @@ _NEWTON_RTOL = 1e-5
 absolute (≈0.1 m, ulp 3e-17 m), so K·ulp puts a floor near 1e-6 of a δ = 1%·L tip load on the soft
 finger; quadratic convergence reaches it in 3–5 iterations."""
 _NEWTON_MAX_ITER = 40
+"""Newton iterations per load increment; `FemFinger.solve_static` then halves the increment and retries
+from the last converged state (the soft 0.02 N quadratic curl takes ~5 per increment; a 0.5 N
+linear-tet curl, about 1.4 rad in 2 increments, up to ~32: its trust-region-limited travel)."""
+_MAX_CUTBACK_FACTOR = 32
+"""Smallest load increment: the requested one divided by this (five halvings)."""
 _MAX_STEP = 0.005
 """Largest vertex move of one Newton step [m]; larger steps are scaled down (trust region)."""
 _MAX_PREDICTOR_REL = 0.1
@@ -412,20 +417,31 @@ class FemFinger:
         """Equilibrium positions [m] (n, 3) under ``load``; counts of the work in ``self.solve_stats``.
 
         The load is ramped in ``steps`` equal increments; each is solved by Newton to ``_NEWTON_RTOL``
-        (or a step below ``_STEP_TOL``·L) with a trust region on the step. Raises `SimulationDiverged`
-        otherwise. Without ``x0`` the first step of each increment takes the tangent at the previous load
+        (or a step below ``_STEP_TOL``·L) with a trust region on the step. An increment that does not
+        converge in ``_NEWTON_MAX_ITER`` iterations is halved and retried from the last converged state
+        (``solve_stats["cutbacks"]``), down to 1/``_MAX_CUTBACK_FACTOR`` of the first; past that it
+        raises `SimulationDiverged`. Without ``x0`` the first step of each increment takes the tangent at the previous load
         (from rest: the unloaded tangent), the derivative of the equilibrium path. With the tangent at the
         new load the tendon's follower stiffness is in, but not the compression it builds, and the soft
         finger's first step went half-way (8 Newton iterations per increment against 5, measured).
         """
         x = self.mesh.vertices.copy() if x0 is None else np.array(x0, dtype=float)
-        self.solve_stats = {"newton_iterations": 0, "factorisations": 0, "gmres_iterations": 0}
+        self.solve_stats = {"newton_iterations": 0, "factorisations": 0, "gmres_iterations": 0, "cutbacks": 0}
         lu = None
-        done = 0.0 if x0 is None else None
-        for s in range(1, steps + 1):
-            scale = s / steps
-            x, lu = self._newton(load, scale, done, x, lu)
-            done = scale
+        done = 0.0 if x0 is None else None  # load scale converged at x (None: x0's, unknown)
+        reached, inc = 0.0, 1.0 / steps
+        while reached < 1.0:
+            scale = min(1.0, reached + inc)
+            try:
+                x, lu = self._newton(load, scale, done, x, lu, max_iter=_NEWTON_MAX_ITER)
+            except SimulationDiverged:
+                # Cut the increment back and retry from the last converged state.
+                if inc / 2 < 1.0 / (steps * _MAX_CUTBACK_FACTOR):
+                    raise
+                inc /= 2
+                self.solve_stats["cutbacks"] += 1
+                continue
+            reached = done = scale
         return x
 
     def _residual(self, load, scale, x, free):
@@ -433,13 +449,16 @@ class FemFinger:
         r = (self.internal_forces(x) + scale * f_ext).ravel()[free]
         return r, f_ext, J
 
-    def _newton(self, load, scale, done, x, lu):
-        """Newton at load ``scale`` from ``x``, converged at load ``done`` (None: unknown)."""
+    def _newton(self, load, scale, done, x, lu, *, max_iter: int = _NEWTON_MAX_ITER):
+        """Newton at load ``scale`` from ``x``, converged at load ``done`` (None: unknown).
+
+        Returns the new positions (``x`` itself is left as it was) and the last factorisation.
+        """
         free = self.free_dof
         stats = self.solve_stats
         r, f_ext, J = self._residual(load, scale, x, free)
         ref = max(np.linalg.norm(scale * f_ext.ravel()[free]), 1e-12)
-        for it in range(_NEWTON_MAX_ITER):
+        for it in range(max_iter):
             A = self._free_tangent(x, J, done if it == 0 and done is not None else scale)
             dx = None if lu is None else self._krylov_step(A, r, lu)
             if dx is None:
@@ -463,7 +482,7 @@ class FemFinger:
                 return x, lu
         raise SimulationDiverged(
             f"FEM Newton did not converge: residual {np.linalg.norm(r) / ref:.2e} of the load after "
-            f"{_NEWTON_MAX_ITER} iterations"
+            f"{max_iter} iterations"
         )
 
     def _krylov_step(self, A: sp.csc_matrix, r: np.ndarray, lu) -> np.ndarray | None:
