@@ -50,9 +50,35 @@ def _row(scenario, model, design, metric, value, reference) -> dict:
 
 
 def default_tensions(stiffness) -> list[float]:
-    """Curl tensions [N] for finger A: soft-finger tensions scaled by its mean E (same curl range)."""
-    scale = float(np.exp(np.mean(stiffness.log_e[0]) - 13.5))
+    """Curl tensions [N] for finger A: the soft finger's, scaled by its linear tendon compliance.
+
+    The compliance S = Σ h_i / k_i (tendon lever h_i over block i's hinge stiffness k_i, the chain's
+    small-bend curl per newton) of the soft finger over this one's: every design then bends about as
+    far as the soft finger at its tensions (~0.25, 0.5 and 1 rad for the chain). For a uniform design
+    this is the ratio of moduli. (Scaling by the mean ln E instead sent random:0 to 1.1–2.4 rad, where
+    a quadratic FEM curl takes minutes to an hour.)
+    """
+    from mjcodesign.chain import hinge_stiffness
+    from mjcodesign.finger import FingerDesign
+
+    design = FingerDesign()
+    lever = design.waypoint_heights()
+
+    def compliance(young) -> float:
+        return float(np.sum(lever / hinge_stiffness(design, np.asarray(young, dtype=float))))
+
+    scale = compliance(np.full(design.n_blocks, np.exp(13.5))) / compliance(stiffness.finger(0))
     return [_CURL_TENSION_SOFT * scale * f for f in _CURL_TENSION_FRACTIONS]
+
+
+def press_tension(stiffness) -> float:
+    """Press (and `bench fem` grasp) tension [N]: half the soft finger's 1-rad curl tension, scaled.
+
+    Scaled by the ratio of mean ln E (paper-optimized: 0.2138 N); the free finger would curl far past
+    the plate.
+    """
+    scale = float(np.exp(np.mean(stiffness.log_e[0]) - 13.5))
+    return _PRESS_TENSION_FRACTION * _CURL_TENSION_SOFT * scale
 
 
 def crosscheck(
@@ -268,7 +294,7 @@ def _press_rows(models, design_name, stiffness, fem_options, tensions, shapes) -
     from mjcodesign.mjcf import FingerModel
     from mjcodesign.press import plate_pose, press_fem, press_linear, press_mujoco
 
-    tension = tensions[0] if tensions else _PRESS_TENSION_FRACTION * default_tensions(stiffness)[-1]
+    tension = tensions[0] if tensions else press_tension(stiffness)
     fem_options = replace(fem_options or FemOptions(), order=1)
     rows = []
     for routing in Routing:
@@ -400,7 +426,7 @@ def _bench_grasp(design, horizon: float) -> dict:
     fem = FemFinger(
         design, stiffness, options=FemOptions(h=_GRASP_MESH_H, spine_layers=2, waypoint_layers=False)
     )
-    tension = _PRESS_TENSION_FRACTION * default_tensions(stiffness)[-1]
+    tension = press_tension(stiffness)
     sim = grasp_scene(fem, tension)
     sim.run(10 * sim.dyn.dt, frames=1)  # compile and warm up
     t0 = time.perf_counter()

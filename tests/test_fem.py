@@ -248,12 +248,12 @@ def test_contact_gradient_matches_central_differences(dyn_finger):
 
 @pytest.fixture(scope="module")
 def press_results(wp):
-    from mjcodesign.cli_crosscheck import default_tensions
+    from mjcodesign.cli_crosscheck import press_tension
     from mjcodesign.fem import FemFinger, FemOptions
     from mjcodesign.press import press_fem, press_linear, press_mujoco
 
     stiffness = Stiffness.preset("paper-optimized")
-    tension = 0.5 * default_tensions(stiffness)[-1]
+    tension = press_tension(stiffness)
     out = {}
     for routing in Routing:
         design = FingerDesign(routing=routing)
