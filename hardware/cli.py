@@ -41,6 +41,12 @@ def _add_motor_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ids", type=_ids, default=(1, 2), help="tendon motor IDs (default 1,2)")
     p.add_argument("--min-ticks", type=int, default=-100, help="per-finger lower pull limit")
     p.add_argument("--max-ticks", type=int, default=1500, help="per-finger upper pull limit")
+    p.add_argument(
+        "--latency-ms",
+        type=float,
+        default=16.0,
+        help="USB-serial adapter latency [ms]; the reply window is bytes*t_byte + 2*latency + 2 ms",
+    )
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -113,6 +119,7 @@ def _grasp(args: argparse.Namespace) -> int:
         calibration=args.calib,
         settings=GraspSettings(workspace=ws, lift_m=args.lift, tendon_ticks=args.ticks),
         motors=_motors(args),
+        latency_ms=args.latency_ms,
         speed_factor=args.speed,
         grasp_force=args.force,
         realtime=not args.no_realtime,
@@ -133,7 +140,7 @@ def _grasp(args: argparse.Namespace) -> int:
 def _tendon(args: argparse.Namespace) -> int:
     from .tendon import TendonConfig, TendonMotors, raise_on_signals
 
-    config = TendonConfig(port=args.dxl, motors=_motors(args))
+    config = TendonConfig(port=args.dxl, motors=_motors(args), latency_ms=args.latency_ms)
     config.check_pull(args.ticks)  # refuse before opening the port
     with raise_on_signals(), TendonMotors(config) as motors:
         final = motors.pull(args.ticks)
@@ -149,7 +156,9 @@ def _status(args: argparse.Namespace) -> int:
     if args.dxl:
         from .tendon import TendonConfig, TendonMotors
 
-        with TendonMotors(TendonConfig(port=args.dxl, motors=_motors(args))) as motors:
+        with TendonMotors(
+            TendonConfig(port=args.dxl, motors=_motors(args), latency_ms=args.latency_ms)
+        ) as motors:
             pos = motors.slack
         print("tendon motors: " + ", ".join(f"ID {i} at {p} ticks" for i, p in pos.items()))
     if args.robot:

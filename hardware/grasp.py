@@ -62,6 +62,8 @@ class GraspJob:
     speed_factor: float = 0.1
     grasp_force: float = 20.0
     tendon_retries: int = 3
+    latency_ms: float = 16.0
+    """USB-serial adapter latency [ms] (`hardware.tendon.TendonConfig.latency_ms`)."""
     realtime: bool = True
     dry_run: bool = False
 
@@ -73,7 +75,12 @@ class GraspJob:
 
     def tendon_config(self) -> TendonConfig:
         """Tendon configuration (a placeholder port in a dry run, for limit checks only)."""
-        return TendonConfig(port=self.dxl or "(dry run)", motors=self.motors, retries=self.tendon_retries)
+        return TendonConfig(
+            port=self.dxl or "(dry run)",
+            motors=self.motors,
+            retries=self.tendon_retries,
+            latency_ms=self.latency_ms,
+        )
 
     def arm_config(self) -> ArmConfig:
         """Arm configuration."""

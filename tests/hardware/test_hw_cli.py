@@ -21,7 +21,12 @@ ROOT = Path(__file__).resolve().parents[2]
 pytest.importorskip("dynamixel_sdk")
 
 
+_LATENCY_MS = "100"  # adapter latency for the emulator: rides out a loaded host (as the library tests)
+
+
 def cli(*args, timeout=120):
+    if "--dxl" in args and "--latency-ms" not in args:
+        args = (*args, "--latency-ms", _LATENCY_MS)
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     return subprocess.run(
         [sys.executable, "-m", "hardware.cli", "hw", *args],
@@ -71,7 +76,8 @@ def test_lost_link_mid_move_refused_torque_off():
     # 1000 ticks take 1 s at 1000 tick/s; the link is back after 0.4 s, when torque goes off.
     with XL330Emulator(ids=(1, 2), speed_ticks_s=1000) as emu:
         emu.cut_link_on_goal(0.4)
-        line = refused(cli("tendon", "--dxl", emu.port, "--ticks", "1000"))
+        # The adapter's real 16 ms: 3 retries then span ~0.1 s, far inside the 0.4 s outage.
+        line = refused(cli("tendon", "--dxl", emu.port, "--ticks", "1000", "--latency-ms", "16"))
         assert "serial link to the tendon motors lost" in line
         assert not emu.torque(1) and not emu.torque(2)
         # Torque went off mid-move: the shaft stopped short of the goal.
@@ -118,9 +124,12 @@ def test_emulate_dxl_prints_port():
         stdout=subprocess.PIPE, text=True, env=env, cwd=ROOT,
     )  # fmt: skip
     try:
+        from hardware.tendon import _port_handler
+
         port = proc.stdout.readline().strip()
         assert port.startswith("/dev/")
-        handler = sdk.PortHandler(port)
+        # The SDK's own handler waits 16 ms of adapter latency; the emulator's poll is 20 ms (as above).
+        handler = _port_handler(sdk, port, float(_LATENCY_MS))
         assert handler.openPort() and handler.setBaudRate(57600)
         model, result, _ = sdk.PacketHandler(2.0).ping(handler, 2)
         handler.closePort()
