@@ -175,8 +175,6 @@ def _curl(design, stiffness, model: str, tension: float, *, observe=None) -> dic
     (`mjcodesign.flex.linear_curl`; its dynamics runs at 3.4 steps/s), valid for bends of a few tenths
     of a radian only. ``observe(built, data)`` as in `mjcodesign.validate.curl`.
     """
-    import mujoco
-
     from mjcodesign.mjcf import FingerModel, SimOptions, TendonMode, build_finger
     from mjcodesign.validate import curl
 
@@ -188,9 +186,7 @@ def _curl(design, stiffness, model: str, tension: float, *, observe=None) -> dic
     built = build_finger(design, stiffness, model, tendon_mode=TendonMode.POINT_FORCE, options=opts)
     r = linear_curl(built.model, built.fingers[0], design, tension)
     if observe is not None:
-        d = mujoco.MjData(built.model)
-        load_nodes(built.model, d, built.fingers[0], r["node_displacement"])
-        observe(built, d)
+        observe(built, load_nodes(built.model, built.fingers[0], r["node_displacement"]))
     return r
 
 
@@ -276,7 +272,9 @@ def _keep_rest(rest: dict, x: np.ndarray, f: np.ndarray) -> None:
 
 
 def _press_metrics(r: dict) -> dict[str, float]:
-    return {k: float(r[k]) for k in ("total_force_n", "distal_third_fraction", "centroid_over_length")}
+    from mjcodesign.press import PRESS_METRICS
+
+    return {k: float(r[k]) for k in PRESS_METRICS}
 
 
 def _beam_metrics(r: dict) -> dict[str, float]:
@@ -292,7 +290,7 @@ def _press_rows(models, design_name, stiffness, fem_options, tensions, shapes) -
     from mjcodesign.fem import FemFinger, FemOptions
     from mjcodesign.finger import FingerDesign, Routing
     from mjcodesign.mjcf import FingerModel
-    from mjcodesign.press import plate_pose, press_fem, press_linear, press_mujoco
+    from mjcodesign.press import PRESS_METRICS, plate_pose, press_fem, press_linear, press_mujoco
 
     tension = tensions[0] if tensions else press_tension(stiffness)
     fem_options = replace(fem_options or FemOptions(), order=1)
@@ -327,7 +325,7 @@ def _press_rows(models, design_name, stiffness, fem_options, tensions, shapes) -
                 except SimulationDiverged as exc:
                     print(f"note: {m} press ({routing.value}) gave no rest state: {exc}", file=sys.stderr)
         for m in res:
-            for metric in ("total_force_n", "distal_third_fraction", "centroid_over_length"):
+            for metric in PRESS_METRICS:
                 ref = res["fem"][metric] if "fem" in res else None
                 name = f"{metric}[{routing.value}]@{tension:.4g}N"
                 rows.append(_row("press", m, design_name, name, res[m][metric], ref))

@@ -359,8 +359,8 @@ def static_tip_solve(m: mujoco.MjModel, handle: FingerHandle, force: float) -> t
     return float(sum(u[i] * w for i, w in tip)), u[free]
 
 
-def load_nodes(m: mujoco.MjModel, d: mujoco.MjData, handle: FingerHandle, displacement: np.ndarray) -> None:
-    """Put a linear solve's free-node displacement [m] into ``d`` (slide joints) and run ``mj_forward``.
+def load_nodes(m: mujoco.MjModel, handle: FingerHandle, displacement: np.ndarray) -> mujoco.MjData:
+    """A new ``MjData`` of ``m`` holding a linear solve's free-node displacement [m], after ``mj_forward``.
 
     The free nodes (``gi >= 1``) are bodies with three slide joints each, in the order of the stiffness
     dofs (:func:`assemble_stiffness`), so their joints' ``qpos`` are the displacement itself.
@@ -375,8 +375,10 @@ def load_nodes(m: mujoco.MjModel, d: mujoco.MjData, handle: FingerHandle, displa
         adr += [int(m.jnt_qposadr[m.body_jntadr[b] + k]) for k in range(3)]
     if len(adr) != len(displacement):
         raise ValueError(f"{len(displacement)} displacements for {len(adr)} node dofs")
+    d = mujoco.MjData(m)
     d.qpos[adr] = displacement
     mujoco.mj_forward(m, d)
+    return d
 
 
 def grid_rest(design: FingerDesign, handle: FingerHandle) -> np.ndarray:

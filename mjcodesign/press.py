@@ -29,6 +29,7 @@ from mjcodesign.simulate import check_state
 from mjcodesign.stiffness import Stiffness
 
 __all__ = [
+    "PRESS_METRICS",
     "plate_pose",
     "plate_box",
     "plate_contacts",
@@ -44,6 +45,9 @@ _PLATE_HALF = (0.08, 0.02, 0.005)
 """Plate half extents [m]: longer and wider than the finger, 10 mm thick."""
 _PLATE_X0 = 0.02
 """Plate starts past the clamped base segment [m] (x in the finger frame)."""
+PRESS_METRICS = ("total_force_n", "distal_third_fraction", "centroid_over_length")
+"""What a press reports (:func:`force_distribution`): total normal force [N], distal-third share,
+centroid over the finger length."""
 _MIN_CONTACT_FORCE = 1e-9
 """Total normal force below this [N] means the finger never reached the plate."""
 
@@ -152,18 +156,17 @@ def _settle_on_plate(m, d, apply, length: float, max_time: float) -> dict:
     """
     n_win = max(1, int(round(_WINDOW / m.opt.timestep)))
     every = max(1, n_win // _SAMPLES_PER_WINDOW)
-    keys = ("total_force_n", "distal_third_fraction", "centroid_over_length")
     means: list[np.ndarray] = []
     while d.time < max_time:
         samples = []
-        for k in range(n_win):
+        for step in range(n_win):
             apply(d)
             mujoco.mj_step(m, d)
-            if (k + 1) % every == 0:
+            if (step + 1) % every == 0:
                 pts, _, fs = plate_contacts(m, d)
                 if fs.sum() > _MIN_CONTACT_FORCE:
                     r = force_distribution(pts[:, 0], fs, length)
-                    samples.append([r[k] for k in keys])
+                    samples.append([r[k] for k in PRESS_METRICS])
         check_state(d)
         if len(samples) < _SAMPLES_PER_WINDOW // 2:  # not (yet) on the plate for most of the window
             means.clear()
@@ -174,7 +177,9 @@ def _settle_on_plate(m, d, apply, length: float, max_time: float) -> dict:
             and len(means) >= _TREND_WINDOWS
             and _settled(np.array(means[-_TREND_WINDOWS:]))
         ):
-            out = dict(zip(keys, (float(v) for v in np.mean(means[-_TREND_WINDOWS:], axis=0)), strict=True))
+            out = dict(
+                zip(PRESS_METRICS, (float(v) for v in np.mean(means[-_TREND_WINDOWS:], axis=0)), strict=True)
+            )
             out["n_contacts"] = int(len(plate_contacts(m, d)[2]))
             out["settled_s"] = float(d.time)
             return out
@@ -290,8 +295,7 @@ def press_linear(
     u = np.zeros(K.shape[0])
     u[free] = sla.cho_solve(Kf, f[free]) + KiG @ lam
     if observe is not None:
-        d = mujoco.MjData(m)
-        load_nodes(m, d, h, u[free])
+        d = load_nodes(m, h, u[free])
         on = lam > 0
         pts = verts[cand[on]] + (Wv[on] @ u.reshape(-1, 3))
         observe(built, d, (pts, np.outer(lam[on], normal)), (centre, R, half))

@@ -128,8 +128,7 @@ def validate_beam(
 
         delta, u = static_tip_solve(built.model, built.fingers[0], force)
         if observe is not None:
-            d = mujoco.MjData(built.model)
-            load_nodes(built.model, d, built.fingers[0], u)
+            d = load_nodes(built.model, built.fingers[0], u)
     if observe is not None:
         observe(built, d)
     analytic = cantilever_tip_deflection(design, young, force)

@@ -8,6 +8,7 @@ import pytest
 
 from mjcodesign.femmesh import mesh_finger
 from mjcodesign.finger import FingerDesign, Routing
+from mjcodesign.press import PRESS_METRICS
 from mjcodesign.stiffness import Stiffness
 
 _TOL_BEAM = 0.05  # FEM vs Euler–Bernoulli tip deflection (issue 4)
@@ -278,12 +279,9 @@ def test_press_uniform_height_loads_the_tip(press_results):
         assert h[k]["n_contacts"] < p[k]["n_contacts"]
 
 
-_PRESS_METRICS = ("total_force_n", "distal_third_fraction", "centroid_over_length")
-
-
 def test_press_chain_matches_fem(press_results):
     for fem, chain, *_ in press_results.values():
-        for k in _PRESS_METRICS:
+        for k in PRESS_METRICS:
             assert chain[k] == pytest.approx(fem[k], rel=_TOL_CURL), k
 
 
@@ -297,7 +295,7 @@ def test_press_chain_matches_fem(press_results):
 @pytest.mark.parametrize("model", [2, 4], ids=["flex", "flex-quadratic-linear"])
 def test_press_flex_matches_fem(press_results, model):
     for res in press_results.values():
-        for k in _PRESS_METRICS:
+        for k in PRESS_METRICS:
             assert res[model][k] == pytest.approx(res[0][k], rel=_TOL_CURL), k
 
 
