@@ -24,6 +24,7 @@ __all__ = ["ArmConfig", "FrankaArm", "Workspace", "check_transform"]
 FRANKA_HAND_MAX_WIDTH = 0.08  # Franka Hand stroke [m], from the Franka datasheet
 _RIGID_TOL = 1e-4  # |R^T R - I| and |det R - 1| tolerance for a pose matrix
 _T = TypeVar("_T")
+_UNANSWERED: list[tuple[Any, Any]] = []  # hand connections with a command that never answered
 
 
 def check_transform(matrix: Any, what: str = "pose") -> np.ndarray:
@@ -83,6 +84,9 @@ class ArmConfig:
         gripper_speed: Franka Hand finger speed [m/s].
         grasp_force: Franka Hand grasp force [N].
         realtime: Require a realtime kernel (True on the real robot; False for franky-sim).
+        motion_timeout_s: Longest an arm or hand motion may take before it is stopped and
+            reported [s]. franky's blocking calls wait forever; a motion that neither
+            finishes nor fails (a lost reply, a stalled controller) must not hang the job.
     """
 
     host: str
@@ -91,6 +95,7 @@ class ArmConfig:
     gripper_speed: float = 0.05
     grasp_force: float = 20.0
     realtime: bool = True
+    motion_timeout_s: float = 60.0
 
     def __post_init__(self) -> None:
         if not self.host:
@@ -101,6 +106,8 @@ class ArmConfig:
             raise HardwareError(f"gripper speed must be in (0, 0.1] m/s, got {self.gripper_speed}")
         if not 0.0 < self.grasp_force <= 140.0:  # Franka Hand: 140 N continuous (datasheet)
             raise HardwareError(f"grasp force must be in (0, 140] N, got {self.grasp_force}")
+        if not 0.0 < self.motion_timeout_s < float("inf"):
+            raise HardwareError(f"motion timeout must be positive, got {self.motion_timeout_s} s")
 
 
 class FrankaArm:
@@ -137,8 +144,14 @@ class FrankaArm:
         self._robot.relative_dynamics_factor = self.config.speed_factor
 
     def close(self) -> None:
-        """Drop the connections (franky closes them when the objects go away)."""
-        self._robot = None
+        """Stop any motion still running, then drop the connections (franky closes them).
+
+        A `franky.Robot` destroyed while a motion winds down blocks in its destructor, so the
+        motion is stopped and joined first.
+        """
+        robot, self._robot = self._robot, None
+        if robot is not None:
+            self._halt(robot)
         self._gripper = None
 
     # ---- state ----
@@ -149,7 +162,7 @@ class FrankaArm:
 
     def width(self) -> float:
         """Present Franka Hand opening [m]."""
-        return float(self._call("read the hand width", lambda: self._gripper.width))
+        return float(self._call("read the hand width", lambda: self._hand().width))
 
     def has_errors(self) -> bool:
         """Whether the robot reports an error (reflex) that needs recovery."""
@@ -163,7 +176,18 @@ class FrankaArm:
         self.config.workspace.check(T, what)
         franky = self._franky
         motion = franky.CartesianMotion(franky.Affine(T), franky.ReferenceType.Absolute)
-        self._call(f"move to {what}", lambda: self._connected().move(motion), recover=True)
+        robot = self._connected()
+
+        def move() -> None:
+            robot.move(motion, asynchronous=True)
+            if not robot.join_motion(timeout=self.config.motion_timeout_s):
+                self._halt(robot)
+                raise HardwareError(
+                    f"arm: move to {what} did not finish within "
+                    f"{self.config.motion_timeout_s:g} s; the robot was stopped"
+                )
+
+        self._call(f"move to {what}", move, recover=True)
 
     def lift(self, height: float) -> None:
         """Move straight up by `height` along world z, keeping the orientation [m]."""
@@ -174,7 +198,10 @@ class FrankaArm:
     def set_width(self, width: float) -> None:
         """Move the Franka Hand fingers to `width` [m] without grasping."""
         self._check_width(width)
-        ok = self._call("move the hand", lambda: self._gripper.move(width, self.config.gripper_speed))
+        ok = self._call(
+            "move the hand",
+            lambda: self._hand_wait("move", self._hand().move_async(width, self.config.gripper_speed)),
+        )
         if not ok:
             raise HardwareError(f"Franka Hand did not reach width {width:.4f} m")
 
@@ -187,12 +214,15 @@ class FrankaArm:
         self._check_width(width)
         self._call(
             "grasp",
-            lambda: self._gripper.grasp(
-                width,
-                self.config.gripper_speed,
-                self.config.grasp_force,
-                epsilon_inner=FRANKA_HAND_MAX_WIDTH,
-                epsilon_outer=FRANKA_HAND_MAX_WIDTH,
+            lambda: self._hand_wait(
+                "grasp",
+                self._hand().grasp_async(
+                    width,
+                    self.config.gripper_speed,
+                    self.config.grasp_force,
+                    epsilon_inner=FRANKA_HAND_MAX_WIDTH,
+                    epsilon_outer=FRANKA_HAND_MAX_WIDTH,
+                ),
             ),
         )
 
@@ -209,6 +239,42 @@ class FrankaArm:
             raise HardwareError("arm is not connected")
         return self._robot
 
+    def _hand(self) -> Any:
+        if self._gripper is None:
+            raise HardwareError("Franka Hand is not connected")
+        return self._gripper
+
+    def _halt(self, robot: Any) -> None:
+        """Stop the arm's motion if one is running and wait until it has ended."""
+        errors = (self._franky.Exception, RuntimeError)
+        try:
+            if robot.join_motion(timeout=0.0):
+                return
+        except errors:  # the finished motion's own error, already reported by its caller
+            return
+        robot.stop()
+        try:
+            robot.join_motion(timeout=self.config.motion_timeout_s)
+        except errors:  # "Move command preempted": the stop itself
+            pass
+
+    def _hand_wait(self, what: str, future: Any) -> bool:
+        """The result of a Franka Hand command's future; stop the hand if it runs past the timeout."""
+        if not future.wait(self.config.motion_timeout_s):
+            self._gripper.stop()
+            if not future.wait(self.config.motion_timeout_s):
+                # The stopped command never answered (the real hand answers a stop; franky-sim's
+                # drops the reply). libfranka's destructor waits for that reply, so the connection
+                # is parked rather than destroyed here; it still holds up interpreter exit, which
+                # `hw selftest`'s watchdog bounds.
+                _UNANSWERED.append((self._gripper, future))
+                self._gripper = None
+            raise HardwareError(
+                f"arm: hand {what} did not finish within {self.config.motion_timeout_s:g} s; "
+                "the hand was stopped"
+            )
+        return bool(future.get())
+
     def _check_width(self, width: float) -> None:
         if not 0.0 <= width <= FRANKA_HAND_MAX_WIDTH:
             raise PoseError(f"hand width {width:.4f} m is outside [0, {FRANKA_HAND_MAX_WIDTH}] m")
@@ -219,6 +285,8 @@ class FrankaArm:
         errors = (franky.Exception, franky.GripperException, RuntimeError)
         try:
             return fn()
+        except HardwareError:
+            raise
         except errors as exc:
             if recover and self._robot is not None:
                 try:

@@ -89,6 +89,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
     st = sub.add_parser("selftest", help="whole grasp against franky-sim and the emulator")
     st.add_argument("--json", action="store_true", help="print the result as JSON")
+    st.add_argument(
+        "--timeout-s",
+        type=float,
+        default=150.0,
+        help="watchdog: past this, print every thread's stack and exit 1 (a hang in a peer) [s]",
+    )
 
     hw.set_defaults(func=run)
     return hw
@@ -185,9 +191,19 @@ def _emulate(args: argparse.Namespace) -> int:
 
 
 def _selftest(args: argparse.Namespace) -> int:
+    import faulthandler
+
     from .selftest import run_selftest
 
-    result = run_selftest(log=(lambda line: None) if args.json else print)
+    if not args.timeout_s > 0:
+        raise HardwareError(f"--timeout-s must be positive, got {args.timeout_s}")
+    # franky's and the SDK's blocking calls cannot be interrupted from Python; if a peer hangs
+    # in a way no motion or serial timeout catches, leave its stacks for the report, not a hang.
+    faulthandler.dump_traceback_later(args.timeout_s, exit=True)
+    try:
+        result = run_selftest(log=(lambda line: None) if args.json else print)
+    finally:
+        faulthandler.cancel_dump_traceback_later()
     print(json.dumps(result) if args.json else f"selftest ok: {result['ok']}")
     return 0 if result["ok"] else 1
 

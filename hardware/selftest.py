@@ -1,7 +1,10 @@
 """Protocol peers for `hw selftest` and the tests: franky-sim with a box, and the XL330 emulator.
 
-`franka_sim` runs franky-sim's MuJoCo simulator and `SimulationServer` in this process, bound to
-127.0.0.1 only; franky then speaks the libfranka protocol to it over loopback. `run_selftest`
+`franka_sim` runs franky-sim's MuJoCo simulator and `SimulationServer` in a child process, bound to
+127.0.0.1 only; franky then speaks the libfranka protocol to it over loopback, as to a robot on
+the network. (In one process, franky's C++ calls that wait on the robot while holding the GIL,
+such as destroying a `franky.Robot` whose motion is still winding down, starve the simulator's
+Python thread and deadlock.) `run_selftest`
 performs the whole ``hw grasp`` code path against both peers, starting from a recorded point
 cloud in a camera frame plus a calibration file.
 """
@@ -37,6 +40,8 @@ SIM_SPEED_FACTOR = 0.5  # franky dynamics factor in the simulator: fast, and sti
 LIFT_OK_FRACTION = 0.8  # the box may slip a little in the PD-controlled hand
 SETTLE_S = 0.5  # let the box come to rest in the hand before measuring its lift [s]
 _CLOUD_POINTS = 2000
+_SIM_START_S = 60.0  # spawn, import MuJoCo and compile the FR3 scene, on a loaded host [s]
+_SIM_REPLY_S = 10.0  # a state query to the simulator process [s]
 _IDS = (1, 2)
 # The selftest runs simulator, franky, SDK and emulator on one small machine; a serial reply can
 # miss the SDK's 34 ms timeout when the CPU is oversubscribed, so allow more attempts than on
@@ -58,23 +63,23 @@ class SimScene:
     """A running franky-sim: host to connect to, and ground-truth reads of the box."""
 
     host: str
-    sim: Any
+    _conn: Any
 
     def box_z(self) -> float:
         """Height of the box centre in the world [m]."""
-        return float(self.sim.data.xpos[self.sim.model.body("box").id][2])
+        self._conn.send("box_z")
+        if not self._conn.poll(_SIM_REPLY_S):
+            raise HardwareError("franky-sim did not answer a state query")
+        return float(self._conn.recv())
 
 
-@contextmanager
-def franka_sim(box: bool = True) -> Iterator[SimScene]:
-    """Run franky-sim (MuJoCo) with one FR3 and optionally a box, serving on 127.0.0.1."""
+def _serve_sim(conn: Any, box: bool) -> None:
+    """Child process of `franka_sim`: build and serve the simulator, answer box-height queries."""
     import xml.etree.ElementTree as ET
 
-    try:
-        import franky_sim
-        from franky_sim.mujoco_simulator import MujocoSimulator
-    except ImportError:
-        raise HardwareError("franky-sim is not installed (needed for the selftest)") from None
+    import franky_sim
+    from franky_sim.mujoco_simulator import MujocoSimulator
+
     sim = MujocoSimulator()
     sim.init()
     sim.add_robot()
@@ -88,12 +93,52 @@ def franka_sim(box: bool = True) -> Iterator[SimScene]:
         try:
             server.init()
         except OSError as exc:  # libfranka's fixed ports are taken (another simulator running?)
-            raise HardwareError(f"franky-sim cannot serve on {LOOPBACK}: {exc}") from exc
+            conn.send(("error", f"franky-sim cannot serve on {LOOPBACK}: {exc}"))
+            return
         server.run_async()
-        yield SimScene(LOOPBACK, sim)
+        conn.send(("ready", LOOPBACK))
+        box_id = sim.model.body("box").id if box else -1
+        while True:
+            try:
+                request = conn.recv()
+            except EOFError:  # the parent is gone
+                return
+            if request is None:
+                return
+            conn.send(float(sim.data.xpos[box_id][2]) if box_id >= 0 else float("nan"))
     finally:
         server.cleanup()
         sim.cleanup()
+
+
+@contextmanager
+def franka_sim(box: bool = True) -> Iterator[SimScene]:
+    """Run franky-sim (MuJoCo) with one FR3 and optionally a box in a child process, on 127.0.0.1."""
+    import importlib.util
+    import multiprocessing
+
+    if importlib.util.find_spec("franky_sim") is None:
+        raise HardwareError("franky-sim is not installed (needed for the selftest)")
+    ctx = multiprocessing.get_context("spawn")
+    parent, child = ctx.Pipe()
+    proc = ctx.Process(target=_serve_sim, args=(child, box), daemon=True)
+    proc.start()
+    try:
+        if not parent.poll(_SIM_START_S):
+            raise HardwareError(f"franky-sim did not start within {_SIM_START_S:g} s")
+        status, detail = parent.recv()
+        if status != "ready":
+            raise HardwareError(detail)
+        yield SimScene(detail, parent)
+    finally:
+        try:
+            parent.send(None)
+        except OSError:
+            pass
+        proc.join(timeout=5.0)
+        if proc.is_alive():
+            proc.terminate()
+            proc.join(timeout=5.0)
 
 
 def sample_box_surface(

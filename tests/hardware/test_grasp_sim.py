@@ -49,10 +49,6 @@ def cloud_files(tmp_path):
     return tmp_path / "cloud.ply", tmp_path / "calib.json"
 
 
-def joints(scene):
-    return scene.sim.data.qpos[:7].copy()
-
-
 def test_pick_and_lift(scene, cloud_files):
     cloud, calib = cloud_files
     with emulator_process(IDS) as port:
@@ -90,3 +86,55 @@ def test_lost_link_mid_grasp_no_lift_torque_off(scene, cloud_files):
             run_job(job, print)
         assert scene.box_z() == pytest.approx(z_box, abs=0.005)  # never lifted
         assert not any(torque_over_bus(port, IDS).values())
+
+
+def test_motion_past_its_timeout_is_stopped_and_reported(scene):
+    from hardware.arm import ArmConfig, FrankaArm
+
+    # A 10 cm move at 0.1 of the dynamics limits takes about a second; allow it 0.1 s.
+    with FrankaArm(ArmConfig(scene.host, realtime=False, motion_timeout_s=0.1)) as arm:
+        start = arm.pose()
+        target = start.copy()
+        target[2, 3] += 0.10
+        t0 = time.monotonic()
+        with pytest.raises(HardwareError, match=r"move to lift target did not finish within 0.1 s"):
+            arm.move_to(target, "lift target")
+        assert time.monotonic() - t0 < 2.0
+        time.sleep(0.5)  # stopped: it comes to rest well short of the target
+        assert arm.pose()[2, 3] - start[2, 3] < 0.08
+    # Leaving the block stopped and joined what was left; nothing hangs on the way out. (The hand's
+    # timeout is tested with a stand-in: franky-sim's hand never answers a stopped move, the real
+    # one does, and a connection with an unanswered command cannot be torn down cleanly.)
+
+
+def test_hand_command_past_its_timeout_is_stopped_and_reported():
+    from hardware.arm import ArmConfig, FrankaArm
+
+    class Future:  # a hand command that ends only when stopped, as the real hand's does
+        def __init__(self):
+            self.done = False
+
+        def wait(self, timeout):
+            return self.done
+
+        def get(self):
+            return False
+
+    class Hand:
+        def __init__(self):
+            self.future, self.stops = Future(), 0
+
+        def move_async(self, width, speed):
+            return self.future
+
+        def stop(self):
+            self.stops += 1
+            self.future.done = True
+
+    import franky
+
+    arm = FrankaArm(ArmConfig("stand-in", motion_timeout_s=0.01))
+    arm._franky, arm._gripper = franky, Hand()
+    with pytest.raises(HardwareError, match=r"hand move did not finish within 0.01 s; the hand was stopped"):
+        arm.set_width(0.03)
+    assert arm._gripper.stops == 1

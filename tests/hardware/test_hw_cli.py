@@ -139,9 +139,20 @@ def test_emulate_dxl_prints_port():
         proc.wait(timeout=10)
 
 
+def test_selftest_watchdog_dumps_stacks_instead_of_hanging():
+    pytest.importorskip("franky_sim")
+    proc = cli("selftest", "--json", "--timeout-s", "0.5", timeout=60)
+    assert proc.returncode == 1
+    assert proc.stderr.startswith("Timeout (0:00:00.500000)!"), proc.stderr[:300]
+    assert "run_selftest" in proc.stderr  # the main thread's stack, where it was
+    assert proc.stdout == ""
+    assert refused(cli("selftest", "--timeout-s", "0")) == "error: --timeout-s must be positive, got 0.0"
+
+
 def test_selftest_json():
     pytest.importorskip("franky_sim")
-    proc = cli("selftest", "--json", timeout=180)
+    # The selftest's own limits (60 s a motion, 150 s in all) come first; this one only backs them.
+    proc = cli("selftest", "--json", timeout=240)
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout.strip().splitlines()[-1])
     print(result)
