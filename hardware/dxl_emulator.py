@@ -461,10 +461,16 @@ def emulator_process(
             raise RuntimeError("the emulator process did not start")
         yield parent.recv()
     finally:
-        try:
-            parent.send(None)
-        except OSError:
-            pass
-        proc.join(timeout=2.0)
-        if proc.is_alive():
-            proc.terminate()
+        stop_child(parent, proc, grace_s=2.0)
+
+
+def stop_child(conn: object, proc: object, grace_s: float) -> None:
+    """Ask a peer's child process to stop (``None`` on its pipe); terminate it after ``grace_s``."""
+    try:
+        conn.send(None)  # type: ignore[attr-defined]
+    except OSError:
+        pass
+    proc.join(timeout=grace_s)
+    if proc.is_alive():
+        proc.terminate()
+        proc.join(timeout=grace_s)

@@ -25,7 +25,7 @@ import numpy as np
 from mjcodesign.errors import HardwareError
 
 from .camera import save_point_cloud, transform_points
-from .dxl_emulator import emulator_process
+from .dxl_emulator import emulator_process, stop_child
 from .grasp import GraspJob, run_job
 from .pipeline import GraspReport
 from .xl330 import ADDR
@@ -131,14 +131,7 @@ def franka_sim(box: bool = True) -> Iterator[SimScene]:
             raise HardwareError(detail)
         yield SimScene(detail, parent)
     finally:
-        try:
-            parent.send(None)
-        except OSError:
-            pass
-        proc.join(timeout=5.0)
-        if proc.is_alive():
-            proc.terminate()
-            proc.join(timeout=5.0)
+        stop_child(parent, proc, grace_s=5.0)
 
 
 def sample_box_surface(
