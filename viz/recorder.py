@@ -19,7 +19,9 @@ parts, the logged time points, the phase starts), which Rerun splits into one ch
 from __future__ import annotations
 
 import json
+import os
 import uuid
+import weakref
 from pathlib import Path
 
 import mujoco
@@ -128,12 +130,7 @@ class RerunRecorder:
         static.add(root, "Transform3D", "translation", [[_SPACING_DESIGNS * self._n_rollouts, 0.0, 0.0]])
         self._n_rollouts += 1
         steps = logged_steps(len(r.states), m.opt.timestep, r.starts, self.decimation)
-        edges = np.array([b.x1 for b in scene.built.design.blocks()[:-1]])
-        fingers = finger_surfaces(m, scene.built.fingers, edges)
-        rigid = [
-            mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in ("palm", "A_carriage", "B_carriage")
-        ]
-        gripper = body_geom_surface(m, rigid)
+        fingers, gripper = _gripper_surfaces(m, scene)
         timed = ColumnBatch(np.r_[0.0, (steps + 1) * m.opt.timestep], TIMELINE)
         self._geometry(static, timed, root, r, fingers, gripper, log_e)
         for name, names in _SERIES_NAMES.items():
@@ -290,6 +287,24 @@ class RerunRecorder:
         if self._scratch is None or self._scratch[0] is not m:
             self._scratch = (m, mujoco.MjData(m))
         return self._scratch[1]
+
+
+_SURFACES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _gripper_surfaces(m: mujoco.MjModel, scene) -> tuple[dict[str, Surface], Surface | None]:
+    """The fingers' and the gripper's rigid parts' surfaces of ``m``, built once per model.
+
+    They depend on the model's geometry only (vertices are placed per state from the geom poses), and
+    rollouts of one model (repeats, poses of one design) are recorded again and again.
+    """
+    if m not in _SURFACES:
+        edges = np.array([b.x1 for b in scene.built.design.blocks()[:-1]])
+        rigid = [
+            mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in ("palm", "A_carriage", "B_carriage")
+        ]
+        _SURFACES[m] = (finger_surfaces(m, scene.built.fingers, edges), body_geom_surface(m, rigid))
+    return _SURFACES[m]
 
 
 class _Frames:
@@ -467,10 +482,19 @@ def _safe(label: str) -> str:
 
 
 def _check_writable(path: Path) -> None:
+    """Refuse a recording path that cannot be written, before anything is simulated.
+
+    Asks the file system (the file, else its folder) instead of opening the file: truncating an
+    existing recording costs milliseconds, and the file sink truncates it again.
+    """
     if path.is_dir():
         raise OutputError(f"cannot write the recording {path}: it is a folder")
-    try:
-        with open(path, "wb"):
-            pass
-    except OSError as exc:
-        raise OutputError(f"cannot write the recording {path}: {exc.strerror or exc}") from exc
+    parent = path.parent if str(path.parent) else Path(".")
+    if path.exists():
+        ok, why = os.access(path, os.W_OK), "Permission denied"
+    elif not parent.is_dir():
+        ok, why = False, "No such file or directory"
+    else:
+        ok, why = os.access(parent, os.W_OK | os.X_OK), "Permission denied"
+    if not ok:
+        raise OutputError(f"cannot write the recording {path}: {why}")
