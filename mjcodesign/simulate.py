@@ -7,7 +7,7 @@ import numpy as np
 
 from mjcodesign.errors import SimulationDiverged
 
-__all__ = ["check_state", "reset_warnings"]
+__all__ = ["check_state", "has_warning", "reset_warnings"]
 
 _FATAL_WARNINGS = (
     mujoco.mjtWarning.mjWARN_INERTIA,  # also raised when the flex M+K solve under-converges
@@ -24,6 +24,11 @@ def reset_warnings(d: mujoco.MjData) -> None:
     """Clear the warning counters of ``d``."""
     for w in _FATAL_WARNINGS:
         d.warning[w].number = 0
+
+
+def has_warning(d: mujoco.MjData) -> bool:
+    """Whether ``d`` holds any of the warnings that fail a rollout."""
+    return any(d.warning[w].number > 0 for w in _FATAL_WARNINGS)
 
 
 def check_state(d: mujoco.MjData, context: str = "") -> None:

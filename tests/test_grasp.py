@@ -1,5 +1,7 @@
 """Grasp scenario on the chain model: static hold force, determinism, batched rollouts."""
 
+import re
+
 import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
@@ -172,6 +174,8 @@ def test_batch_flags_a_diverged_rollout(box_scene):
     outs = MujocoBackend(nthread=1).run_scenes([_scene_with(box_scene, bad), box_scene], scenario)
     assert outs[0].reason.startswith("diverged") and not outs[0].success
     assert not outs[1].reason.startswith("diverged")
+    # Re-run alone, step by step after the unchecked pass saw the warning: the first bad step is named.
+    assert re.fullmatch(r"diverged: step \d+: MuJoCo warning \w+ at t=.*", outs[0].reason), outs[0].reason
 
 
 def test_default_impulse_is_the_papers_at_real_scale():

@@ -31,7 +31,7 @@ from mjcodesign.scenario import (
     phase_controls,
     scene_at_pose,
 )
-from mjcodesign.simulate import check_state, reset_warnings
+from mjcodesign.simulate import check_state, has_warning, reset_warnings
 from mjcodesign.stiffness import Stiffness
 
 __all__ = ["GraspBackend", "MujocoBackend", "with_stiffness"]
@@ -141,6 +141,37 @@ def _initial_state(scene: GraspScene) -> np.ndarray:
     return x0
 
 
+def _step_all(
+    m: mujoco.MjModel,
+    d: mujoco.MjData,
+    x0: np.ndarray,
+    ctrl: np.ndarray,
+    states: np.ndarray,
+    *,
+    checked: bool,
+) -> tuple[int, SimulationDiverged] | None:
+    """Run every step from ``x0`` into ``states``; None if no warning was raised and all is finite.
+
+    Unchecked, a failure is ``(len(ctrl), error)`` (its step unknown); ``checked`` checks after every
+    step and stops at the first bad one, ``(step, error)``.
+    """
+    reset_warnings(d)
+    mujoco.mj_setState(m, d, x0, STATE_SPEC)
+    spec = control_spec()
+    for t in range(len(ctrl)):
+        mujoco.mj_setState(m, d, ctrl[t], spec)
+        mujoco.mj_step(m, d)
+        if checked:
+            try:
+                check_state(d, f"step {t}: ")
+            except SimulationDiverged as exc:
+                return t, exc
+        mujoco.mj_getState(m, d, states[t], STATE_SPEC)
+    if checked or (not has_warning(d) and np.isfinite(states).all()):
+        return None
+    return len(ctrl), SimulationDiverged("a warning or a non-finite state")
+
+
 class MujocoBackend:
     """MuJoCo C. ``nthread`` defaults to every core the process may use."""
 
@@ -156,25 +187,24 @@ class MujocoBackend:
         observer: Observer | None = None,
         label: str = "grasp",
     ) -> Outcome:
-        """Step the scenario one ``mj_step`` at a time, checking MuJoCo's warnings after every step.
+        """Step the scenario one ``mj_step`` at a time; MuJoCo's warnings are failures.
 
-        ``observer`` receives the full rollout (its states up to a divergence) under ``label``.
+        The steps run unchecked, and the warnings and the states are checked once at the end; if
+        either is bad, the same (deterministic) steps run again with a check after every one, which
+        names the first bad step. ``observer`` receives the full rollout (its states up to a
+        divergence) under ``label``.
         """
         t0 = time.perf_counter()
         m = model or scene.model
         ctrl, starts = phase_controls(scene, scenario)
         x0 = _initial_state(scene)
         d = mujoco.MjData(m)
-        mujoco.mj_setState(m, d, x0, STATE_SPEC)
         states = np.empty((len(ctrl), x0.size))
-        spec = control_spec()
-        try:
-            for t in range(len(ctrl)):
-                mujoco.mj_setState(m, d, ctrl[t], spec)
-                mujoco.mj_step(m, d)
-                check_state(d, f"step {t}: ")
-                mujoco.mj_getState(m, d, states[t], STATE_SPEC)
-        except SimulationDiverged as exc:
+        bad = _step_all(m, d, x0, ctrl, states, checked=False)
+        if bad is not None:  # again, step by step, to name the first bad step
+            bad = _step_all(m, d, x0, ctrl, states, checked=True)
+        if bad is not None:
+            t, exc = bad
             out = failed_outcome(f"diverged: {exc}", time.perf_counter() - t0)
             _observe(observer, label, scene, scenario, m, x0, states[:t], ctrl, starts, out)
             return out
