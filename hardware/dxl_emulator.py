@@ -456,6 +456,7 @@ def emulator_process(
         daemon=True,
     )
     proc.start()
+    child.close()  # the child's end lives in the child: its exit then reads as EOF here
     try:
         if not parent.poll(_CHILD_START_S):
             raise RuntimeError("the emulator process did not start")

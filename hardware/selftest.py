@@ -2,9 +2,8 @@
 
 `franka_sim` runs franky-sim's MuJoCo simulator and `SimulationServer` in a child process, bound to
 127.0.0.1 only; franky then speaks the libfranka protocol to it over loopback, as to a robot on
-the network. (In one process, franky's C++ calls that wait on the robot while holding the GIL,
-such as destroying a `franky.Robot` whose motion is still winding down, starve the simulator's
-Python thread and deadlock.) `run_selftest`
+the network, and the simulator keeps stepping whatever the client process does (franky's blocking
+C++ calls, the GIL, a stuck test). `run_selftest`
 performs the whole ``hw grasp`` code path against both peers, starting from a recorded point
 cloud in a camera frame plus a calibration file.
 """
@@ -123,10 +122,15 @@ def franka_sim(box: bool = True) -> Iterator[SimScene]:
     parent, child = ctx.Pipe()
     proc = ctx.Process(target=_serve_sim, args=(child, box), daemon=True)
     proc.start()
+    child.close()  # the child's end lives in the child: its exit then reads as EOF here
     try:
         if not parent.poll(_SIM_START_S):
             raise HardwareError(f"franky-sim did not start within {_SIM_START_S:g} s")
-        status, detail = parent.recv()
+        try:
+            status, detail = parent.recv()
+        except EOFError:
+            proc.join(timeout=5.0)
+            raise HardwareError(f"franky-sim exited while starting (exit code {proc.exitcode})") from None
         if status != "ready":
             raise HardwareError(detail)
         yield SimScene(detail, parent)

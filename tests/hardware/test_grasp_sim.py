@@ -138,3 +138,11 @@ def test_hand_command_past_its_timeout_is_stopped_and_reported():
     with pytest.raises(HardwareError, match=r"hand move did not finish within 0.01 s; the hand was stopped"):
         arm.set_width(0.03)
     assert arm._gripper.stops == 1
+
+
+def test_second_simulator_on_the_same_ports_is_refused(scene):
+    # libfranka's ports are fixed: the second simulator process reports it and exits cleanly.
+    with pytest.raises(HardwareError, match=r"franky-sim cannot serve on 127\.0\.0\.1"):
+        with franka_sim():
+            pass
+    assert scene.box_z() == pytest.approx(BOX_CENTRE[2], abs=0.005)  # the first one still answers
