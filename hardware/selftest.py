@@ -27,6 +27,7 @@ from .camera import save_point_cloud, transform_points
 from .dxl_emulator import emulator_process, stop_child
 from .grasp import GraspJob, run_job
 from .pipeline import GraspReport
+from .tendon import port_handler
 from .xl330 import ADDR
 
 __all__ = ["SimScene", "franka_sim", "run_selftest", "sample_box_surface"]
@@ -42,10 +43,12 @@ _CLOUD_POINTS = 2000
 _SIM_START_S = 60.0  # spawn, import MuJoCo and compile the FR3 scene, on a loaded host [s]
 _SIM_REPLY_S = 10.0  # a state query to the simulator process [s]
 _IDS = (1, 2)
-# The selftest runs simulator, franky, SDK and emulator on one small machine; a serial reply can
-# miss the SDK's 34 ms timeout when the CPU is oversubscribed, so allow more attempts than on
-# the real bus.
+# The selftest runs simulator, franky, SDK and emulator (three processes) on one small machine; a
+# serial reply can miss the SDK's window (34 ms at the real adapter's 16 ms latency) when the CPU is
+# oversubscribed, so give the emulator a 100 ms adapter latency (as the tests do) and more attempts
+# than on the real bus. A CI run lost the link with 16 ms and 10 attempts.
 _SELFTEST_RETRIES = 10
+_SELFTEST_LATENCY_MS = 100.0
 # A camera 0.6 m above the table looking down at the box, rotated about its optical axis.
 _T_BASE_CAMERA = np.array(
     [
@@ -157,7 +160,7 @@ def torque_over_bus(port: str, ids: tuple[int, ...]) -> dict[int, bool]:
     """Torque Enable of each motor, read over the serial bus with dynamixel-sdk."""
     import dynamixel_sdk as sdk
 
-    handler, packets = sdk.PortHandler(port), sdk.PacketHandler(2.0)
+    handler, packets = port_handler(sdk, port, _SELFTEST_LATENCY_MS), sdk.PacketHandler(2.0)
     if not (handler.openPort() and handler.setBaudRate(57600)):
         raise HardwareError(f"cannot open {port}")
     try:
@@ -192,6 +195,7 @@ def run_selftest(log: Callable[[str], None] = lambda line: None) -> dict:
                 calibration=calib_path,
                 speed_factor=SIM_SPEED_FACTOR,
                 tendon_retries=_SELFTEST_RETRIES,
+                latency_ms=_SELFTEST_LATENCY_MS,
                 realtime=False,
             )
             z0 = scene.box_z()

@@ -27,6 +27,7 @@ __all__ = [
     "FingerMotor",
     "TendonConfig",
     "TendonMotors",
+    "port_handler",
     "raise_on_signals",
     "PAPER_PULL_TICKS",
 ]
@@ -128,7 +129,7 @@ class TendonConfig:
             motor.check(ticks)
 
 
-def _port_handler(sdk: Any, port: str, latency_ms: float) -> Any:
+def port_handler(sdk: Any, port: str, latency_ms: float) -> Any:
     """The SDK's port handler with the reply timeout computed from ``latency_ms``, not its fixed 16 ms."""
 
     class _Port(sdk.PortHandler):
@@ -184,7 +185,7 @@ class TendonMotors:
         import dynamixel_sdk as sdk
 
         self._sdk = sdk
-        self._port = _port_handler(sdk, self.config.port, self.config.latency_ms)
+        self._port = port_handler(sdk, self.config.port, self.config.latency_ms)
         try:
             opened = self._port.openPort() and self._port.setBaudRate(self.config.baudrate)
         except Exception as exc:  # pyserial raises SerialException (an OSError) or ValueError

@@ -54,7 +54,7 @@ def test_pick_and_lift(scene, cloud_files):
     with emulator_process(IDS) as port:
         job = GraspJob(
             robot=scene.host, dxl=port, pose="auto", cloud=cloud, calibration=calib,
-            speed_factor=0.5, tendon_retries=10, realtime=False,
+            speed_factor=0.5, tendon_retries=10, realtime=False, latency_ms=100.0,
         )  # fmt: skip
         z0 = scene.box_z()
         lifted = []

@@ -124,12 +124,12 @@ def test_emulate_dxl_prints_port():
         stdout=subprocess.PIPE, text=True, env=env, cwd=ROOT,
     )  # fmt: skip
     try:
-        from hardware.tendon import _port_handler
+        from hardware.tendon import port_handler
 
         port = proc.stdout.readline().strip()
         assert port.startswith("/dev/")
         # The SDK's own handler waits 16 ms of adapter latency; the emulator's poll is 20 ms (as above).
-        handler = _port_handler(sdk, port, float(_LATENCY_MS))
+        handler = port_handler(sdk, port, float(_LATENCY_MS))
         assert handler.openPort() and handler.setBaudRate(57600)
         model, result, _ = sdk.PacketHandler(2.0).ping(handler, 2)
         handler.closePort()
