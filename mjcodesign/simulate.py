@@ -26,22 +26,27 @@ def reset_warnings(d: mujoco.MjData) -> None:
         d.warning[w].number = 0
 
 
+def _first_warning(d: mujoco.MjData):
+    """The first of the warnings that fail a rollout that ``d`` holds, or None."""
+    return next((w for w in _FATAL_WARNINGS if d.warning[w].number > 0), None)
+
+
 def has_warning(d: mujoco.MjData) -> bool:
     """Whether ``d`` holds any of the warnings that fail a rollout."""
-    return any(d.warning[w].number > 0 for w in _FATAL_WARNINGS)
+    return _first_warning(d) is not None
 
 
 def check_state(d: mujoco.MjData, context: str = "") -> None:
     """Raise :class:`SimulationDiverged` if MuJoCo warned or the state is not finite."""
-    for w in _FATAL_WARNINGS:
-        if d.warning[w].number > 0:
-            name = mujoco.mjtWarning(w).name.removeprefix("mjWARN_")
-            hint = {
-                "INERTIA": "under-converged M+K solve or singular inertia: raise iterations or lower the timestep",
-                "BADQACC": "acceleration blew up: lower the timestep",
-            }.get(name, "")
-            raise SimulationDiverged(
-                f"{context}MuJoCo warning {name} at t={d.time:.4f} s" + (f" ({hint})" if hint else "")
-            )
+    w = _first_warning(d)
+    if w is not None:
+        name = mujoco.mjtWarning(w).name.removeprefix("mjWARN_")
+        hint = {
+            "INERTIA": "under-converged M+K solve or singular inertia: raise iterations or lower the timestep",
+            "BADQACC": "acceleration blew up: lower the timestep",
+        }.get(name, "")
+        raise SimulationDiverged(
+            f"{context}MuJoCo warning {name} at t={d.time:.4f} s" + (f" ({hint})" if hint else "")
+        )
     if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
         raise SimulationDiverged(f"{context}state is not finite at t={d.time:.4f} s")

@@ -489,7 +489,7 @@ def _check_writable(path: Path) -> None:
     """
     if path.is_dir():
         raise OutputError(f"cannot write the recording {path}: it is a folder")
-    parent = path.parent if str(path.parent) else Path(".")
+    parent = path.parent  # Path("x.rrd").parent is Path(".")
     if path.exists():
         ok, why = os.access(path, os.W_OK), "Permission denied"
     elif not parent.is_dir():
