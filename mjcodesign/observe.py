@@ -4,13 +4,17 @@ An observer (the Rerun recorder of the top-level ``viz`` package, for one) recei
 rest shapes after they are computed, so it never slows or changes a simulation. Observers are found by
 name in the entry-point group ``mjcodesign.observers`` (``pyproject.toml``); the core never imports
 them, and :func:`load_observer` turns a missing one into an :class:`~mjcodesign.errors.ObserverError`.
+
+An observer that replays states may also offer :class:`Capture`: a backend that steps a rollout itself
+(MuJoCo C's ``run``) then hands it, in :attr:`Rollout.captured`, what the observer took from ``MjData``
+at the steps it asked for, instead of the observer recomputing them (``mj_forward`` per logged state).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -27,6 +31,7 @@ __all__ = [
     "Rollout",
     "Snapshot",
     "Observer",
+    "Capture",
     "observer_class",
     "load_observer",
 ]
@@ -60,6 +65,9 @@ class Rollout:
     scratch: mujoco.MjData | None = field(default=None, compare=False, repr=False)
     """An ``MjData`` of ``model`` that the simulator is done with (None if it has none to spare): an
     observer may overwrite it instead of allocating its own (the arena of a scene is ~15 MB)."""
+    captured: dict[int, Any] = field(default_factory=dict, compare=False, repr=False)
+    """What the observer's :meth:`Capture.capture` returned per step (-1: the initial state), for the
+    steps of :meth:`Capture.capture_steps` that the simulator could take; empty otherwise."""
 
     def __post_init__(self) -> None:
         if self.states.ndim != 2 or self.states.shape[1] != self.x0.size:
@@ -121,6 +129,26 @@ class Observer(Protocol):
 
     def close(self) -> None:
         """Flush and release the output (a file is complete afterwards)."""
+        ...
+
+
+@runtime_checkable
+class Capture(Protocol):
+    """Optional for an observer: take what it logs of a state while the simulator steps.
+
+    After ``mj_step`` with the controls of step t+1, ``MjData`` still holds the forward quantities
+    (kinematics, tendon paths, contacts, constraint and actuator forces) of state t: only the state
+    itself moved on. These are what ``mj_setState`` of ``states[t]``, the controls of step t+1 and
+    ``mj_forward`` give (up to the constraint solver's tolerance: the warm start differs), so a
+    simulator calls :meth:`capture` right after that step and the observer need not replay it.
+    """
+
+    def capture_steps(self, n_steps: int, timestep: float, starts: dict[str, int]) -> set[int]:
+        """The states to capture among ``-1`` (the initial state) ... ``n_steps - 1``."""
+        ...
+
+    def capture(self, model: mujoco.MjModel, data: mujoco.MjData) -> Any:
+        """Copy what is needed from ``data`` (which must not be changed)."""
         ...
 
 

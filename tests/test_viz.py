@@ -57,18 +57,45 @@ def _read(path: Path) -> dict[str, list]:
 
 
 def _column(batches: list, name: str) -> tuple[np.ndarray | None, list]:
-    """(sim_time [s] or None for static rows, values) of one component over an entity's chunks."""
+    """(sim_time [s] or None for static rows, values) of one component over an entity's chunks.
+
+    Rows where the component is null (nothing logged at that time point) are left out.
+    """
     times, values = [], []
     for b in batches:
         if name not in b.schema.names:
             continue
         vals = b.column(name).to_pylist()
-        values += vals
+        keep = [v is not None for v in vals]
+        vals = [v for v in vals if v is not None]
         if vals and isinstance(vals[0], list) and vals[0] and isinstance(vals[0][0], str):
-            values[-len(vals) :] = [v[0] for v in vals]  # one string per row (text components)
+            vals = [v[0] for v in vals]  # one string per row (text components)
+        values += vals
         if "sim_time" in b.schema.names:
-            times += [t.total_seconds() for t in b.column("sim_time").to_pylist()]
+            ts = b.column("sim_time").to_pylist()
+            times += [t.total_seconds() for t, k in zip(ts, keep, strict=True) if k]
     return (np.array(times) if times else None), values
+
+
+def _series(data, name: str, line: str) -> tuple[np.ndarray, np.ndarray]:
+    """(sim_time [s], values) of one line of a ``series/`` entity, in time order."""
+    names = _names(data, name)
+    t, v = _column(data[f"{_ROOT}/series/{name}"], "Scalars:scalars")
+    order = np.argsort(t)
+    return t[order], np.array(v)[order, names.index(line)]
+
+
+def _names(data, name: str) -> list[str]:
+    """The line names of a ``series/`` entity (logged once)."""
+    rows = [
+        v
+        for b in data[f"{_ROOT}/series/{name}"]
+        if "SeriesLines:names" in b.schema.names
+        for v in b.column("SeriesLines:names").to_pylist()
+        if v is not None
+    ]
+    assert len(rows) == 1, rows
+    return rows[0]
 
 
 def _rgb(row) -> set[tuple[int, int, int]]:
@@ -105,24 +132,28 @@ def recorded(tmp_path_factory):
 
 def test_recording_has_every_entity(recorded):
     path, _, _, data = recorded
-    for part in (
-        "fingers/A",
-        "fingers/B",
-        "gripper",
-        "object",
-        "object/mesh",
-        "ground",
-        "tendon",
-        "contacts",
-        "phases",
-        "outcome",
-        "series/tendon_force",
-        "series/object_height",
-        "series/contact_force",
-        "series/displacement",
-    ):
-        assert f"{_ROOT}/{part}" in data, part
-    assert "/legend" in data and "/legend/colorbar" in data
+    want = {
+        "": {"Transform3D:translation", "TextDocument:text"},  # the offset and the outcome
+        "/fingers": {"Mesh3D:vertex_positions", "Mesh3D:triangle_indices", "Mesh3D:vertex_colors"},
+        "/gripper": {"Mesh3D:vertex_positions", "Mesh3D:triangle_indices", "Mesh3D:vertex_colors"},
+        "/object": {"Transform3D:translation", "Transform3D:quaternion", "Mesh3D:vertex_positions"},
+        "/ground": {"Mesh3D:vertex_positions", "Mesh3D:triangle_indices"},
+        "/tendon": {"LineStrips3D:strips"},
+        "/contacts": {"Arrows3D:origins", "Arrows3D:vectors", "Arrows3D:colors"},
+        "/phases": {"TextLog:text"},
+        "/series/force": {"Scalars:scalars", "SeriesLines:names"},
+        "/series/object": {"Scalars:scalars", "SeriesLines:names"},
+    }
+    for part, columns in want.items():
+        got = {n for b in data[f"{_ROOT}{part}"] for n in b.schema.names}
+        assert columns <= got, (part, columns - got)
+    assert {"Boxes3D:centers", "Boxes3D:colors", "TextDocument:text"} <= {
+        n for b in data["/legend"] for n in b.schema.names
+    }
+    # One chunk per entity: the grasp is one record batch, the ground and meshes ride on it.
+    assert all(len(data[f"{_ROOT}{part}"]) == 1 for part in want)
+    assert _names(data, "force") == ["tendon A", "tendon B", "contact"]
+    assert _names(data, "object") == ["height", "displacement x", "displacement y", "displacement z"]
     _verify(path)
 
 
@@ -135,17 +166,20 @@ def test_time_points(recorded):
     expected = sorted(
         {0.0} | {(t + 1) * dt for t in range(_DECIMATION - 1, n, _DECIMATION)} | {lift * dt, n * dt}
     )
-    for part in ("fingers/A", "fingers/B", "object", "tendon", "contacts", "series/object_height"):
+    for part in ("fingers", "gripper", "object", "tendon", "contacts", "series/object", "series/force"):
         name = {
             "object": "Transform3D:translation",
             "tendon": "LineStrips3D:strips",
             "contacts": "Arrows3D:vectors",
-            "series/object_height": "Scalars:scalars",
+            "series/object": "Scalars:scalars",
+            "series/force": "Scalars:scalars",
         }.get(part, "Mesh3D:vertex_positions")
         t, v = _column(data[f"{_ROOT}/{part}"], name)
         assert len(v) == len(expected), part
         np.testing.assert_allclose(np.sort(t), expected, atol=1e-9)
     t, text = _column(data[f"{_ROOT}/phases"], "TextLog:text")
+    starts = np.cumsum([0, *_SCENARIO.phase_steps(dt).values()])[:-1] * dt
+    np.testing.assert_allclose(t, starts, atol=1e-9)  # each at its phase's first step
     assert [s.split()[0] for s in text] == [
         "settle",
         "close",
@@ -161,10 +195,13 @@ def test_finger_colours_follow_stiffness(recorded):
     from viz.colormap import stiffness_rgb
 
     _, scene, _, data = recorded
-    for i, letter in enumerate("AB"):
-        _, colours = _column(data[f"{_ROOT}/fingers/{letter}"], "Mesh3D:vertex_colors")
+    _, colours = _column(data[f"{_ROOT}/fingers"], "Mesh3D:vertex_colors")
+    _, pos = _column(data[f"{_ROOT}/fingers"], "Mesh3D:vertex_positions")
+    assert len(colours) == 1 and len(colours[0]) == len(pos[0])  # once, one per vertex
+    half = len(colours[0]) // 2  # the fingers are alike: A's vertices, then B's
+    for i, row in enumerate((colours[0][:half], colours[0][half:])):
         # Every block's colour, and nothing else (the 11 blocks of paper-optimized differ).
-        assert _rgb(colours[0]) == _want(stiffness_rgb(scene.built.stiffness.log_e[i]))
+        assert _rgb(row) == _want(stiffness_rgb(scene.built.stiffness.log_e[i]))
 
 
 def test_column_batch_matches_rerun_columns(tmp_path):
@@ -191,11 +228,19 @@ def test_column_batch_matches_rerun_columns(tmp_path):
     b.add("/ours", "Mesh3D", "vertex_positions", pos, [1, 2, 3])
     b.add("/ours", "Scalars", "scalars", times)
     b.add_once("/ours", "Mesh3D", "triangle_indices", tris)
+    b.add("/ours", "TextLog", "text", ["a", "c"], rows=[0, 2])
+    b.add("/ours", "Arrows3D", "vectors", pos[:3], [1, 2], rows=[1, 2])
+    with pytest.raises(ValueError, match="distinct"):
+        b.add("/ours", "TextLog", "text", ["a", "b"], rows=[1, 1])
     b.send(rec)
     rec.flush()
     rec.disconnect()
     data = _read(path)
     (ref,), (ours,) = data["/ref"], data["/ours"]
+    assert ours.column("TextLog:text").to_pylist() == [["a"], None, ["c"]]
+    vectors = ours.column("Arrows3D:vectors").to_pylist()  # float32
+    assert vectors[0] is None and [len(v) for v in vectors[1:]] == [1, 2]
+    np.testing.assert_allclose(np.concatenate(vectors[1:]), pos[:3], rtol=1e-7)
     for name in ("Mesh3D:vertex_positions", "Scalars:scalars"):
         mine, theirs = ours.schema.field(name), ref.schema.field(name)
         assert mine.type == theirs.type
@@ -203,6 +248,40 @@ def test_column_batch_matches_rerun_columns(tmp_path):
         assert ours.column(name).to_pylist() == ref.column(name).to_pylist()
     assert ours.column("Mesh3D:triangle_indices").to_pylist() == [tris.tolist(), None, None]
     _verify(path)
+
+
+def test_captured_states_equal_replayed_ones(tmp_path):
+    """What the recorder takes while MuJoCo steps equals what a replay (mj_setState + mj_forward) gives."""
+    pytest.importorskip("rerun")
+    import dataclasses
+
+    import mujoco
+
+    from viz.recorder import RerunRecorder, _gripper_surfaces, _Replay, logged_steps
+
+    scene = _scene()
+    got = []
+    rec = RerunRecorder(tmp_path / "unused.rrd", decimation=_DECIMATION)
+    rec.rollout = got.append  # keep the rollout instead of logging it
+    MujocoBackend(nthread=1).run(scene, _SCENARIO, observer=rec)
+    (r,) = got
+    steps = logged_steps(len(r.states), scene.model.opt.timestep, r.starts, _DECIMATION)
+    assert set(r.captured) == {-1, *steps[:-1].tolist()}  # the last state has no next step to take it
+    fingers, gripper = _gripper_surfaces(r.model, scene)
+    frames = [
+        _Replay(x, fingers, gripper, mujoco.MjData(r.model)).frames(steps)
+        for x in (r, dataclasses.replace(r, captured={}))
+    ]
+    for name in ("fingers", "gripper"):
+        np.testing.assert_array_equal(frames[0].surfaces[name], frames[1].surfaces[name])
+    np.testing.assert_array_equal(frames[0].object_pos, frames[1].object_pos)
+    np.testing.assert_array_equal(frames[0].series["object"], frames[1].series["object"])
+    # Contact forces: the constraint solver starts warm in the run, cold in the replay.
+    np.testing.assert_allclose(frames[0].series["force"], frames[1].series["force"], rtol=1e-6, atol=1e-6)
+    for (p0, f0, o0), (p1, f1, o1) in zip(frames[0].contacts, frames[1].contacts, strict=True):
+        np.testing.assert_array_equal(p0, p1)
+        np.testing.assert_array_equal(o0, o1)
+        np.testing.assert_allclose(f0, f1, atol=1e-6)
 
 
 def test_colormap_ends_and_monotone():
@@ -217,17 +296,14 @@ def test_colormap_ends_and_monotone():
 
 def test_scalars_match_outcome(recorded):
     _, scene, out, data = recorded
-    t_h, h = _column(data[f"{_ROOT}/series/object_height"], "Scalars:scalars")
-    h = np.array(h)[np.argsort(t_h), 0]
+    _, h = _series(data, "object", "height")
     # Outcome.lift_height = z_COM(end) - z_COM(t = 0), both logged.
     assert abs((h[-1] - h[0]) - out.lift_height) < _TOL_EXACT
-    t_d, disp = _column(data[f"{_ROOT}/series/displacement"], "Scalars:scalars")
-    disp = np.array(disp)[np.argsort(t_d)]
+    disp = np.column_stack([_series(data, "object", f"displacement {a}")[1] for a in "xyz"])
     np.testing.assert_allclose(disp[-1], out.displacement, atol=_TOL_EXACT)
     # Tension per finger: the motor's force equals its control, the full ramp after tightening.
-    t_f, f = _column(data[f"{_ROOT}/series/tendon_force"], "Scalars:scalars")
-    f = np.array(f)[np.argsort(t_f)]
-    t_f = np.sort(t_f)
+    t_f, f = _series(data, "force", "tendon A")
+    f = np.column_stack([f, _series(data, "force", "tendon B")[1]])
     dt = scene.model.opt.timestep
     steps = _SCENARIO.phase_steps(dt)
     hold0 = dt * sum(v for k, v in steps.items() if k in ("settle", "close", "tighten", "lift"))
@@ -236,8 +312,7 @@ def test_scalars_match_outcome(recorded):
     assert in_hold.sum() >= 2
     np.testing.assert_allclose(f[in_hold], _SCENARIO.tension, rtol=1e-12)
     # Contact force: |F| of the fingers on the object in the hold, against the outcome's mean.
-    t_c, c = _column(data[f"{_ROOT}/series/contact_force"], "Scalars:scalars")
-    c = np.array(c)[np.argsort(t_c), 0]
+    _, c = _series(data, "force", "contact")
     ref = np.linalg.norm(out.body_force[3:])
     assert ref > 0.4  # the 50 g box's weight is carried (m g = 0.49 N)
     np.testing.assert_allclose(c[in_hold], ref, rtol=_TOL_HOLD_FORCE)
@@ -267,10 +342,10 @@ def test_run_batch_hands_every_design_to_the_observer(tmp_path):
     data = _read(path)
     for d, out in zip(designs, outs, strict=True):
         # The batch's models carry the design in their hinge stiffness; colours are read back from it.
-        _, colours = _column(data[f"/designs/{d}/fingers/A"], "Mesh3D:vertex_colors")
+        _, colours = _column(data[f"/designs/{d}/fingers"], "Mesh3D:vertex_colors")
         assert _rgb(colours[0]) == _want(stiffness_rgb(Stiffness.preset(d).log_e[0, 0]))
-        t, h = _column(data[f"/designs/{d}/series/object_height"], "Scalars:scalars")
-        h = np.array(h)[np.argsort(t), 0]
+        t, h = _column(data[f"/designs/{d}/series/object"], "Scalars:scalars")
+        h = np.array(h)[np.argsort(t), 0]  # the first line: height
         assert abs((h[-1] - h[0]) - out.lift_height) < _TOL_EXACT
     _verify(path)
 
@@ -289,13 +364,13 @@ def test_flex_fingers_deform_and_are_coloured(tmp_path):
     MujocoBackend(nthread=1).run(scene, scenario, observer=rec, label="flex")
     rec.close()
     data = _read(path)
-    t, pos = _column(data["/designs/flex/fingers/A"], "Mesh3D:vertex_positions")
+    t, pos = _column(data["/designs/flex/fingers"], "Mesh3D:vertex_positions")
     first, last = np.array(pos[int(np.argmin(t))]), np.array(pos[int(np.argmax(t))])
     m = scene.model
-    assert first.shape == (m.flex_vertnum[0], 3)
+    assert first.shape == (m.flex_vertnum[0] + m.flex_vertnum[1], 3)  # both fingers' surfaces
     assert np.abs(last - first).max() > 1e-3  # the tendon curls the flex (and it closed)
-    _, colours = _column(data["/designs/flex/fingers/A"], "Mesh3D:vertex_colors")
-    got = _rgb(colours[0])
+    _, colours = _column(data["/designs/flex/fingers"], "Mesh3D:vertex_colors")
+    got = _rgb(colours[0][: m.flex_vertnum[0]])  # finger A
     assert got <= _want(stiffness_rgb(scene.built.stiffness.log_e[0]))
     assert len(got) >= 8  # most of the 11 blocks own a surface vertex
     _verify(path)
@@ -443,7 +518,7 @@ def test_cli_several_designs_side_by_side(tmp_path):
     for d in designs:
         _, tr = _column(data[f"/designs/{d}"], "Transform3D:translation")
         offsets.append(tuple(np.ravel(tr[0])))
-        _, doc = _column(data[f"/designs/{d}/outcome"], "TextDocument:text")
+        _, doc = _column(data[f"/designs/{d}"], "TextDocument:text")
         logged = json.loads(doc[0])
         out = next(o for o in outs if o["design"] == d)
         assert logged["success"] == out["success"] and logged["displacement"] == out["displacement"]
@@ -619,9 +694,9 @@ def test_spawn_streams_the_grasp_to_the_viewer_on_its_port(tmp_path):
             os.killpg(server.pid, 9)
     out = json.loads(r.stdout)
     data = _read(saved)
-    for part in ("fingers/A", "fingers/B", "object", "tendon", "contacts", "outcome"):
+    for part in ("fingers", "gripper", "object", "tendon", "contacts", "phases"):
         assert f"{_ROOT}/{part}" in data, part
-    _, doc = _column(data[f"{_ROOT}/outcome"], "TextDocument:text")
+    _, doc = _column(data[_ROOT], "TextDocument:text")
     assert json.loads(doc[0])["success"] == out["success"]
 
 

@@ -142,42 +142,52 @@ class ColumnBatch:
             )
             self._arrays.append(pa.array(ns, type=pa.duration("ns")))
 
-    def add(self, entity: str, archetype: str, field: str, items, lengths=None) -> None:
+    def add(self, entity: str, archetype: str, field: str, items, lengths=None, rows=None) -> None:
         """Add ``rr.{archetype}``'s ``field`` of ``entity``: all rows' values in ``items`` (first axis).
 
-        ``lengths``: how many values each row holds, shape (n_rows,); default: all of them in the one
-        static row, or one per row on a timeline.
+        ``rows``: the rows (time points) that hold values, ascending; the others are null (nothing
+        logged there: a latest-at query finds the row before). Default: every row. ``lengths``: how
+        many values each of these rows holds; default: all of them in the one static row, or one per
+        row on a timeline.
         """
         column, t = _field(entity, archetype, field)
+        n = self.n_rows if rows is None else len(rows)
         if lengths is None:
-            lengths = [len(items)] if self.timeline is None else np.ones(self.n_rows, dtype=int)
-        if len(lengths) != self.n_rows:
-            raise ValueError(f"{entity} {field}: {len(lengths)} rows, the batch has {self.n_rows}")
-        self._fields.append(column)
-        self._arrays.append(_lists(t, lengths, items))
-
-    def add_once(self, entity: str, archetype: str, field: str, items) -> None:
-        """Add ``field`` of ``entity`` at the first time point only (null cells after it).
-
-        What never changes over a rollout (triangles, colours, series names) then shares the entity's
-        chunk of per-step data instead of a static chunk of its own: each chunk costs Rerun ~0.2 ms of
-        CPU, and a latest-at query from the first time point on finds the values all the same.
-        """
-        if self.timeline is None:
-            raise ValueError("add_once needs a timeline; use add for static data")
-        column, t = _field(entity, archetype, field)
-        values = _items(t.value_type, items)
-        offsets = np.full(self.n_rows + 1, len(values), dtype=np.int32)
-        offsets[0] = 0
+            lengths = [len(items)] if self.timeline is None else np.ones(n, dtype=int)
+        if len(lengths) != n:
+            raise ValueError(f"{entity} {field}: {len(lengths)} rows of values for {n} rows")
+        if rows is None:
+            self._arrays.append(_lists(t, lengths, items))
+            self._fields.append(column)
+            return
+        per_row = np.zeros(self.n_rows, dtype=np.int32)
+        per_row[rows] = lengths
         valid = np.zeros(self.n_rows, dtype=bool)
-        valid[0] = True
+        valid[rows] = True
+        if valid.sum() != n:
+            raise ValueError(f"{entity} {field}: rows must be distinct and below {self.n_rows}")
+        offsets = np.zeros(self.n_rows + 1, dtype=np.int32)
+        per_row.cumsum(out=offsets[1:])
+        values = _items(t.value_type, items)
+        if len(values) != offsets[-1]:
+            raise ValueError(f"{len(values)} values for rows of {offsets[-1]} in all")
         bits = pa.py_buffer(np.packbits(valid, bitorder="little"))
-        self._fields.append(column)
         self._arrays.append(
             pa.Array.from_buffers(
-                t, self.n_rows, [bits, pa.py_buffer(offsets)], null_count=self.n_rows - 1, children=[values]
+                t, self.n_rows, [bits, pa.py_buffer(offsets)], null_count=self.n_rows - n, children=[values]
             )
         )
+        self._fields.append(column)
+
+    def add_once(self, entity: str, archetype: str, field: str, items) -> None:
+        """Add ``field`` of ``entity`` at the first row only (null after it); the one row if static.
+
+        What never changes over a rollout (meshes, colours, names, the outcome) then shares the
+        entity's chunk of per-step data, and the static parts one record batch with it: each chunk
+        and each batch costs Rerun ~0.2 ms of CPU, and a latest-at query from the first time point on
+        finds the values all the same.
+        """
+        self.add(entity, archetype, field, items, [len(items)], rows=None if self.timeline is None else [0])
 
     def send(self, rec: rr.RecordingStream) -> None:
         """Send every column added (one chunk per entity); nothing if none were."""

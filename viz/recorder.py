@@ -1,19 +1,21 @@
 """The Rerun observer: grasp rollouts and crosscheck rest shapes, side by side in one recording.
 
-A grasp rollout is replayed from its states (``mj_setState`` + ``mj_forward`` at the logged steps) and
-logged on the ``sim_time`` timeline [s] in three Arrow record batches (:mod:`viz.batch`: the static
-parts, the logged time points, the phase starts), which Rerun splits into one chunk per entity:
+A grasp rollout is logged on the ``sim_time`` timeline [s] in one Arrow record batch (:mod:`viz.batch`),
+which Rerun splits into one chunk per entity. Its logged states come from the simulator while it
+stepped (:class:`mjcodesign.observe.Capture`), or are replayed from the states (``mj_setState`` +
+``mj_forward``) when it could not take them (batched rollouts):
 
-* ``/designs/{label}``: a static offset (runs side by side along world x), ``ground``, ``object``
-  (pose per step, mesh static), ``fingers/A``, ``fingers/B`` (deformed surface per step, coloured per
-  block by stiffness; triangles and colours at the first time point), ``gripper`` (palm and
-  carriages), ``tendon`` (native wrap path per step),
-  ``contacts`` (force arrows), ``phases`` (a text log entry at every phase start), ``outcome``;
-* ``/designs/{label}/series/``: ``tendon_force`` (fingers A, B) [N], ``object_height`` (COM) [m],
-  ``contact_force`` (norm of the fingers' force on the object) [N], ``displacement`` (object COM
-  relative to the palm, palm frame, since the grasp: x, y, z) [m];
+* ``/designs/{label}``: the offset (runs side by side along world x) and the outcome (JSON text);
+  ``ground``; ``object`` (pose per step, its mesh); ``fingers`` (both fingers' deformed surfaces per
+  step, A's vertices first, coloured per block by stiffness); ``gripper`` (palm and carriages);
+  ``tendon`` (native wrap path per step); ``contacts`` (force arrows); ``phases`` (a text log entry at
+  every phase start). Meshes, colours and names ride on the first time point.
+* ``/designs/{label}/series/``: ``force`` [N] (lines ``tendon A``, ``tendon B``: each finger's
+  tendon tension; ``contact``: the norm of the fingers' force on the object) and ``object`` [m]
+  (``height``: COM height; ``displacement x|y|z``: object COM relative to the palm, in the palm
+  frame, since the grasp).
 * ``/crosscheck/{label}``: a rest shape (``finger``, ``tendon``, ``metrics``), static;
-* ``/legend``: the stiffness colour scale and every design's ln E (``/legend/colorbar`` in 3-D).
+* ``/legend``: every design's ln E (text) and the stiffness colour scale's swatches (boxes in 3-D).
 """
 
 from __future__ import annotations
@@ -55,7 +57,11 @@ _GROUND_RGB = (60, 80, 100)
 _FINGER_CONTACT_RGB = (230, 60, 200)
 _OTHER_CONTACT_RGB = (150, 150, 150)
 _TENDON_RGB = (30, 30, 30)
-_SERIES_NAMES = {"tendon_force": ["finger A", "finger B"], "displacement": ["x", "y", "z"]}
+_SERIES_NAMES = {
+    "force": ["tendon A", "tendon B", "contact"],
+    "object": ["height", "displacement x", "displacement y", "displacement z"],
+}
+"""Lines of each ``series/`` entity, in column order (:meth:`_Replay.frames`)."""
 
 
 def logged_steps(n_steps: int, dt: float, starts: dict[str, int], decimation: int | None) -> np.ndarray:
@@ -99,81 +105,116 @@ class RerunRecorder:
         self.path = Path(path) if path is not None else None
         if self.path is not None:
             _check_writable(self.path)
-        self.rec = rr.RecordingStream(application_id, recording_id=recording_id or str(uuid.uuid4()))
-        sinks = []
-        if spawn:
-            self.rec.spawn(port=port, connect=False)
-            sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{port}/proxy"))
-        if self.path is not None:
-            sinks.append(rr.FileSink(str(self.path)))
-        self.rec.set_sinks(*sinks)
+        self._ids = (application_id, recording_id or str(uuid.uuid4()))
+        self._spawn, self._port = spawn, port
+        self._rec: rr.RecordingStream | None = None
+        if spawn:  # the viewer starts up while the simulation runs
+            self._open()
         self._designs: dict[str, np.ndarray] = {}
         self._scratch: tuple[mujoco.MjModel, mujoco.MjData] | None = None
         self._n_rollouts = 0
         self._groups: dict[str, int] = {}
         self._shape_arrow_scale: float | None = None
 
-    # -- observer protocol ------------------------------------------------------------------------
-    def rollout(self, r: Rollout) -> None:
-        """Log one grasp rollout under ``/designs/{label}``.
+    @property
+    def rec(self) -> rr.RecordingStream:
+        """The recording stream, opened on first use (a file sink writes from then on)."""
+        return self._rec if self._rec is not None else self._open()
 
-        Three record batches (:class:`viz.batch.ColumnBatch`): the static parts, everything on the
-        logged time points (with the triangles, colours and series names that never change at the first
-        one), and the phase starts.
+    def _open(self) -> rr.RecordingStream:
+        """Open the stream and its sinks.
+
+        Not at construction (unless a viewer is spawned): an open stream's threads take CPU time while
+        the simulation runs, and nothing is logged before a rollout is complete.
+        """
+        application_id, recording_id = self._ids
+        rec = rr.RecordingStream(application_id, recording_id=recording_id)
+        sinks = []
+        if self._spawn:
+            rec.spawn(port=self._port, connect=False)
+            sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{self._port}/proxy"))
+        if self.path is not None:
+            sinks.append(rr.FileSink(str(self.path)))
+        rec.set_sinks(*sinks)
+        self._rec = rec
+        return rec
+
+    # -- observer protocol ------------------------------------------------------------------------
+    def capture_steps(self, n_steps: int, timestep: float, starts: dict[str, int]) -> set[int]:
+        """The initial state and the logged steps (:class:`mjcodesign.observe.Capture`)."""
+        return {-1, *logged_steps(n_steps, timestep, starts, self.decimation).tolist()}
+
+    def capture(self, model: mujoco.MjModel, data: mujoco.MjData) -> tuple:
+        """What :meth:`rollout` logs of the state ``data`` holds the forward quantities of."""
+        return _grab(model, data, model.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC)
+
+    def rollout(self, r: Rollout) -> None:
+        """Log one grasp rollout under ``/designs/{label}``, in one record batch.
+
+        Its time points are the logged states and the phase starts. What never changes (meshes,
+        colours, series names, the offset, the outcome, the legend) rides on the first time point
+        (:meth:`viz.batch.ColumnBatch.add_once`), and each entity's values sit on its own rows (the
+        states' or the phase starts'), null elsewhere.
         """
         root = f"/designs/{_safe(r.label)}"
         m = r.model
+        dt = m.opt.timestep
         scene = r.scene
         log_e = np.asarray(scene.built.stiffness.log_e) if r.model is scene.built.model else _log_e_of(r)
-        static = ColumnBatch()
-        self._legend(r.label, log_e, static)
-        static.add(root, "Transform3D", "translation", [[_SPACING_DESIGNS * self._n_rollouts, 0.0, 0.0]])
+        steps = logged_steps(len(r.states), dt, r.starts, self.decimation)
+        phases = {k: v for k, v in r.starts.items() if k != "end" and v < len(r.states)}
+        # State t is at time (t + 1) dt (the initial state at 0); a phase starting at step k at k dt.
+        # Phases of no steps start with the next one: one log entry per start step.
+        entries: dict[int, list[str]] = {}
+        for k, v in phases.items():
+            entries.setdefault(v, []).append(f"{k} (step {v})")
+        frame_k, phase_k = np.r_[0, steps + 1], np.fromiter(entries, dtype=int)
+        ks = np.union1d(frame_k, phase_k)
+        at_frame, at_phase = np.searchsorted(ks, frame_k), np.searchsorted(ks, phase_k)
+        b = ColumnBatch(ks * dt, TIMELINE)
+        self._legend(r.label, log_e, b)
+        b.add_once(root, "Transform3D", "translation", [[_SPACING_DESIGNS * self._n_rollouts, 0.0, 0.0]])
         self._n_rollouts += 1
-        steps = logged_steps(len(r.states), m.opt.timestep, r.starts, self.decimation)
+        b.add_once(root, "TextDocument", "text", [json.dumps(r.outcome.as_dict(), indent=1)])
+        b.add_once(root, "TextDocument", "media_type", ["text/plain"])
         fingers, gripper = _gripper_surfaces(m, scene)
-        timed = ColumnBatch(np.r_[0.0, (steps + 1) * m.opt.timestep], TIMELINE)
-        self._geometry(static, timed, root, r, fingers, gripper, log_e)
+        self._geometry(b, root, r, fingers, gripper, log_e)
         for name, names in _SERIES_NAMES.items():
-            timed.add_once(f"{root}/series/{name}", "SeriesLines", "names", names)
-        static.add(f"{root}/outcome", "TextDocument", "text", [json.dumps(r.outcome.as_dict(), indent=1)])
-        static.add(f"{root}/outcome", "TextDocument", "media_type", ["text/plain"])
-        static.send(self.rec)
+            b.add_once(f"{root}/series/{name}", "SeriesLines", "names", names)
 
         frames = _Replay(r, fingers, gripper, self._data(r)).frames(steps)
         for name, pos in frames.surfaces.items():
-            timed.add(
-                f"{root}/{name}", "Mesh3D", "vertex_positions", pos.reshape(-1, 3), [pos.shape[1]] * len(pos)
+            b.add(
+                f"{root}/{name}",
+                "Mesh3D",
+                "vertex_positions",
+                pos.reshape(-1, 3),
+                [pos.shape[1]] * len(pos),
+                at_frame,
             )
-        timed.add(f"{root}/object", "Transform3D", "translation", frames.object_pos)
-        timed.add(f"{root}/object", "Transform3D", "quaternion", frames.object_quat[:, [1, 2, 3, 0]])
-        timed.add(
-            f"{root}/tendon",
-            "LineStrips3D",
-            "strips",
-            [s for row in frames.tendon for s in row],
-            _lengths(frames.tendon),
+        b.add(f"{root}/object", "Transform3D", "translation", frames.object_pos, rows=at_frame)
+        b.add(
+            f"{root}/object", "Transform3D", "quaternion", frames.object_quat[:, [1, 2, 3, 0]], rows=at_frame
         )
+        strips = [s for row in frames.tendon for s in row]
+        b.add(f"{root}/tendon", "LineStrips3D", "strips", strips, _lengths(frames.tendon), at_frame)
         pos, vec, on_object = (np.concatenate(c) for c in zip(*frames.contacts, strict=True))
         counts = _lengths(frames.contacts, 0)
-        timed.add(f"{root}/contacts", "Arrows3D", "origins", pos, counts)
-        timed.add(f"{root}/contacts", "Arrows3D", "vectors", vec * _ARROW_M_PER_N, counts)
+        b.add(f"{root}/contacts", "Arrows3D", "origins", pos, counts, at_frame)
+        b.add(f"{root}/contacts", "Arrows3D", "vectors", vec * _ARROW_M_PER_N, counts, at_frame)
         colours = rgba32(np.where(on_object[:, None], _FINGER_CONTACT_RGB, _OTHER_CONTACT_RGB))
-        timed.add(f"{root}/contacts", "Arrows3D", "colors", colours, counts)
+        b.add(f"{root}/contacts", "Arrows3D", "colors", colours, counts, at_frame)
         for name, values in frames.series.items():
-            values = values.reshape(len(values), -1)
-            timed.add(
+            b.add(
                 f"{root}/series/{name}",
                 "Scalars",
                 "scalars",
                 values.reshape(-1),
                 [values.shape[1]] * len(values),
+                at_frame,
             )
-        timed.send(self.rec)
-
-        phases = {k: v for k, v in r.starts.items() if k != "end" and v < len(r.states)}
-        starts = ColumnBatch(np.array([v * m.opt.timestep for v in phases.values()]), TIMELINE)
-        starts.add(f"{root}/phases", "TextLog", "text", [f"{k} (step {v})" for k, v in phases.items()])
-        starts.send(self.rec)
+        b.add(f"{root}/phases", "TextLog", "text", ["; ".join(e) for e in entries.values()], rows=at_phase)
+        b.send(self.rec)
 
     def snapshot(self, s: Snapshot) -> None:
         """Log one rest shape under ``/crosscheck/{label}`` (static).
@@ -240,44 +281,54 @@ class RerunRecorder:
         self.rec.disconnect()
 
     # -- helpers ----------------------------------------------------------------------------------
-    def _legend(self, name: str, log_e: np.ndarray, static: ColumnBatch) -> None:
+    def _legend(self, name: str, log_e: np.ndarray, batch: ColumnBatch) -> None:
+        """``/legend``: every design's ln E (text), and the colour scale's swatches in 3-D (once)."""
         first = not self._designs
         self._designs[name] = log_e
-        static.add("/legend", "TextDocument", "text", [legend_markdown(self._designs)])
-        static.add("/legend", "TextDocument", "media_type", ["text/markdown"])
+        batch.add_once("/legend", "TextDocument", "text", [legend_markdown(self._designs)])
+        batch.add_once("/legend", "TextDocument", "media_type", ["text/markdown"])
         if first:
             ticks = legend_ticks()
             centers = _COLORBAR_ORIGIN + np.outer(np.arange(len(ticks)), [_COLORBAR_STEP, 0, 0])
-            static.add("/legend/colorbar", "Boxes3D", "centers", centers)
-            static.add(
-                "/legend/colorbar",
-                "Boxes3D",
-                "half_sizes",
-                [[0.5 * _COLORBAR_STEP, 0.005, 0.002]] * len(ticks),
+            batch.add_once("/legend", "Boxes3D", "centers", centers)
+            batch.add_once(
+                "/legend", "Boxes3D", "half_sizes", [[0.5 * _COLORBAR_STEP, 0.005, 0.002]] * len(ticks)
             )
-            static.add("/legend/colorbar", "Boxes3D", "colors", rgba32(stiffness_rgb(ticks)))
-            static.add("/legend/colorbar", "Boxes3D", "labels", [f"{v:.1f}" for v in ticks])
-            static.add("/legend/colorbar", "Boxes3D", "fill_mode", [rr.components.FillMode.Solid.value])
+            batch.add_once("/legend", "Boxes3D", "colors", rgba32(stiffness_rgb(ticks)))
+            batch.add_once("/legend", "Boxes3D", "labels", [f"{v:.1f}" for v in ticks])
+            batch.add_once("/legend", "Boxes3D", "fill_mode", [rr.components.FillMode.Solid.value])
 
-    def _geometry(self, static: ColumnBatch, timed: ColumnBatch, root, r, fingers, gripper, log_e) -> None:
-        """Ground and object mesh (static); the fingers' and gripper's triangles and colours (first step)."""
+    def _geometry(self, b: ColumnBatch, root, r, fingers, gripper, log_e) -> None:
+        """Ground, object mesh, the fingers' and gripper's triangles and colours, on the first time point.
+
+        Both fingers are one mesh (finger A's vertices first), coloured per block by stiffness; the
+        object's mesh sits on the ``object`` entity, whose per-step transform moves it.
+        """
         g = _GROUND_HALF
         mesh = r.scene.obj.mesh
         for name, vertices, triangles, rgb in (
             ("ground", [[-g, -g, 0], [g, -g, 0], [g, g, 0], [-g, g, 0]], [[0, 1, 2], [0, 2, 3]], _GROUND_RGB),
-            ("object/mesh", mesh.vertices, mesh.faces, _OBJECT_RGB),
+            ("object", mesh.vertices, mesh.faces, _OBJECT_RGB),
         ):
-            static.add(f"{root}/{name}", "Mesh3D", "vertex_positions", np.asarray(vertices))
-            static.add(f"{root}/{name}", "Mesh3D", "triangle_indices", np.asarray(triangles))
-            static.add(f"{root}/{name}", "Mesh3D", "albedo_factor", [rgba32(rgb)])
-        parts = {f"fingers/{k}": (s, stiffness_rgb(log_e[i])) for i, (k, s) in enumerate(fingers.items())}
+            b.add_once(f"{root}/{name}", "Mesh3D", "vertex_positions", np.asarray(vertices))
+            b.add_once(f"{root}/{name}", "Mesh3D", "triangle_indices", np.asarray(triangles))
+            b.add_once(f"{root}/{name}", "Mesh3D", "albedo_factor", [rgba32(rgb)])
+        surfs = list(fingers.values())
+        offsets = np.cumsum([0] + [len(s.vertex_block) for s in surfs])
+        tris = np.concatenate([s.triangles + o for s, o in zip(surfs, offsets, strict=False)])
+        rgb = np.concatenate(
+            [_block_colours(stiffness_rgb(log_e[i]), s.vertex_block) for i, s in enumerate(surfs)]
+        )
+        b.add_once(f"{root}/fingers", "Mesh3D", "triangle_indices", tris)
+        b.add_once(f"{root}/fingers", "Mesh3D", "vertex_colors", rgba32(rgb))
         if gripper is not None:
-            parts["gripper"] = (gripper, None)
-        for name, (surf, block_rgb) in parts.items():
-            rgb = _block_colours(block_rgb, surf.vertex_block) if block_rgb is not None else NEUTRAL_RGB
-            timed.add_once(f"{root}/{name}", "Mesh3D", "triangle_indices", surf.triangles)
-            colours = np.broadcast_to(rgba32(rgb), len(surf.vertex_block))
-            timed.add_once(f"{root}/{name}", "Mesh3D", "vertex_colors", colours)
+            b.add_once(f"{root}/gripper", "Mesh3D", "triangle_indices", gripper.triangles)
+            b.add_once(
+                f"{root}/gripper",
+                "Mesh3D",
+                "vertex_colors",
+                np.broadcast_to(rgba32(NEUTRAL_RGB), len(gripper.vertex_block)),
+            )
 
     def _data(self, r: Rollout) -> mujoco.MjData:
         """The rollout's spare ``MjData``, else one of its model, reused while rollouts of one model follow."""
@@ -310,9 +361,9 @@ def _gripper_surfaces(m: mujoco.MjModel, scene) -> tuple[dict[str, Surface], Sur
 class _Frames:
     """Per logged time point (the initial state first): surfaces, object pose, tendon, contacts, series."""
 
-    def __init__(self, n: int, surfaces: list[str]):
-        self.surfaces: dict[str, np.ndarray] = {k: np.zeros((n, 0, 3)) for k in surfaces}
-        """World vertices per surface [m], shape (n, n_vertices, 3)."""
+    def __init__(self, n: int):
+        self.surfaces: dict[str, np.ndarray] = {}
+        """World vertices of ``fingers`` (both, A first) and ``gripper`` [m], shape (n, n_vertices, 3)."""
         self.object_pos = np.empty((n, 3))
         self.object_quat = np.empty((n, 4))
         self.tendon: list[list[np.ndarray]] = []
@@ -331,9 +382,8 @@ class _Replay:
         self.r = r
         self.m = r.model
         self.d = d
-        self.surfaces = {f"fingers/{k}": s for k, s in fingers.items()}
-        if gripper is not None:
-            self.surfaces["gripper"] = gripper
+        self.fingers = list(fingers.values())
+        self.gripper = gripper
         m = self.m
         # Tendon actuators per finger, in finger order (A, B): their forces sum to the finger's tension.
         self.acts = {
@@ -349,67 +399,41 @@ class _Replay:
         ob, palm = r.scene.object_body, r.scene.palm_body
         ts = np.r_[-1, steps]
         n = len(ts)
-        out = _Frames(n, list(self.surfaces))
-        gpos, gmat = np.empty((n, m.ngeom, 3)), np.empty((n, m.ngeom, 9))
-        fpos = np.empty((n, m.nflexvert, 3))
-        xpos, xquat, xipos = np.empty((n, m.nbody, 3)), np.empty((n, m.nbody, 4)), np.empty((n, m.nbody, 3))
-        palm_mat, act = np.empty((n, 9)), np.empty((n, m.nu))
-        wrap = np.empty((n, 2 * m.nwrap, 3))
-        wrap_adr, wrap_num = np.empty((n, m.ntendon), dtype=int), np.empty((n, m.ntendon), dtype=int)
-        contacts = []  # per state: (pos, frame, geom1, geom2, force in the contact frame)
+        out = _Frames(n)
+        rows = []
         ctrl, spec = r.ctrl, control_spec()
-        for i, t in enumerate(ts):
-            # As mjcodesign.scenario.outcome_from_states: the state under the control of the next step.
-            mujoco.mj_setState(m, d, r.x0 if t < 0 else r.states[t], STATE_SPEC)
-            mujoco.mj_setState(m, d, ctrl[min(t + 1, len(ctrl) - 1)], spec)
-            mujoco.mj_forward(m, d)
-            gpos[i], gmat[i], fpos[i] = d.geom_xpos, d.geom_xmat, d.flexvert_xpos
-            xpos[i], xquat[i], xipos[i] = d.xpos, d.xquat, d.xipos
-            palm_mat[i], act[i] = d.xmat[palm], d.actuator_force
-            wrap[i], wrap_adr[i], wrap_num[i] = d.wrap_xpos.reshape(-1, 3), d.ten_wrapadr, d.ten_wrapnum
-            contacts.append(self._contacts())
-        for name, surf in self.surfaces.items():
-            out.surfaces[name] = surf.positions(gpos, gmat, fpos)
+        for t in ts:
+            row = r.captured.get(int(t))
+            if row is None:  # as mjcodesign.scenario.outcome_from_states: the state under the next control
+                mujoco.mj_setState(m, d, r.x0 if t < 0 else r.states[t], STATE_SPEC)
+                mujoco.mj_setState(m, d, ctrl[min(t + 1, len(ctrl) - 1)], spec)
+                mujoco.mj_forward(m, d)
+                row = _grab(m, d, self.elliptic)
+            rows.append(row)
+        gpos, gmat, fpos, xpos, xquat, xipos, xmat, act, wrap, wrap_adr, wrap_num = (
+            np.stack(c) for c in zip(*(row[:-1] for row in rows), strict=True)
+        )
+        contacts = [row[-1] for row in rows]
+        palm_mat = xmat[:, palm]
+        out.surfaces["fingers"] = np.concatenate(
+            [s.positions(gpos, gmat, fpos) for s in self.fingers], axis=1
+        )
+        if self.gripper is not None:
+            out.surfaces["gripper"] = self.gripper.positions(gpos, gmat, fpos)
         out.object_pos, out.object_quat = xpos[:, ob], xquat[:, ob]
         out.tendon = [
             [wrap[i, a : a + k] for a, k in zip(wrap_adr[i], wrap_num[i], strict=True)] for i in range(n)
         ]
         out.contacts, force = self._world_contacts(contacts)
         grasp = _index_of(steps, r.starts["lift"] - 1)
-        out.series["tendon_force"] = np.stack([act[:, ids].sum(axis=1) for ids in self.acts.values()], axis=1)
-        out.series["object_height"] = xipos[:, ob, 2]
-        out.series["contact_force"] = force
+        tendon = np.stack([act[:, ids].sum(axis=1) for ids in self.acts.values()], axis=1)
+        out.series["force"] = np.column_stack([tendon, force])
         # Object COM in the palm frame; relative to the grasp (end of tightening), as Outcome.displacement,
         # and before it, vs the same state.
         rel = np.einsum("nji,nj->ni", palm_mat.reshape(n, 3, 3), xipos[:, ob] - xpos[:, palm])
-        out.series["displacement"] = rel - (rel[grasp] if grasp is not None else rel[0])
+        displacement = rel - (rel[grasp] if grasp is not None else rel[0])
+        out.series["object"] = np.column_stack([xipos[:, ob, 2], displacement])
         return out
-
-    def _contacts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Contacts of the loaded state: points [m], frames (normal, tangents), geoms, local forces [N]."""
-        m, d = self.m, self.d
-        nc = d.ncon
-        con = d.contact
-        if nc == 0:
-            return (
-                np.zeros((0, 3)),
-                np.zeros((0, 9)),
-                np.zeros(0, dtype=int),
-                np.zeros(0, dtype=int),
-                np.zeros((0, 3)),
-            )
-        dim = con.dim
-        if not self.elliptic or np.any(dim == 1):
-            local, f6 = np.zeros((nc, 3)), np.zeros(6)
-            for i in range(nc):
-                mujoco.mj_contactForce(m, d, i, f6)
-                local[i] = f6[:3]
-        else:
-            # Elliptic cones: the first three efc rows of a contact are its normal and tangent forces.
-            adr = con.efc_address
-            local = d.efc_force[np.maximum(adr, 0)[:, None] + np.arange(3)]
-            local[adr < 0] = 0.0  # excluded contacts carry no force
-        return con.pos.copy(), con.frame.copy(), con.geom1.copy(), con.geom2.copy(), local
 
     def _world_contacts(self, rows) -> tuple[list, np.ndarray]:
         """Contacts in world axes, and the norm of the fingers' total force on the object [N], shape (n,).
@@ -431,6 +455,51 @@ class _Replay:
         return list(
             zip(np.split(pos, cuts), np.split(world, cuts), np.split(on_object, cuts), strict=True)
         ), (np.linalg.norm(total, axis=1))
+
+
+def _grab(m: mujoco.MjModel, d: mujoco.MjData, elliptic: bool) -> tuple:
+    """Copies of what a logged state needs from ``d`` after ``mj_forward`` (or a step) at that state.
+
+    Geom, flex-vertex and body poses, actuator forces, tendon wrap paths, and the contacts: points
+    [m], frames (normal, tangents), geoms and forces in the contact frame [N].
+    """
+    nc = d.ncon
+    con = d.contact
+    if nc == 0:
+        contacts = (
+            np.zeros((0, 3)),
+            np.zeros((0, 9)),
+            np.zeros(0, dtype=int),
+            np.zeros(0, dtype=int),
+            np.zeros((0, 3)),
+        )
+    else:
+        dim = con.dim
+        if not elliptic or np.any(dim == 1):
+            local, f6 = np.zeros((nc, 3)), np.zeros(6)
+            for i in range(nc):
+                mujoco.mj_contactForce(m, d, i, f6)
+                local[i] = f6[:3]
+        else:
+            # Elliptic cones: the first three efc rows of a contact are its normal and tangent forces.
+            adr = con.efc_address
+            local = d.efc_force[np.maximum(adr, 0)[:, None] + np.arange(3)]
+            local[adr < 0] = 0.0  # excluded contacts carry no force
+        contacts = (con.pos.copy(), con.frame.copy(), con.geom1.copy(), con.geom2.copy(), local)
+    return (
+        d.geom_xpos.copy(),
+        d.geom_xmat.copy(),
+        d.flexvert_xpos.copy(),
+        d.xpos.copy(),
+        d.xquat.copy(),
+        d.xipos.copy(),
+        d.xmat.copy(),
+        d.actuator_force.copy(),
+        d.wrap_xpos.reshape(-1, 3).copy(),
+        d.ten_wrapadr.copy(),
+        d.ten_wrapnum.copy(),
+        contacts,
+    )
 
 
 def _index_of(steps: np.ndarray, step: int) -> int | None:

@@ -19,7 +19,7 @@ from mjcodesign.chain import contact_solref
 from mjcodesign.errors import SimulationDiverged
 from mjcodesign.finger import FingerDesign
 from mjcodesign.mjcf import GripperPose, make_data
-from mjcodesign.observe import Observer, Rollout
+from mjcodesign.observe import Capture, Observer, Rollout
 from mjcodesign.scenario import (
     STATE_SPEC,
     GraspScenario,
@@ -149,11 +149,16 @@ def _step_all(
     states: np.ndarray,
     *,
     checked: bool,
+    capture: Capture | None = None,
+    steps: frozenset[int] = frozenset(),
+    captured: dict | None = None,
 ) -> tuple[int, SimulationDiverged] | None:
     """Run every step from ``x0`` into ``states``.
 
     ``checked`` checks MuJoCo's warnings and the state after every step and stops at the first bad
-    one: ``(step, error)``; None when every step passed, or always when unchecked.
+    one: ``(step, error)``; None when every step passed, or always when unchecked. ``capture`` takes
+    state t (of ``steps``, -1 the initial state) into ``captured[t]`` right after step t+1, while the
+    data still holds that state's forward quantities (:class:`~mjcodesign.observe.Capture`).
     """
     reset_warnings(d)
     mujoco.mj_setState(m, d, x0, STATE_SPEC)
@@ -161,6 +166,8 @@ def _step_all(
     for t in range(len(ctrl)):
         mujoco.mj_setState(m, d, ctrl[t], spec)
         mujoco.mj_step(m, d)
+        if t - 1 in steps:
+            captured[t - 1] = capture.capture(m, d)
         if checked:
             try:
                 check_state(d, f"step {t}: ")
@@ -198,17 +205,29 @@ class MujocoBackend:
         x0 = _initial_state(scene)
         d = mujoco.MjData(m)
         states = np.empty((len(ctrl), x0.size))
-        bad = _step_all(m, d, x0, ctrl, states, checked=False)
+        captured: dict = {}
+        capture = observer if isinstance(observer, Capture) else None
+        steps = (
+            frozenset(capture.capture_steps(len(ctrl), m.opt.timestep, starts)) if capture else frozenset()
+        )
+        bad = _step_all(
+            m, d, x0, ctrl, states, checked=False, capture=capture, steps=steps, captured=captured
+        )
         if has_warning(d) or not np.isfinite(states).all():  # again, step by step, to name the step
             bad = _step_all(m, d, x0, ctrl, states, checked=True)
         if bad is not None:
             t, exc = bad
             out = failed_outcome(f"diverged: {exc}", time.perf_counter() - t0)
-            _observe(observer, label, scene, scenario, m, x0, states[:t], ctrl, starts, out)
+            captured = {k: v for k, v in captured.items() if k < t}
+            _observe(
+                observer, label, scene, scenario, m, x0, states[:t], ctrl, starts, out, captured=captured
+            )
             return out
         out = outcome_from_states(_scene_with(scene, m), scenario, x0, states, ctrl, starts)
         out.wall_time_s = time.perf_counter() - t0
-        _observe(observer, label, scene, scenario, m, x0, states, ctrl, starts, out, scratch=d)
+        _observe(
+            observer, label, scene, scenario, m, x0, states, ctrl, starts, out, scratch=d, captured=captured
+        )
         return out
 
     def run_batch(
@@ -319,10 +338,26 @@ class MujocoBackend:
         return outs
 
 
-def _observe(observer, label, scene, scenario, m, x0, states, ctrl, starts, out, scratch=None) -> None:
+def _observe(
+    observer, label, scene, scenario, m, x0, states, ctrl, starts, out, scratch=None, captured=None
+) -> None:
     if observer is not None:
         sc = _scene_with(scene, m)
-        observer.rollout(Rollout(label, sc, scenario, m, x0, states, ctrl, starts, out, scratch=scratch))
+        observer.rollout(
+            Rollout(
+                label,
+                sc,
+                scenario,
+                m,
+                x0,
+                states,
+                ctrl,
+                starts,
+                out,
+                scratch=scratch,
+                captured=captured or {},
+            )
+        )
 
 
 def _diverged(states: np.ndarray, x0: np.ndarray, dt: float) -> np.ndarray:
