@@ -108,6 +108,7 @@ class RerunRecorder:
         self._ids = (application_id, recording_id or str(uuid.uuid4()))
         self._spawn, self._port = spawn, port
         self._rec: rr.RecordingStream | None = None
+        self._closed = False
         if spawn:  # the viewer starts up while the simulation runs
             self._open()
         self._designs: dict[str, np.ndarray] = {}
@@ -127,6 +128,8 @@ class RerunRecorder:
         Not at construction (unless a viewer is spawned): an open stream's threads take CPU time while
         the simulation runs, and nothing is logged before a rollout is complete.
         """
+        if self._closed:
+            raise OutputError(f"the recording {self.path or ''} is closed")
         application_id, recording_id = self._ids
         rec = rr.RecordingStream(application_id, recording_id=recording_id)
         sinks = []
@@ -276,9 +279,23 @@ class RerunRecorder:
         static.send(self.rec)
 
     def close(self) -> None:
-        """Flush everything and close the sinks."""
-        self.rec.flush()
-        self.rec.disconnect()
+        """Flush everything, close the sinks and end the stream's threads (the file is complete).
+
+        Rerun keeps a dropped stream, with its two threads, until an "orphan" sweep (``rr.init`` runs
+        one); without the sweep every recording made in a process left two threads behind that now and
+        then spun on ``sched_yield``, taking CPU time from the simulation. A second call does nothing.
+        """
+        if self._closed:
+            return
+        rec = self.rec  # opened now if nothing was logged: the file holds an empty recording
+        self._closed = True
+        rec.flush()
+        rec.disconnect()
+        self._rec = None
+        del rec
+        import rerun_bindings  # rerun-sdk's native module; rr.init calls the same sweep
+
+        rerun_bindings.flush_and_cleanup_orphaned_recordings()
 
     # -- helpers ----------------------------------------------------------------------------------
     def _legend(self, name: str, log_e: np.ndarray, batch: ColumnBatch) -> None:
