@@ -12,6 +12,7 @@ those of one ``send_columns`` (temporal) or static ``log`` call per entity.
 from __future__ import annotations
 
 from functools import cache, lru_cache
+from typing import NamedTuple
 
 import numpy as np
 import pyarrow as pa
@@ -58,57 +59,78 @@ def _component(archetype: str, field: str) -> tuple[dict[str, str], pa.ListType]
     return meta, column.as_arrow_array().type
 
 
-@lru_cache(maxsize=4096)
-def _field(entity: str, archetype: str, field: str) -> tuple[pa.Field, pa.ListType]:
-    """The Arrow field of ``entity``'s column of ``rr.{archetype}``'s ``field``, and its datatype.
+class _Level(NamedTuple):
+    """One nesting level of a component's items: how :func:`_items` builds its Arrow array."""
 
-    Entities recur (every rollout of a design logs the same ones), and a field with its metadata costs
+    kind: str
+    """``list`` (variable-size), ``fixed`` (fixed-size list of numbers), ``string`` or ``primitive``."""
+    type: pa.DataType
+    child: pa.DataType | None
+    """The numbers' type of a ``fixed`` level."""
+    dtype: np.dtype | None
+    """numpy dtype of the numbers (``fixed`` and ``primitive``)."""
+    width: int
+    """Numbers per item of a ``fixed`` level."""
+
+
+def _levels(t: pa.DataType) -> tuple[_Level, ...]:
+    """The levels of item type ``t``, outermost first.
+
+    Worked out once per component, not per column: hashing or inspecting an Arrow type costs
+    microseconds.
+    """
+    out = []
+    while pa.types.is_list(t):
+        out.append(_Level("list", t, None, None, 0))
+        t = t.value_type
+    if pa.types.is_fixed_size_list(t):
+        if not pa.types.is_primitive(t.value_type):
+            raise ValueError(f"fixed-size lists of {t.value_type} are not supported")
+        out.append(_Level("fixed", t, t.value_type, np.dtype(t.value_type.to_pandas_dtype()), t.list_size))
+    elif pa.types.is_string(t):
+        out.append(_Level("string", t, None, None, 0))
+    else:
+        out.append(_Level("primitive", t, None, np.dtype(t.to_pandas_dtype()), 0))
+    return tuple(out)
+
+
+@lru_cache(maxsize=4096)
+def _field(entity: str, archetype: str, field: str) -> tuple[pa.Field, pa.ListType, tuple[_Level, ...]]:
+    """The Arrow field of ``entity``'s column of ``rr.{archetype}``'s ``field``, its type, its levels.
+
+    The type is a list per row; the levels are its items' (:func:`_levels`). Entities recur (every rollout of a design logs the same ones), and a field with its metadata costs
     ~15 us to build.
     """
     meta, t = _component(archetype, field)
     name = f"{entity}:{meta['rerun:component']}"
-    return pa.field(name, t, metadata={**meta, "rerun:entity_path": entity}), t
+    return pa.field(name, t, metadata={**meta, "rerun:entity_path": entity}), t, _levels(t.value_type)
 
 
-def _items(t: pa.DataType, data) -> pa.Array:
-    """Arrow array of type ``t`` from numpy data.
+def _items(levels: tuple[_Level, ...], data) -> pa.Array:
+    """Arrow array of the outermost of ``levels`` from numpy data.
 
     Rows of a fixed-size list, scalars, strings, or a list of arrays for a variable-size list (strips).
     Numeric data is wrapped as Arrow buffers without a copy once it has the column's dtype
     (``pa.array`` costs ~10 us a call, which adds up over some 40 arrays per grasp).
     """
-    kind, dtype, width = _layout(t)
+    kind, t, child, dtype, width = levels[0]
     if kind == "fixed":
         values = np.asarray(data, dtype=dtype).reshape(-1)
-        buffers = [None, pa.py_buffer(values)]
-        child = pa.Array.from_buffers(t.value_type, len(values), buffers)
-        return pa.Array.from_buffers(t, len(values) // width, [None], children=[child])
+        inner = pa.Array.from_buffers(child, len(values), [None, pa.py_buffer(values)])
+        return pa.Array.from_buffers(t, len(values) // width, [None], children=[inner])
     if kind == "list":
-        return _lists(t, [len(x) for x in data], np.concatenate(data) if len(data) else [])
+        return _lists(t, [len(x) for x in data], np.concatenate(data) if len(data) else [], levels[1:])
     if kind == "string":
         return pa.array(list(data), type=t)
     values = np.ascontiguousarray(data, dtype=dtype).reshape(-1)
     return pa.Array.from_buffers(t, len(values), [None, pa.py_buffer(values)])
 
 
-@cache
-def _layout(t: pa.DataType) -> tuple[str, np.dtype | None, int]:
-    """How :func:`_items` builds ``t``: kind, numpy dtype of the values, fixed list size."""
-    if pa.types.is_fixed_size_list(t):
-        if not pa.types.is_primitive(t.value_type):
-            raise ValueError(f"fixed-size lists of {t.value_type} are not supported")
-        return "fixed", np.dtype(t.value_type.to_pandas_dtype()), t.list_size
-    if pa.types.is_list(t):
-        return "list", None, 0
-    if pa.types.is_string(t):
-        return "string", None, 0
-    return "primitive", np.dtype(t.to_pandas_dtype()), 0
-
-
-def _lists(t: pa.ListType, lengths, items) -> pa.ListArray:
+def _lists(t: pa.ListType, lengths, items, levels: tuple[_Level, ...]) -> pa.ListArray:
+    """A list array of type ``t``: ``lengths[i]`` of ``items`` (of ``levels``) in row i."""
     offsets = np.zeros(len(lengths) + 1, dtype=np.int32)
-    np.asarray(lengths, dtype=np.int32).cumsum(out=offsets[1:])
-    values = _items(t.value_type, items)
+    np.cumsum(lengths, out=offsets[1:])
+    values = _items(levels, items)
     if len(values) != offsets[-1]:
         raise ValueError(f"{len(values)} values for rows of {offsets[-1]} in all")
     return pa.Array.from_buffers(t, len(lengths), [None, pa.py_buffer(offsets)], children=[values])
@@ -150,25 +172,25 @@ class ColumnBatch:
         many values each of these rows holds; default: all of them in the one static row, or one per
         row on a timeline.
         """
-        column, t = _field(entity, archetype, field)
+        column, t, levels = _field(entity, archetype, field)
         n = self.n_rows if rows is None else len(rows)
         if lengths is None:
             lengths = [len(items)] if self.timeline is None else np.ones(n, dtype=int)
         if len(lengths) != n:
             raise ValueError(f"{entity} {field}: {len(lengths)} rows of values for {n} rows")
         if rows is None:
-            self._arrays.append(_lists(t, lengths, items))
+            self._arrays.append(_lists(t, lengths, items, levels))
             self._fields.append(column)
             return
         per_row = np.zeros(self.n_rows, dtype=np.int32)
         per_row[rows] = lengths
         valid = np.zeros(self.n_rows, dtype=bool)
         valid[rows] = True
-        if valid.sum() != n:
+        if np.count_nonzero(valid) != n:
             raise ValueError(f"{entity} {field}: rows must be distinct and below {self.n_rows}")
         offsets = np.zeros(self.n_rows + 1, dtype=np.int32)
-        per_row.cumsum(out=offsets[1:])
-        values = _items(t.value_type, items)
+        np.cumsum(per_row, out=offsets[1:])
+        values = _items(levels, items)
         if len(values) != offsets[-1]:
             raise ValueError(f"{len(values)} values for rows of {offsets[-1]} in all")
         bits = pa.py_buffer(np.packbits(valid, bitorder="little"))
