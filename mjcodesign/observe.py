@@ -1,13 +1,14 @@
 """What a simulator hands to an observer, and how observers are found.
 
 An observer (the Rerun recorder of the top-level ``viz`` package, for one) receives whole rollouts and
-rest shapes after they are computed, so it never slows or changes a simulation. Observers are found by
+rest shapes after they are computed, so it never changes a simulation. Observers are found by
 name in the entry-point group ``mjcodesign.observers`` (``pyproject.toml``); the core never imports
 them, and :func:`load_observer` turns a missing one into an :class:`~mjcodesign.errors.ObserverError`.
 
 An observer that replays states may also offer :class:`Capture`: a backend that steps a rollout itself
-(MuJoCo C's ``run``) then hands it, in :attr:`Rollout.captured`, what the observer took from ``MjData``
-at the steps it asked for, instead of the observer recomputing them (``mj_forward`` per logged state).
+(MuJoCo C's ``run``) then hands it, in :attr:`Rollout.captured`, what the observer copied from
+``MjData`` (read only) at the steps it asked for, instead of the observer recomputing them
+(``mj_forward`` per logged state); the copies are the only time an observer adds to a run.
 """
 
 from __future__ import annotations
