@@ -25,6 +25,10 @@ FRANKA_HAND_MAX_WIDTH = 0.08  # Franka Hand stroke [m], from the Franka datashee
 _RIGID_TOL = 1e-4  # |R^T R - I| and |det R - 1| tolerance for a pose matrix
 _T = TypeVar("_T")
 _UNANSWERED: list[tuple[Any, Any]] = []  # hand connections with a command that never answered
+_UNRESPONSIVE: list[Any] = []  # robot connections whose motion did not end after a stop
+_STOP_WAIT_S = 5.0
+"""Longest wait for a stopped arm motion to end [s]: a stop decelerates the arm within about a second
+(franky's stop motion; franky-sim alike), so longer means the connection no longer answers."""
 
 
 def check_transform(matrix: Any, what: str = "pose") -> np.ndarray:
@@ -181,10 +185,14 @@ class FrankaArm:
         def move() -> None:
             robot.move(motion, asynchronous=True)
             if not robot.join_motion(timeout=self.config.motion_timeout_s):
-                self._halt(robot)
+                stopped = self._halt(robot)
                 raise HardwareError(
-                    f"arm: move to {what} did not finish within "
-                    f"{self.config.motion_timeout_s:g} s; the robot was stopped"
+                    f"arm: move to {what} did not finish within {self.config.motion_timeout_s:g} s; "
+                    + (
+                        "the robot was stopped"
+                        if stopped
+                        else f"it did not stop within {_STOP_WAIT_S:g} s either"
+                    )
                 )
 
         self._call(f"move to {what}", move, recover=True)
@@ -244,19 +252,28 @@ class FrankaArm:
             raise HardwareError("Franka Hand is not connected")
         return self._gripper
 
-    def _halt(self, robot: Any) -> None:
-        """Stop the arm's motion if one is running and wait until it has ended."""
+    def _halt(self, robot: Any) -> bool:
+        """Stop the arm's motion if one is running and wait until it has ended; whether it has.
+
+        A motion that has not ended :data:`_STOP_WAIT_S` after the stop leaves the connection parked
+        and dropped: destroying a `franky.Robot` with a motion still running blocks in its destructor.
+        """
         errors = (self._franky.Exception, RuntimeError)
         try:
             if robot.join_motion(timeout=0.0):
-                return
+                return True
         except errors:  # the finished motion's own error, already reported by its caller
-            return
+            return True
         robot.stop()
         try:
-            robot.join_motion(timeout=self.config.motion_timeout_s)
+            if robot.join_motion(timeout=_STOP_WAIT_S):
+                return True
         except errors:  # "Move command preempted": the stop itself
-            pass
+            return True
+        _UNRESPONSIVE.append(robot)
+        if self._robot is robot:
+            self._robot = None
+        return False
 
     def _hand_wait(self, what: str, future: Any) -> bool:
         """The result of a Franka Hand command's future; stop the hand if it runs past the timeout."""

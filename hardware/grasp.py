@@ -49,6 +49,7 @@ class GraspJob:
         grasp_force: Franka Hand grasp force [N].
         tendon_retries: Attempts per serial transaction before the link counts as lost.
         realtime: Require a realtime kernel for the arm (False for franky-sim).
+        motion_timeout_s: Longest an arm or hand motion may take (`ArmConfig.motion_timeout_s`).
         dry_run: Plan and report; connect to nothing.
     """
 
@@ -65,6 +66,7 @@ class GraspJob:
     latency_ms: float = 16.0
     """USB-serial adapter latency [ms] (`hardware.tendon.TendonConfig.latency_ms`)."""
     realtime: bool = True
+    motion_timeout_s: float = 60.0
     dry_run: bool = False
 
     def __post_init__(self) -> None:
@@ -90,6 +92,7 @@ class GraspJob:
             grasp_force=self.grasp_force,
             workspace=self.settings.workspace,
             realtime=self.realtime,
+            motion_timeout_s=self.motion_timeout_s,
         )
 
 

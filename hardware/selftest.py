@@ -49,6 +49,9 @@ _IDS = (1, 2)
 # than on the real bus. A CI run lost the link with 16 ms and 10 attempts.
 _SELFTEST_RETRIES = 10
 _SELFTEST_LATENCY_MS = 100.0
+_SELFTEST_MOTION_TIMEOUT_S = 20.0
+"""Each selftest motion takes 0.4-1 s on franky-sim; 20 s leaves a stalled one time to be reported as an
+error (stop included) well inside the selftest's watchdog, instead of 60 s for the move, then its stop."""
 # A camera 0.6 m above the table looking down at the box, rotated about its optical axis.
 _T_BASE_CAMERA = np.array(
     [
@@ -197,6 +200,7 @@ def run_selftest(log: Callable[[str], None] = lambda line: None) -> dict:
                 tendon_retries=_SELFTEST_RETRIES,
                 latency_ms=_SELFTEST_LATENCY_MS,
                 realtime=False,
+                motion_timeout_s=_SELFTEST_MOTION_TIMEOUT_S,
             )
             z0 = scene.box_z()
             lifted: list[float] = []

@@ -5,8 +5,13 @@ from __future__ import annotations
 import pytest
 
 from hardware.dxl_emulator import XL330Emulator
+from hardware.tendon import port_handler
 
 FAST_TICKS_S = 20_000.0  # emulated motor speed: fast enough that a 1000-tick pull takes 50 ms
+SDK_LATENCY_MS = 100.0
+"""Adapter latency of the raw SDK port [ms]: a 204 ms reply window instead of the SDK's 34 ms, which the
+in-process emulator thread missed on a loaded host (as in test_hw_tendon, where the 16 ms timeout
+itself is tested)."""
 
 
 @pytest.fixture
@@ -19,7 +24,7 @@ def emulator():
 def sdk_port(emulator):
     """A real dynamixel-sdk port and packet handler connected to the emulator."""
     dxl = pytest.importorskip("dynamixel_sdk")
-    port = dxl.PortHandler(emulator.port)
+    port = port_handler(dxl, emulator.port, SDK_LATENCY_MS)
     assert port.openPort() and port.setBaudRate(57600)
     yield port, dxl.PacketHandler(2.0)
     port.closePort()

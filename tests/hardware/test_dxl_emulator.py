@@ -35,7 +35,7 @@ def test_ping_model_and_missing_id(sdk_port):
     t0 = time.monotonic()
     _, result, _ = ph.ping(port, 7)
     assert result == dxl.COMM_RX_TIMEOUT
-    assert time.monotonic() - t0 < 0.2  # SDK timeout is 2*16+2 = 34 ms for a ping
+    assert time.monotonic() - t0 < 1.0  # the reply window (2 * 100 + 2 ms and the bytes), not a hang
 
 
 def test_broadcast_ping_lists_both(sdk_port):
@@ -135,21 +135,23 @@ def test_corrupt_crc_gets_crc_error(emulator):
 
 def test_link_cut_times_out_then_recovers(sdk_port, emulator):
     port, ph = sdk_port
-    emulator.cut_link(0.2)
+    cut_s = 0.5  # longer than the ping's 204 ms reply window
+    back = time.monotonic() + cut_s
+    emulator.cut_link(cut_s)
     assert ph.ping(port, 1)[1] == dxl.COMM_RX_TIMEOUT
-    time.sleep(0.25)
+    time.sleep(max(0.0, back - time.monotonic()) + 0.05)
     assert ph.ping(port, 1)[1] == dxl.COMM_SUCCESS
 
 
-def test_round_trip_time(sdk_port):
+def test_reads_in_a_row(sdk_port):
+    # No time limit here (speed lives in benchmarks): every read answers, with the resting position.
     port, ph = sdk_port
     n = 50
     t0 = time.perf_counter()
     for _ in range(n):
-        assert ph.read4ByteTxRx(port, 1, ADDR["present_position"])[1] == dxl.COMM_SUCCESS
-    per = (time.perf_counter() - t0) / n
-    print(f"emulator read round trip: {per * 1e3:.2f} ms")
-    assert per < 0.02  # the real bus at 57600 baud takes ~3 ms; in-process GIL sharing adds some
+        assert ph.read4ByteTxRx(port, 1, ADDR["present_position"])[1:] == (dxl.COMM_SUCCESS, 0)
+    assert ph.read4ByteTxRx(port, 1, ADDR["present_position"])[0] == 2048  # the emulator's initial
+    print(f"emulator read round trip: {(time.perf_counter() - t0) / n * 1e3:.2f} ms")
 
 
 def test_close_is_prompt():

@@ -140,6 +140,40 @@ def test_hand_command_past_its_timeout_is_stopped_and_reported():
     assert arm._gripper.stops == 1
 
 
+def test_arm_that_does_not_stop_is_parked_not_waited_for(monkeypatch):
+    import franky
+
+    import hardware.arm as arm_module
+    from hardware.arm import ArmConfig, FrankaArm
+
+    class Robot:  # a connection whose motion never ends, stop or not (a stalled simulator)
+        def __init__(self):
+            self.stops, self.waited = 0, []
+
+        def move(self, motion, asynchronous):
+            pass
+
+        def join_motion(self, timeout):
+            self.waited.append(timeout)
+            return False
+
+        def stop(self):
+            self.stops += 1
+
+    monkeypatch.setattr(arm_module, "_STOP_WAIT_S", 0.01)
+    monkeypatch.setattr(arm_module, "_UNRESPONSIVE", [])
+    arm = FrankaArm(ArmConfig("stand-in", motion_timeout_s=0.01))
+    robot = Robot()
+    arm._franky, arm._robot = franky, robot
+    target = np.eye(4)
+    target[:3, 3] = (0.5, 0.0, 0.3)
+    with pytest.raises(HardwareError, match=r"within 0.01 s; it did not stop within 0.01 s either"):
+        arm.move_to(target, "lift target")
+    assert robot.stops == 1 and arm._robot is None and arm_module._UNRESPONSIVE == [robot]
+    arm.close()  # nothing left to stop or wait for
+    assert robot.stops == 1 and robot.waited == [0.01, 0.0, 0.01]
+
+
 def test_second_simulator_on_the_same_ports_is_refused(scene):
     # libfranka's ports are fixed: the second simulator process reports it and exits cleanly.
     with pytest.raises(HardwareError, match=r"franky-sim cannot serve on 127\.0\.0\.1"):
