@@ -178,7 +178,9 @@ def add_bench_parser(bench_subparsers) -> None:
         "viz", help="cost of recording a grasp to Rerun against the rollout time, per decimation"
     )
     p.add_argument(
-        "--cases", default="chain-box,chain-ycb", help="comma-separated, from chain-box, chain-ycb, flex-box"
+        "--cases",
+        default="chain-box,chain-held,chain-ycb",
+        help="comma-separated, from chain-box, chain-held, chain-ycb, flex-box",
     )
     p.add_argument("--repeats", type=int, default=5, help="rollouts per measurement (median)")
     p.add_argument(
