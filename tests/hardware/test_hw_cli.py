@@ -154,8 +154,8 @@ def test_selftest_json():
     # The selftest's own limits (20 s a motion, 150 s in all) come first; this one only backs them.
     proc = cli("selftest", "--json", timeout=240)
     if proc.returncode != 0:
-        # One more attempt, with the first one's stderr kept: in 2 of ~15 CI runs on a loaded 2-core
-        # host franky-sim stalled an arm motion (not reproduced here: 40+ selftests in a row passed).
+        # One more attempt, with the first one's stderr kept: two CI runs on a loaded 2-core host hung
+        # here (one traced to an arm motion on franky-sim that never ended; neither reproduced here).
         # What this test checks is the command's JSON contract; stalls end as named errors (tested
         # with a 0.1 s motion limit in test_hw_arm and by the watchdog test above).
         first = proc.stderr
