@@ -284,6 +284,32 @@ def test_captured_states_equal_replayed_ones(tmp_path):
         np.testing.assert_allclose(f0, f1, atol=1e-6)
 
 
+def test_diverged_rollout_is_recorded_up_to_its_failure(tmp_path):
+    """A blown-up run is logged up to the step before the failure, with the reason in its outcome."""
+    pytest.importorskip("rerun")
+    from mjcodesign.backends.mujoco_c import with_stiffness
+    from mjcodesign.observe import load_observer
+
+    scene = _scene()
+    bad = with_stiffness(scene, Stiffness.preset("soft"))
+    bad.jnt_stiffness[:] *= 1e6  # as tests/test_grasp.py: an undamped hinge far too stiff blows up
+    bad.dof_damping[:] = 0.0
+    path = tmp_path / "diverged.rrd"
+    rec = load_observer("rerun", path=path, decimation=1)
+    out = MujocoBackend(nthread=1).run(scene, _SCENARIO, bad, observer=rec, label="paper-optimized")
+    rec.close()
+    assert out.reason.startswith("diverged: step ")
+    failed = int(out.reason.split()[2].rstrip(":"))
+    data = _read(path)
+    t, pos = _column(data[f"{_ROOT}/fingers"], "Mesh3D:vertex_positions")
+    dt = scene.model.opt.timestep
+    np.testing.assert_allclose(t, dt * np.arange(failed + 1), atol=1e-9)  # states 0 .. failed-1, and t=0
+    assert np.all(np.isfinite(np.concatenate([np.ravel(p) for p in pos])))
+    _, doc = _column(data[_ROOT], "TextDocument:text")
+    assert json.loads(doc[0])["reason"] == out.reason
+    _verify(path)
+
+
 def test_recordings_leave_no_threads_behind(tmp_path):
     """A closed recorder ends its stream's threads: a process writing many recordings keeps its count."""
     pytest.importorskip("rerun")
