@@ -165,15 +165,7 @@ class RerunRecorder:
         scene = r.scene
         log_e = np.asarray(scene.built.stiffness.log_e) if r.model is scene.built.model else _log_e_of(r)
         steps = logged_steps(len(r.states), dt, r.starts, self.decimation)
-        phases = {k: v for k, v in r.starts.items() if k != "end" and v < len(r.states)}
-        # State t is at time (t + 1) dt (the initial state at 0); a phase starting at step k at k dt.
-        # Phases of no steps start with the next one: one log entry per start step.
-        entries: dict[int, list[str]] = {}
-        for k, v in phases.items():
-            entries.setdefault(v, []).append(f"{k} (step {v})")
-        frame_k, phase_k = np.r_[0, steps + 1], np.fromiter(entries, dtype=int)
-        ks = np.union1d(frame_k, phase_k)
-        at_frame, at_phase = np.searchsorted(ks, frame_k), np.searchsorted(ks, phase_k)
+        ks, at_frame, at_phase, entries = _time_points(steps, r.starts, len(r.states))
         b = ColumnBatch(ks * dt, TIMELINE)
         self._legend(r.label, log_e, b)
         b.add_once(root, "Transform3D", "translation", [[_SPACING_DESIGNS * self._n_rollouts, 0.0, 0.0]])
@@ -517,6 +509,23 @@ def _grab(m: mujoco.MjModel, d: mujoco.MjData, elliptic: bool) -> tuple:
         d.ten_wrapnum.copy(),
         contacts,
     )
+
+
+def _time_points(steps: np.ndarray, starts: dict[str, int], n_steps: int):
+    """A rollout's time points in steps, and which of them hold the logged states and phase starts.
+
+    State t is at time (t + 1) dt, the initial state at 0; a phase starting at step k at k dt. Returns
+    the sorted time points ``ks`` (times ``ks * dt``), the rows of the states (initial first) and of
+    the phase starts, and the phase log entries per start step (phases of no steps start with the
+    next one, in one entry).
+    """
+    entries: dict[int, list[str]] = {}
+    for k, v in starts.items():
+        if k != "end" and v < n_steps:
+            entries.setdefault(v, []).append(f"{k} (step {v})")
+    frame_k, phase_k = np.r_[0, steps + 1], np.fromiter(entries, dtype=int)
+    ks = np.union1d(frame_k, phase_k)
+    return ks, np.searchsorted(ks, frame_k), np.searchsorted(ks, phase_k), entries
 
 
 def _index_of(steps: np.ndarray, step: int) -> int | None:
