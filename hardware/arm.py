@@ -185,14 +185,13 @@ class FrankaArm:
         def move() -> None:
             robot.move(motion, asynchronous=True)
             if not robot.join_motion(timeout=self.config.motion_timeout_s):
-                stopped = self._halt(robot)
+                how = (
+                    "the robot was stopped"
+                    if self._halt(robot)
+                    else f"it did not stop within {_STOP_WAIT_S:g} s either"
+                )
                 raise HardwareError(
-                    f"arm: move to {what} did not finish within {self.config.motion_timeout_s:g} s; "
-                    + (
-                        "the robot was stopped"
-                        if stopped
-                        else f"it did not stop within {_STOP_WAIT_S:g} s either"
-                    )
+                    f"arm: move to {what} did not finish within {self.config.motion_timeout_s:g} s; {how}"
                 )
 
         self._call(f"move to {what}", move, recover=True)

@@ -23,9 +23,10 @@ import struct
 import threading
 import time
 import tty
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 from .xl330 import ADDR, XL330_MODEL_NUMBER
 
@@ -448,21 +449,42 @@ def emulator_process(
     example with an in-process simulator), as a real motor's would be. Inspect its state over the
     bus, as with real motors.
     """
+    args = (tuple(ids), speed_ticks_s, initial_position, cut_link_on_goal_s)
+    with child_process(_serve_in_child, args, what="the emulator process", start_s=_CHILD_START_S) as started:
+        yield started[1]  # the port
+
+
+@contextmanager
+def child_process(
+    target: Callable[..., None],
+    args: tuple,
+    *,
+    what: str,
+    start_s: float,
+    grace_s: float = 2.0,
+    error: type[Exception] = RuntimeError,
+) -> Iterator[tuple[Any, Any]]:
+    """Run ``target(conn, *args)`` in a spawned child; yield its pipe end and its first message.
+
+    The child answers over ``conn`` once it is ready, or exits; ``error`` is raised if it says
+    nothing within ``start_s`` or exits first. On leaving, the child is stopped (:func:`stop_child`).
+    """
     ctx = multiprocessing.get_context("spawn")
     parent, child = ctx.Pipe()
-    proc = ctx.Process(
-        target=_serve_in_child,
-        args=(child, tuple(ids), speed_ticks_s, initial_position, cut_link_on_goal_s),
-        daemon=True,
-    )
+    proc = ctx.Process(target=target, args=(child, *args), daemon=True)
     proc.start()
     child.close()  # the child's end lives in the child: its exit then reads as EOF here
     try:
-        if not parent.poll(_CHILD_START_S):
-            raise RuntimeError("the emulator process did not start")
-        yield parent.recv()
+        if not parent.poll(start_s):
+            raise error(f"{what} did not start within {start_s:g} s")
+        try:
+            first = parent.recv()
+        except EOFError:
+            proc.join(timeout=5.0)
+            raise error(f"{what} exited while starting (exit code {proc.exitcode})") from None
+        yield parent, first
     finally:
-        stop_child(parent, proc, grace_s=2.0)
+        stop_child(parent, proc, grace_s=grace_s)
 
 
 def stop_child(conn: object, proc: object, grace_s: float) -> None:

@@ -24,7 +24,7 @@ import numpy as np
 from mjcodesign.errors import HardwareError
 
 from .camera import save_point_cloud, transform_points
-from .dxl_emulator import emulator_process, stop_child
+from .dxl_emulator import child_process, emulator_process
 from .grasp import GraspJob, run_job
 from .pipeline import GraspReport
 from .tendon import port_handler
@@ -120,28 +120,15 @@ def _serve_sim(conn: Any, box: bool) -> None:
 def franka_sim(box: bool = True) -> Iterator[SimScene]:
     """Run franky-sim (MuJoCo) with one FR3 and optionally a box in a child process, on 127.0.0.1."""
     import importlib.util
-    import multiprocessing
 
     if importlib.util.find_spec("franky_sim") is None:
         raise HardwareError("franky-sim is not installed (needed for the selftest)")
-    ctx = multiprocessing.get_context("spawn")
-    parent, child = ctx.Pipe()
-    proc = ctx.Process(target=_serve_sim, args=(child, box), daemon=True)
-    proc.start()
-    child.close()  # the child's end lives in the child: its exit then reads as EOF here
-    try:
-        if not parent.poll(_SIM_START_S):
-            raise HardwareError(f"franky-sim did not start within {_SIM_START_S:g} s")
-        try:
-            status, detail = parent.recv()
-        except EOFError:
-            proc.join(timeout=5.0)
-            raise HardwareError(f"franky-sim exited while starting (exit code {proc.exitcode})") from None
+    with child_process(
+        _serve_sim, (box,), what="franky-sim", start_s=_SIM_START_S, grace_s=5.0, error=HardwareError
+    ) as (conn, (status, detail)):
         if status != "ready":
             raise HardwareError(detail)
-        yield SimScene(detail, parent)
-    finally:
-        stop_child(parent, proc, grace_s=5.0)
+        yield SimScene(detail, conn)
 
 
 def sample_box_surface(
