@@ -133,14 +133,13 @@ def recorded(tmp_path_factory):
 def test_recording_has_every_entity(recorded):
     path, _, _, data = recorded
     want = {
-        "": {"Transform3D:translation", "TextDocument:text"},  # the offset and the outcome
+        "": {"Transform3D:translation", "TextDocument:text", "TextLog:text"},  # offset, outcome, phases
         "/fingers": {"Mesh3D:vertex_positions", "Mesh3D:triangle_indices", "Mesh3D:vertex_colors"},
         "/gripper": {"Mesh3D:vertex_positions", "Mesh3D:triangle_indices", "Mesh3D:vertex_colors"},
         "/object": {"Transform3D:translation", "Transform3D:quaternion", "Mesh3D:vertex_positions"},
         "/ground": {"Mesh3D:vertex_positions", "Mesh3D:triangle_indices"},
         "/tendon": {"LineStrips3D:strips"},
         "/contacts": {"Arrows3D:origins", "Arrows3D:vectors", "Arrows3D:colors"},
-        "/phases": {"TextLog:text"},
         "/series/force": {"Scalars:scalars", "SeriesLines:names"},
         "/series/object": {"Scalars:scalars", "SeriesLines:names"},
     }
@@ -177,7 +176,7 @@ def test_time_points(recorded):
         t, v = _column(data[f"{_ROOT}/{part}"], name)
         assert len(v) == len(expected), part
         np.testing.assert_allclose(np.sort(t), expected, atol=1e-9)
-    t, text = _column(data[f"{_ROOT}/phases"], "TextLog:text")
+    t, text = _column(data[_ROOT], "TextLog:text")
     starts = np.cumsum([0, *_SCENARIO.phase_steps(dt).values()])[:-1] * dt
     np.testing.assert_allclose(t, starts, atol=1e-9)  # each at its phase's first step
     assert [s.split()[0] for s in text] == [
@@ -257,7 +256,7 @@ def test_captured_states_equal_replayed_ones(tmp_path):
 
     import mujoco
 
-    from viz.recorder import RerunRecorder, _gripper_surfaces, _Replay, logged_steps
+    from viz.recorder import RerunRecorder, _gripper_of, _Replay, logged_steps
 
     scene = _scene()
     got = []
@@ -267,10 +266,9 @@ def test_captured_states_equal_replayed_ones(tmp_path):
     (r,) = got
     steps = logged_steps(len(r.states), scene.model.opt.timestep, r.starts, _DECIMATION)
     assert set(r.captured) == {-1, *steps[:-1].tolist()}  # the last state has no next step to take it
-    fingers, gripper = _gripper_surfaces(r.model, scene)
+    g = _gripper_of(r.model, scene)
     frames = [
-        _Replay(x, fingers, gripper, mujoco.MjData(r.model)).frames(steps)
-        for x in (r, dataclasses.replace(r, captured={}))
+        _Replay(x, g, mujoco.MjData(r.model)).frames(steps) for x in (r, dataclasses.replace(r, captured={}))
     ]
     for name in ("fingers", "gripper"):
         np.testing.assert_array_equal(frames[0].surfaces[name], frames[1].surfaces[name])
@@ -278,10 +276,11 @@ def test_captured_states_equal_replayed_ones(tmp_path):
     np.testing.assert_array_equal(frames[0].series["object"], frames[1].series["object"])
     # Contact forces: the constraint solver starts warm in the run, cold in the replay.
     np.testing.assert_allclose(frames[0].series["force"], frames[1].series["force"], rtol=1e-6, atol=1e-6)
-    for (p0, f0, o0), (p1, f1, o1) in zip(frames[0].contacts, frames[1].contacts, strict=True):
-        np.testing.assert_array_equal(p0, p1)
-        np.testing.assert_array_equal(o0, o1)
-        np.testing.assert_allclose(f0, f1, atol=1e-6)
+    c0, c1 = frames[0].contacts, frames[1].contacts
+    np.testing.assert_array_equal(c0.counts, c1.counts)
+    np.testing.assert_array_equal(c0.pos, c1.pos)
+    np.testing.assert_array_equal(c0.on_object, c1.on_object)
+    np.testing.assert_allclose(c0.force, c1.force, atol=1e-6)
 
 
 def test_diverged_rollout_is_recorded_up_to_its_failure(tmp_path):
@@ -741,8 +740,8 @@ def test_spawn_streams_the_grasp_to_the_viewer_on_its_port(tmp_path):
             os.killpg(server.pid, 9)
     out = json.loads(r.stdout)
     data = _read(saved)
-    for part in ("fingers", "gripper", "object", "tendon", "contacts", "phases"):
-        assert f"{_ROOT}/{part}" in data, part
+    for part in ("", "/fingers", "/gripper", "/object", "/tendon", "/contacts"):
+        assert f"{_ROOT}{part}" in data, part
     _, doc = _column(data[_ROOT], "TextDocument:text")
     assert json.loads(doc[0])["success"] == out["success"]
 

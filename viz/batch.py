@@ -142,6 +142,18 @@ def rgba32(rgb) -> np.ndarray:
     return (c[..., 0] << 24) | (c[..., 1] << 16) | (c[..., 2] << 8) | np.uint32(255)
 
 
+class _RowSet(NamedTuple):
+    """Rows of a batch that hold values (the others are null), in the forms an Arrow list column needs."""
+
+    bits: pa.Buffer
+    """Validity bitmap (little-endian bit order)."""
+    null_count: int
+    valid: np.ndarray
+    """Bool mask, shape (n_rows,)."""
+    before: np.ndarray
+    """Valid rows before each row, shape (n_rows + 1,), int32: the offsets of one value per valid row."""
+
+
 class ColumnBatch:
     """Component columns of several entities on one index, sent as one record batch.
 
@@ -153,6 +165,7 @@ class ColumnBatch:
         self.n_rows = 1 if times is None else len(times)
         self._fields: list[pa.Field] = []
         self._arrays: list[pa.Array] = []
+        self._row_sets: dict[bytes | None, _RowSet] = {}
         if times is not None:
             ns = np.round(np.asarray(times, dtype=float) * 1e9).astype("timedelta64[ns]")
             self._fields.append(
@@ -164,39 +177,56 @@ class ColumnBatch:
             )
             self._arrays.append(pa.array(ns, type=pa.duration("ns")))
 
+    def _rows(self, rows) -> _RowSet:
+        """The row set of ``rows`` (None: every row), worked out once per batch.
+
+        Columns of one batch share a few row sets (the logged states', the first row), and building
+        a validity bitmap costs several numpy calls.
+        """
+        key = None if rows is None else np.asarray(rows, dtype=np.int64).tobytes()
+        hit = self._row_sets.get(key)
+        if hit is not None:
+            return hit
+        valid = np.zeros(self.n_rows, dtype=bool)
+        valid[slice(None) if rows is None else np.asarray(rows, dtype=np.int64)] = True
+        n = int(np.count_nonzero(valid))
+        if rows is not None and n != len(rows):
+            raise ValueError(f"rows must be distinct and below {self.n_rows}, got {list(rows)}")
+        before = np.zeros(self.n_rows + 1, dtype=np.int32)
+        np.cumsum(valid, out=before[1:])
+        bits = pa.py_buffer(np.packbits(valid, bitorder="little"))
+        out = self._row_sets[key] = _RowSet(bits, self.n_rows - n, valid, before)
+        return out
+
     def add(self, entity: str, archetype: str, field: str, items, lengths=None, rows=None) -> None:
         """Add ``rr.{archetype}``'s ``field`` of ``entity``: all rows' values in ``items`` (first axis).
 
         ``rows``: the rows (time points) that hold values, ascending; the others are null (nothing
         logged there: a latest-at query finds the row before). Default: every row. ``lengths``: how
-        many values each of these rows holds; default: all of them in the one static row, or one per
-        row on a timeline.
+        many values each of these rows holds (an int: as many in each); default: all of them in the
+        one static row, or one per row on a timeline.
         """
         column, t, levels = _field(entity, archetype, field)
-        n = self.n_rows if rows is None else len(rows)
-        if lengths is None:
-            lengths = [len(items)] if self.timeline is None else np.ones(n, dtype=int)
-        if len(lengths) != n:
-            raise ValueError(f"{entity} {field}: {len(lengths)} rows of values for {n} rows")
-        if rows is None:
-            self._arrays.append(_lists(t, lengths, items, levels))
-            self._fields.append(column)
-            return
-        per_row = np.zeros(self.n_rows, dtype=np.int32)
-        per_row[rows] = lengths
-        valid = np.zeros(self.n_rows, dtype=bool)
-        valid[rows] = True
-        if np.count_nonzero(valid) != n:
-            raise ValueError(f"{entity} {field}: rows must be distinct and below {self.n_rows}")
-        offsets = np.zeros(self.n_rows + 1, dtype=np.int32)
-        np.cumsum(per_row, out=offsets[1:])
+        rs = self._rows(rows)
+        n = self.n_rows - rs.null_count
         values = _items(levels, items)
+        if lengths is None:
+            lengths = len(values) if self.timeline is None else 1
+        if np.ndim(lengths) == 0:  # as many values in every valid row
+            offsets = rs.before * np.int32(lengths)
+        else:
+            if len(lengths) != n:
+                raise ValueError(f"{entity} {field}: {len(lengths)} rows of values for {n} rows")
+            per_row = np.zeros(self.n_rows, dtype=np.int32)
+            per_row[rs.valid] = lengths
+            offsets = np.zeros(self.n_rows + 1, dtype=np.int32)
+            np.cumsum(per_row, out=offsets[1:])
         if len(values) != offsets[-1]:
-            raise ValueError(f"{len(values)} values for rows of {offsets[-1]} in all")
-        bits = pa.py_buffer(np.packbits(valid, bitorder="little"))
+            raise ValueError(f"{entity} {field}: {len(values)} values for rows of {offsets[-1]} in all")
+        bits = rs.bits if rs.null_count else None
         self._arrays.append(
             pa.Array.from_buffers(
-                t, self.n_rows, [bits, pa.py_buffer(offsets)], null_count=self.n_rows - n, children=[values]
+                t, self.n_rows, [bits, pa.py_buffer(offsets)], null_count=rs.null_count, children=[values]
             )
         )
         self._fields.append(column)
@@ -209,7 +239,7 @@ class ColumnBatch:
         and each batch costs Rerun ~0.2 ms of CPU, and a latest-at query from the first time point on
         finds the values all the same.
         """
-        self.add(entity, archetype, field, items, [len(items)], rows=None if self.timeline is None else [0])
+        self.add(entity, archetype, field, items, len(items), rows=None if self.timeline is None else [0])
 
     def send(self, rec: rr.RecordingStream) -> None:
         """Send every column added (one chunk per entity); nothing if none were."""

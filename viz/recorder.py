@@ -5,11 +5,11 @@ which Rerun splits into one chunk per entity. Its logged states come from the si
 stepped (:class:`mjcodesign.observe.Capture`), or are replayed from the states (``mj_setState`` +
 ``mj_forward``) when it could not take them (batched rollouts):
 
-* ``/designs/{label}``: the offset (runs side by side along world x) and the outcome (JSON text);
-  ``ground``; ``object`` (pose per step, its mesh); ``fingers`` (both fingers' deformed surfaces per
-  step, A's vertices first, coloured per block by stiffness); ``gripper`` (palm and carriages);
-  ``tendon`` (native wrap path per step); ``contacts`` (force arrows); ``phases`` (a text log entry at
-  every phase start). Meshes, colours and names ride on the first time point.
+* ``/designs/{label}``: the offset (runs side by side along world x), the outcome (JSON text) and
+  the phases (a text log entry at every phase start); ``ground``; ``object`` (pose per step, its
+  mesh); ``fingers`` (both fingers' deformed surfaces per step, A's vertices first, coloured per
+  block by stiffness); ``gripper`` (palm and carriages); ``tendon`` (native wrap path per step);
+  ``contacts`` (force arrows). Meshes, colours and names ride on the first time point.
 * ``/designs/{label}/series/``: ``force`` [N] (lines ``tendon A``, ``tendon B``: each finger's
   tendon tension; ``contact``: the norm of the fingers' force on the object) and ``object`` [m]
   (``height``: COM height; ``displacement x|y|z``: object COM relative to the palm, in the palm
@@ -25,6 +25,7 @@ import os
 import uuid
 import weakref
 from pathlib import Path
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -57,6 +58,7 @@ _GROUND_RGB = (60, 80, 100)
 _FINGER_CONTACT_RGB = (230, 60, 200)
 _OTHER_CONTACT_RGB = (150, 150, 150)
 _TENDON_RGB = (30, 30, 30)
+_FINGER_CONTACT_RGBA, _OTHER_CONTACT_RGBA = rgba32(_FINGER_CONTACT_RGB), rgba32(_OTHER_CONTACT_RGB)
 _SERIES_NAMES = {
     "force": ["tendon A", "tendon B", "contact"],
     "object": ["height", "displacement x", "displacement y", "displacement z"],
@@ -108,6 +110,7 @@ class RerunRecorder:
         self._ids = (application_id, recording_id or str(uuid.uuid4()))
         self._spawn, self._port = spawn, port
         self._rec: rr.RecordingStream | None = None
+        self._encoded: rr.BinaryStream | None = None
         self._closed = False
         if spawn:  # the viewer starts up while the simulation runs
             self._open()
@@ -132,13 +135,14 @@ class RerunRecorder:
             raise OutputError(f"the recording {self.path or ''} is closed")
         application_id, recording_id = self._ids
         rec = rr.RecordingStream(application_id, recording_id=recording_id)
-        sinks = []
-        if self._spawn:
+        if not self._spawn:  # a file only: encoded in memory, written by close()
+            self._encoded = rec.binary_stream()
+        else:
+            sinks = [rr.GrpcSink(f"rerun+http://127.0.0.1:{self._port}/proxy")]
             rec.spawn(port=self._port, connect=False)
-            sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{self._port}/proxy"))
-        if self.path is not None:
-            sinks.append(rr.FileSink(str(self.path)))
-        rec.set_sinks(*sinks)
+            if self.path is not None:
+                sinks.append(rr.FileSink(str(self.path)))
+            rec.set_sinks(*sinks)
         self._rec = rec
         return rec
 
@@ -170,21 +174,20 @@ class RerunRecorder:
         self._legend(r.label, log_e, b)
         b.add_once(root, "Transform3D", "translation", [[_SPACING_DESIGNS * self._n_rollouts, 0.0, 0.0]])
         self._n_rollouts += 1
-        b.add_once(root, "TextDocument", "text", [json.dumps(r.outcome.as_dict(), indent=1)])
-        b.add_once(root, "TextDocument", "media_type", ["text/plain"])
-        fingers, gripper = _gripper_surfaces(m, scene)
-        self._geometry(b, root, r, fingers, gripper, log_e)
+        b.add_once(root, "TextDocument", "text", [json.dumps(r.outcome.as_dict(), indent=1)])  # plain text
+        g = _gripper_of(m, scene)
+        self._geometry(b, root, r, g, log_e)
         for name, names in _SERIES_NAMES.items():
             b.add_once(f"{root}/series/{name}", "SeriesLines", "names", names)
 
-        frames = _Replay(r, fingers, gripper, self._data(r)).frames(steps)
+        frames = _Replay(r, g, self._data(r)).frames(steps)
         for name, pos in frames.surfaces.items():
             b.add(
                 f"{root}/{name}",
                 "Mesh3D",
                 "vertex_positions",
                 pos.reshape(-1, 3),
-                [pos.shape[1]] * len(pos),
+                pos.shape[1],
                 at_frame,
             )
         b.add(f"{root}/object", "Transform3D", "translation", frames.object_pos, rows=at_frame)
@@ -193,22 +196,21 @@ class RerunRecorder:
         )
         strips = [s for row in frames.tendon for s in row]
         b.add(f"{root}/tendon", "LineStrips3D", "strips", strips, _lengths(frames.tendon), at_frame)
-        pos, vec, on_object = (np.concatenate(c) for c in zip(*frames.contacts, strict=True))
-        counts = _lengths(frames.contacts, 0)
-        b.add(f"{root}/contacts", "Arrows3D", "origins", pos, counts, at_frame)
-        b.add(f"{root}/contacts", "Arrows3D", "vectors", vec * _ARROW_M_PER_N, counts, at_frame)
-        colours = rgba32(np.where(on_object[:, None], _FINGER_CONTACT_RGB, _OTHER_CONTACT_RGB))
-        b.add(f"{root}/contacts", "Arrows3D", "colors", colours, counts, at_frame)
+        c = frames.contacts
+        b.add(f"{root}/contacts", "Arrows3D", "origins", c.pos, c.counts, at_frame)
+        b.add(f"{root}/contacts", "Arrows3D", "vectors", c.force * _ARROW_M_PER_N, c.counts, at_frame)
+        colours = np.where(c.on_object, _FINGER_CONTACT_RGBA, _OTHER_CONTACT_RGBA)
+        b.add(f"{root}/contacts", "Arrows3D", "colors", colours, c.counts, at_frame)
         for name, values in frames.series.items():
             b.add(
                 f"{root}/series/{name}",
                 "Scalars",
                 "scalars",
                 values.reshape(-1),
-                [values.shape[1]] * len(values),
+                values.shape[1],
                 at_frame,
             )
-        b.add(f"{root}/phases", "TextLog", "text", ["; ".join(e) for e in entries.values()], rows=at_phase)
+        b.add(root, "TextLog", "text", ["; ".join(e) for e in entries.values()], rows=at_phase)
         b.send(self.rec)
 
     def snapshot(self, s: Snapshot) -> None:
@@ -281,13 +283,18 @@ class RerunRecorder:
             return
         rec = self.rec  # opened now if nothing was logged: the file holds an empty recording
         self._closed = True
-        rec.flush()
-        rec.disconnect()
-        self._rec = None
+        encoded = self._encoded.read(flush=True) if self._encoded is not None else None
+        rec.disconnect()  # flushes the batcher into the sinks, then ends them (a file gets its footer)
+        self._rec = self._encoded = None
         del rec
         import rerun_bindings  # rerun-sdk's native module; rr.init calls the same sweep
 
         rerun_bindings.flush_and_cleanup_orphaned_recordings()
+        if encoded is not None:
+            try:
+                self.path.write_bytes(encoded)
+            except OSError as exc:
+                raise OutputError(f"cannot write the recording {self.path}: {exc.strerror or exc}") from exc
 
     # -- helpers ----------------------------------------------------------------------------------
     def _legend(self, name: str, log_e: np.ndarray, batch: ColumnBatch) -> None:
@@ -307,37 +314,26 @@ class RerunRecorder:
             batch.add_once("/legend", "Boxes3D", "labels", [f"{v:.1f}" for v in ticks])
             batch.add_once("/legend", "Boxes3D", "fill_mode", [rr.components.FillMode.Solid.value])
 
-    def _geometry(self, b: ColumnBatch, root, r, fingers, gripper, log_e) -> None:
+    def _geometry(self, b: ColumnBatch, root, r, g: _Gripper, log_e) -> None:
         """Ground, object mesh, the fingers' and gripper's triangles and colours, on the first time point.
 
         Both fingers are one mesh (finger A's vertices first), coloured per block by stiffness; the
         object's mesh sits on the ``object`` entity, whose per-step transform moves it.
         """
-        g = _GROUND_HALF
+        h = _GROUND_HALF
         mesh = r.scene.obj.mesh
         for name, vertices, triangles, rgb in (
-            ("ground", [[-g, -g, 0], [g, -g, 0], [g, g, 0], [-g, g, 0]], [[0, 1, 2], [0, 2, 3]], _GROUND_RGB),
+            ("ground", [[-h, -h, 0], [h, -h, 0], [h, h, 0], [-h, h, 0]], [[0, 1, 2], [0, 2, 3]], _GROUND_RGB),
             ("object", mesh.vertices, mesh.faces, _OBJECT_RGB),
         ):
             b.add_once(f"{root}/{name}", "Mesh3D", "vertex_positions", np.asarray(vertices))
             b.add_once(f"{root}/{name}", "Mesh3D", "triangle_indices", np.asarray(triangles))
             b.add_once(f"{root}/{name}", "Mesh3D", "albedo_factor", [rgba32(rgb)])
-        surfs = list(fingers.values())
-        offsets = np.cumsum([0] + [len(s.vertex_block) for s in surfs])
-        tris = np.concatenate([s.triangles + o for s, o in zip(surfs, offsets, strict=False)])
-        rgb = np.concatenate(
-            [_block_colours(stiffness_rgb(log_e[i]), s.vertex_block) for i, s in enumerate(surfs)]
-        )
-        b.add_once(f"{root}/fingers", "Mesh3D", "triangle_indices", tris)
-        b.add_once(f"{root}/fingers", "Mesh3D", "vertex_colors", rgba32(rgb))
-        if gripper is not None:
-            b.add_once(f"{root}/gripper", "Mesh3D", "triangle_indices", gripper.triangles)
-            b.add_once(
-                f"{root}/gripper",
-                "Mesh3D",
-                "vertex_colors",
-                np.broadcast_to(rgba32(NEUTRAL_RGB), len(gripper.vertex_block)),
-            )
+        b.add_once(f"{root}/fingers", "Mesh3D", "triangle_indices", g.finger_triangles)
+        b.add_once(f"{root}/fingers", "Mesh3D", "vertex_colors", g.finger_colours(log_e))
+        if g.gripper is not None:
+            b.add_once(f"{root}/gripper", "Mesh3D", "triangle_indices", g.gripper.triangles)
+            b.add_once(f"{root}/gripper", "Mesh3D", "vertex_colors", g.gripper_colours)
 
     def _data(self, r: Rollout) -> mujoco.MjData:
         """The rollout's spare ``MjData``, else one of its model, reused while rollouts of one model follow."""
@@ -349,22 +345,81 @@ class RerunRecorder:
         return self._scratch[1]
 
 
-_SURFACES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+class _Gripper:
+    """The surfaces of a model's fingers (A, B) and rigid parts (palm, carriages), and their fixed parts.
 
+    The fingers' triangles as one mesh (A's vertices first) and its colour per vertex (block of finger);
+    the rigid parts' neutral colours.
 
-def _gripper_surfaces(m: mujoco.MjModel, scene) -> tuple[dict[str, Surface], Surface | None]:
-    """The fingers' and the gripper's rigid parts' surfaces of ``m``, built once per model.
-
-    They depend on the model's geometry only (vertices are placed per state from the geom poses), and
-    rollouts of one model (repeats, poses of one design) are recorded again and again.
+    They depend on the model's geometry only (vertices are placed per state from the geom poses), so
+    :func:`_gripper_of` builds them once per model: rollouts of one model (repeats, poses of one
+    design) are recorded again and again.
     """
-    if m not in _SURFACES:
+
+    def __init__(self, m: mujoco.MjModel, scene):
         edges = np.array([b.x1 for b in scene.built.design.blocks()[:-1]])
         rigid = [
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, n) for n in ("palm", "A_carriage", "B_carriage")
         ]
-        _SURFACES[m] = (finger_surfaces(m, scene.built.fingers, edges), body_geom_surface(m, rigid))
-    return _SURFACES[m]
+        self.fingers: dict[str, Surface] = finger_surfaces(m, scene.built.fingers, edges)
+        self.gripper: Surface | None = body_geom_surface(m, rigid)
+        surfs = list(self.fingers.values())
+        first = np.cumsum([0] + [len(s.vertex_block) for s in surfs])
+        self.finger_triangles = np.concatenate([s.triangles + o for s, o in zip(surfs, first, strict=False)])
+        self._combined = (
+            Surface(
+                self.finger_triangles,
+                np.concatenate([s.vertex_block for s in surfs]),
+                geom=np.concatenate([s.geom for s in surfs]),
+                local=np.concatenate([s.local for s in surfs]),
+            )
+            if all(s.geom is not None for s in surfs)
+            else None
+        )
+        self._finger = np.concatenate([np.full(len(s.vertex_block), i) for i, s in enumerate(surfs)])
+        self._block = np.concatenate([s.vertex_block for s in surfs])
+        n = 0 if self.gripper is None else len(self.gripper.vertex_block)
+        self.gripper_colours = np.full(n, rgba32(NEUTRAL_RGB), dtype=np.uint32)
+
+    def finger_positions(self, gpos: np.ndarray, gmat: np.ndarray, fpos: np.ndarray) -> np.ndarray:
+        """World vertices of both fingers (A's first) [m], shape (..., n_vertices, 3) (:meth:`Surface.positions`)."""
+        if self._combined is not None:  # block geoms: one gather for both fingers
+            return self._combined.positions(gpos, gmat, fpos)
+        return np.concatenate([s.positions(gpos, gmat, fpos) for s in self.fingers.values()], axis=-2)
+
+    def finger_colours(self, log_e: np.ndarray) -> np.ndarray:
+        """Colour (``0xRRGGBBAA``) of every finger vertex: its block's stiffness, else neutral.
+
+        A vertex past the last block takes the last block's colour.
+        """
+        log_e = np.atleast_2d(log_e)
+        table = np.append(rgba32(stiffness_rgb(log_e)).reshape(-1), rgba32(NEUTRAL_RGB))
+        nb = log_e.shape[1]
+        idx = np.where(self._block >= 0, self._finger * nb + np.clip(self._block, 0, nb - 1), len(table) - 1)
+        return table[idx]
+
+
+_GRIPPERS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _gripper_of(m: mujoco.MjModel, scene) -> _Gripper:
+    """The :class:`_Gripper` of ``m``, built on first use."""
+    if m not in _GRIPPERS:
+        _GRIPPERS[m] = _Gripper(m, scene)
+    return _GRIPPERS[m]
+
+
+class _Contacts(NamedTuple):
+    """The contacts of every logged state, concatenated (state by state)."""
+
+    pos: np.ndarray
+    """Points [m], shape (k, 3)."""
+    force: np.ndarray
+    """Force [N] in world axes, on the object (or on geom2's body where the object is not in it), (k, 3)."""
+    on_object: np.ndarray
+    """A finger touches the object, shape (k,)."""
+    counts: np.ndarray
+    """Contacts per state, shape (n,)."""
 
 
 class _Frames:
@@ -376,8 +431,24 @@ class _Frames:
         self.object_pos = np.empty((n, 3))
         self.object_quat = np.empty((n, 4))
         self.tendon: list[list[np.ndarray]] = []
-        self.contacts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self.contacts: _Contacts | None = None
         self.series: dict[str, np.ndarray] = {}
+
+
+_GRABBED = (
+    "geom_xpos",
+    "geom_xmat",
+    "flexvert_xpos",
+    "xpos",
+    "xquat",
+    "xipos",
+    "xmat",
+    "actuator_force",
+    "wrap_xpos",
+    "ten_wrapadr",
+    "ten_wrapnum",
+)
+"""``MjData`` arrays that a logged state copies (:func:`_grab`), in this order, one flat row per state."""
 
 
 class _Replay:
@@ -387,18 +458,17 @@ class _Replay:
     derived from them (surfaces, series, contact forces in world axes) is computed for all states at once.
     """
 
-    def __init__(self, r: Rollout, fingers: dict[str, Surface], gripper: Surface | None, d: mujoco.MjData):
+    def __init__(self, r: Rollout, g: _Gripper, d: mujoco.MjData):
         self.r = r
         self.m = r.model
         self.d = d
-        self.fingers = list(fingers.values())
-        self.gripper = gripper
+        self.g = g
         m = self.m
         # Tendon actuators per finger, in finger order (A, B): their forces sum to the finger's tension.
-        self.acts = {
-            h.prefix.rstrip("_"): [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in h.actuators]
+        self.acts = [
+            [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in h.actuators]
             for h in sorted(r.scene.built.fingers, key=lambda h: h.prefix)
-        }
+        ]
         self.is_finger = np.zeros(m.nbody, dtype=bool)
         self.is_finger[r.scene.finger_bodies] = True
         self.elliptic = m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
@@ -419,36 +489,36 @@ class _Replay:
                 mujoco.mj_forward(m, d)
                 row = _grab(m, d, self.elliptic)
             rows.append(row)
+        flat = np.stack([row[0] for row in rows])  # (n, sum of the arrays' sizes)
+        shapes = [getattr(d, name).shape for name in _GRABBED]
+        ends = np.cumsum([int(np.prod(sh)) for sh in shapes])
         gpos, gmat, fpos, xpos, xquat, xipos, xmat, act, wrap, wrap_adr, wrap_num = (
-            np.stack(c) for c in zip(*(row[:-1] for row in rows), strict=True)
+            flat[:, e - size : e].reshape(n, *sh)
+            for e, size, sh in zip(ends, np.diff(ends, prepend=0), shapes, strict=True)
         )
-        contacts = [row[-1] for row in rows]
-        palm_mat = xmat[:, palm]
-        out.surfaces["fingers"] = np.concatenate(
-            [s.positions(gpos, gmat, fpos) for s in self.fingers], axis=1
-        )
-        if self.gripper is not None:
-            out.surfaces["gripper"] = self.gripper.positions(gpos, gmat, fpos)
+        wrap = wrap.reshape(n, -1, 3)
+        wrap_adr, wrap_num = wrap_adr.astype(int), wrap_num.astype(int)
+        palm_mat = xmat[:, palm].reshape(n, 3, 3)
+        out.surfaces["fingers"] = self.g.finger_positions(gpos, gmat, fpos)
+        if self.g.gripper is not None:
+            out.surfaces["gripper"] = self.g.gripper.positions(gpos, gmat, fpos)
         out.object_pos, out.object_quat = xpos[:, ob], xquat[:, ob]
         out.tendon = [
             [wrap[i, a : a + k] for a, k in zip(wrap_adr[i], wrap_num[i], strict=True)] for i in range(n)
         ]
-        out.contacts, force = self._world_contacts(contacts)
+        out.contacts, force = self._world_contacts([row[1] for row in rows])
         grasp = _index_of(steps, r.starts["lift"] - 1)
-        tendon = np.stack([act[:, ids].sum(axis=1) for ids in self.acts.values()], axis=1)
+        tendon = np.stack([act[:, ids].sum(axis=1) for ids in self.acts], axis=1)
         out.series["force"] = np.column_stack([tendon, force])
         # Object COM in the palm frame; relative to the grasp (end of tightening), as Outcome.displacement,
         # and before it, vs the same state.
-        rel = np.einsum("nji,nj->ni", palm_mat.reshape(n, 3, 3), xipos[:, ob] - xpos[:, palm])
+        rel = np.einsum("nji,nj->ni", palm_mat, xipos[:, ob] - xpos[:, palm])
         displacement = rel - (rel[grasp] if grasp is not None else rel[0])
         out.series["object"] = np.column_stack([xipos[:, ob, 2], displacement])
         return out
 
-    def _world_contacts(self, rows) -> tuple[list, np.ndarray]:
-        """Contacts in world axes, and the norm of the fingers' total force on the object [N], shape (n,).
-
-        Per state: points [m], force on the object (or on geom2's body) [N], finger-object mask.
-        """
+    def _world_contacts(self, rows) -> tuple[_Contacts, np.ndarray]:
+        """Contacts in world axes, and the norm of the fingers' total force on the object [N], shape (n,)."""
         counts = np.array([len(p) for p, *_ in rows])
         pos, frame, g1, g2, local = (np.concatenate(c) for c in zip(*rows, strict=True))
         b1, b2 = self.m.geom_bodyid[g1], self.m.geom_bodyid[g2]
@@ -460,17 +530,15 @@ class _Replay:
         state = np.repeat(np.arange(len(rows)), counts)
         total = np.zeros((len(rows), 3))
         np.add.at(total, state[on_object], world[on_object])
-        cuts = np.cumsum(counts)[:-1]
-        return list(
-            zip(np.split(pos, cuts), np.split(world, cuts), np.split(on_object, cuts), strict=True)
-        ), (np.linalg.norm(total, axis=1))
+        return _Contacts(pos, world, on_object, counts), np.linalg.norm(total, axis=1)
 
 
 def _grab(m: mujoco.MjModel, d: mujoco.MjData, elliptic: bool) -> tuple:
     """Copies of what a logged state needs from ``d`` after ``mj_forward`` (or a step) at that state.
 
-    Geom, flex-vertex and body poses, actuator forces, tendon wrap paths, and the contacts: points
-    [m], frames (normal, tangents), geoms and forces in the contact frame [N].
+    The arrays of :data:`_GRABBED` (geom, flex-vertex and body poses, actuator forces, tendon wrap
+    paths) as one flat float row, and the contacts: points [m], frames (normal, tangents), geoms and
+    forces in the contact frame [N].
     """
     nc = d.ncon
     con = d.contact
@@ -495,20 +563,8 @@ def _grab(m: mujoco.MjModel, d: mujoco.MjData, elliptic: bool) -> tuple:
             local = d.efc_force[np.maximum(adr, 0)[:, None] + np.arange(3)]
             local[adr < 0] = 0.0  # excluded contacts carry no force
         contacts = (con.pos.copy(), con.frame.copy(), con.geom1.copy(), con.geom2.copy(), local)
-    return (
-        d.geom_xpos.copy(),
-        d.geom_xmat.copy(),
-        d.flexvert_xpos.copy(),
-        d.xpos.copy(),
-        d.xquat.copy(),
-        d.xipos.copy(),
-        d.xmat.copy(),
-        d.actuator_force.copy(),
-        d.wrap_xpos.reshape(-1, 3).copy(),
-        d.ten_wrapadr.copy(),
-        d.ten_wrapnum.copy(),
-        contacts,
-    )
+    flat = np.concatenate([getattr(d, name) for name in _GRABBED], axis=None, dtype=float)
+    return flat, contacts
 
 
 def _time_points(steps: np.ndarray, starts: dict[str, int], n_steps: int):
@@ -534,9 +590,9 @@ def _index_of(steps: np.ndarray, step: int) -> int | None:
     return int(hit[0]) + 1 if hit.size else None
 
 
-def _lengths(rows, axis: int | None = None) -> list[int]:
-    """Items per row of a ragged list (or of each row's ``axis``-th member)."""
-    return [len(row if axis is None else row[axis]) for row in rows]
+def _lengths(rows) -> list[int]:
+    """Items per row of a ragged list."""
+    return [len(row) for row in rows]
 
 
 def _block_colours(block_rgb: np.ndarray, vertex_block: np.ndarray) -> np.ndarray:
