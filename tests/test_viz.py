@@ -330,6 +330,31 @@ def test_recordings_leave_no_threads_behind(tmp_path):
     _verify(tmp_path / "7.rrd")  # an empty recording, still a valid file
 
 
+def test_recording_replaces_an_old_file_and_reports_a_failed_write(tmp_path):
+    """close() writes the file: over an older one (replaced, not appended to), through a symlink,
+    and a write that fails raises OutputError naming the file."""
+    pytest.importorskip("rerun")
+    from mjcodesign.errors import OutputError
+    from viz.recorder import RerunRecorder
+
+    old = tmp_path / "grasp.rrd"
+    old.write_bytes(b"not a recording" * 10_000)
+    RerunRecorder(old).close()
+    assert old.stat().st_size < 10_000  # an empty recording, not the old bytes
+    _verify(old)
+    link = tmp_path / "link.rrd"
+    link.symlink_to(old)
+    RerunRecorder(link).close()
+    assert link.is_symlink()
+    _verify(old)
+    gone = tmp_path / "gone"
+    gone.mkdir()
+    rec = RerunRecorder(gone / "x.rrd")  # writable when made
+    gone.rmdir()
+    with pytest.raises(OutputError, match="cannot write the recording .*x.rrd"):
+        rec.close()
+
+
 def test_colormap_ends_and_monotone():
     pytest.importorskip("rerun")
     from viz.colormap import stiffness_rgb
@@ -382,10 +407,18 @@ def test_run_batch_hands_every_design_to_the_observer(tmp_path):
     path = tmp_path / "batch.rrd"
     rec = load_observer("rerun", path=path, decimation=50)
     outs = MujocoBackend(nthread=1).run_batch(
-        scene, _SCENARIO, [Stiffness.preset(d) for d in designs], observer=rec, labels=designs
-    )
+        scene,
+        _SCENARIO,
+        [Stiffness.preset(d) for d in [*designs, "soft"]],
+        observer=rec,
+        labels=[*designs, "soft-again"],
+    )[:2]
     rec.close()
     data = _read(path)
+    # The legend: each design once, under its first run; the repeated design logged nothing more.
+    t, legend = _column(data["/legend"], "TextDocument:text")
+    assert len(legend) == 2 and "### soft\n" in legend[-1] and "### semi-rigid\n" in legend[-1]
+    assert "soft-again" not in legend[-1]
     for d, out in zip(designs, outs, strict=True):
         # The batch's models carry the design in their hinge stiffness; colours are read back from it.
         _, colours = _column(data[f"/designs/{d}/fingers"], "Mesh3D:vertex_colors")

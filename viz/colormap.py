@@ -36,7 +36,7 @@ def legend_markdown(designs: dict[str, np.ndarray]) -> str:
         "",
         f"ln(E/Pa), linear: **red** {LOG_E_MIN} ({np.exp(LOG_E_MIN) / 1e6:.2f} MPa, soft) → **yellow** "
         f"{0.5 * (LOG_E_MIN + LOG_E_MAX):.2f} → **green** {LOG_E_MAX} ({np.exp(LOG_E_MAX) / 1e6:.1f} MPa, "
-        "stiff). Grey: rigid parts (palm, carriages).",
+        "stiff). Grey: rigid parts (palm, carriages). Each design is listed under the first run that used it.",
         "",
     ]
     for name, log_e in designs.items():

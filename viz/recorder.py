@@ -86,7 +86,8 @@ class RerunRecorder:
     ``spawn`` starts a desktop viewer on ``port`` of 127.0.0.1, or reuses the viewer (or ``rerun
     --serve-grpc`` proxy) already listening there. ``decimation``: log every n-th step (None:
     :data:`DEFAULT_FRAME_RATE` per simulated second). Call :meth:`close` to flush; the file is complete
-    afterwards.
+    afterwards. A file alone is encoded in memory and written by :meth:`close` (a file sink's writer
+    thread cost ~1 ms more per recording); with a viewer, a file sink writes it as the data comes.
     """
 
     def __init__(
@@ -114,7 +115,7 @@ class RerunRecorder:
         self._closed = False
         if spawn:  # the viewer starts up while the simulation runs
             self._open()
-        self._designs: dict[str, np.ndarray] = {}
+        self._designs: dict[bytes, tuple[str, np.ndarray]] = {}  # ln E -> (first run, ln E)
         self._scratch: tuple[mujoco.MjModel, mujoco.MjData] | None = None
         self._n_rollouts = 0
         self._groups: dict[str, int] = {}
@@ -273,7 +274,7 @@ class RerunRecorder:
         static.send(self.rec)
 
     def close(self) -> None:
-        """Flush everything, close the sinks and end the stream's threads (the file is complete).
+        """Flush everything, close the sinks, end the stream's threads and write the file (complete).
 
         Rerun keeps a dropped stream, with its two threads, until an "orphan" sweep (``rr.init`` runs
         one); without the sweep every recording made in a process left two threads behind that now and
@@ -292,16 +293,28 @@ class RerunRecorder:
         rerun_bindings.flush_and_cleanup_orphaned_recordings()
         if encoded is not None:
             try:
+                if self.path.exists() and not self.path.is_symlink():
+                    # A new file, not the old one truncated: ext4 writes a truncated file's old data
+                    # out first (~2 ms of waiting for a recording written over the last one).
+                    self.path.unlink()
                 self.path.write_bytes(encoded)
             except OSError as exc:
                 raise OutputError(f"cannot write the recording {self.path}: {exc.strerror or exc}") from exc
 
     # -- helpers ----------------------------------------------------------------------------------
     def _legend(self, name: str, log_e: np.ndarray, batch: ColumnBatch) -> None:
-        """``/legend``: every design's ln E (text), and the colour scale's swatches in 3-D (once)."""
+        """``/legend``: every design's ln E (text), and the colour scale's swatches in 3-D (once).
+
+        A design is listed under the first run that used it; the text is logged again only when a
+        run brings a new design (runs of one design, e.g. many poses, add nothing).
+        """
+        key = np.asarray(log_e, dtype=float).tobytes()
+        if key in self._designs:
+            return
         first = not self._designs
-        self._designs[name] = log_e
-        batch.add_once("/legend", "TextDocument", "text", [legend_markdown(self._designs)])
+        self._designs[key] = (name, log_e)
+        designs = dict(self._designs.values())
+        batch.add_once("/legend", "TextDocument", "text", [legend_markdown(designs)])
         batch.add_once("/legend", "TextDocument", "media_type", ["text/markdown"])
         if first:
             ticks = legend_ticks()
