@@ -1,9 +1,11 @@
 """Cost of recording a grasp rollout with an observer (``mjcodesign bench viz``).
 
-Cases are data (:data:`CASES`); one runner times, per case and decimation, the same rollout without and
-with the observer (created, fed and closed inside the timed span), alternating the two so that a busy
-machine slows both alike, and reports medians of wall and CPU time (CPU time counts the observer's own
-threads too).
+Cases are data (:data:`CASES`); one runner times, per case and decimation, the same rollout three ways,
+in turn so that a busy machine slows all alike: without an observer; into a recording of its own (the
+observer created, fed and closed inside the timed span, as ``grasp --rrd`` with one design); and into
+one recording that all repeats share (as ``grasp --design a,b,c --rrd``), whose close is timed once and
+shared out. It reports medians of wall and CPU time (CPU time counts the observer's own threads too).
+The difference between the two recorded figures is the recording's fixed cost (stream, file, footer).
 """
 
 from __future__ import annotations
@@ -50,8 +52,9 @@ def _time(fn) -> tuple[float, float]:
     return time.perf_counter() - w, time.process_time() - c
 
 
-def _measure(sim, scene, scenario, observer: str, path: Path, dec, repeats: int):
-    """Medians of (wall, CPU) [s]: plain rollouts and recorded ones, alternated."""
+def _measure(sim, scene, scenario, observer: str, path: Path, dec, repeats: int) -> dict:
+    """Medians [s] of (wall, CPU) of plain rollouts, of rollouts in a recording each and of rollouts
+    in one shared recording (its close shared out over them), alternated; and the files' sizes [B]."""
     from mjcodesign.observe import observer_class
 
     cls = observer_class(observer)  # finding the entry point (~20 ms) is start-up, not per rollout
@@ -62,18 +65,33 @@ def _measure(sim, scene, scenario, observer: str, path: Path, dec, repeats: int)
     files = [path.with_name(f"{path.stem}_{i}{path.suffix}") for i in range(repeats)]
     paths = iter(files)
 
-    def recorded():
-        # A new file each time, as a run writes: rewriting the last one made ext4 flush its old
-        # data on truncation (~2 ms here), which is the file system's cost, not the recording's.
+    def own():
+        # A new file each time, as a run writes (the recorder replaces an older file, see its close).
         rec = cls(path=next(paths), decimation=dec)
         sim.run(scene, scenario, observer=rec)
         rec.close()
 
-    times = [(_time(plain), _time(recorded)) for _ in range(repeats)]
+    shared_path = path.with_name(f"{path.stem}_shared{path.suffix}")
+    shared = cls(path=shared_path, decimation=dec)
+    labels = iter(f"run{i}" for i in range(repeats))
+
+    def into_shared():
+        sim.run(scene, scenario, observer=shared, label=next(labels))
+
+    times = np.array([(_time(plain), _time(own), _time(into_shared)) for _ in range(repeats)])
+    close = np.array(_time(shared.close))
     for f in files[:-1]:
         f.unlink()
     files[-1].replace(path)  # the size reported is the last recording's
-    return np.median([t[0] for t in times], axis=0), np.median([t[1] for t in times], axis=0)
+    med = np.median(times, axis=0)  # (3, 2): plain, own, shared x wall, CPU
+    return {
+        "plain": med[0],
+        "own": med[1],
+        "shared": med[2] + close / repeats,
+        "close": close,
+        "own_bytes": path.stat().st_size,
+        "shared_bytes": shared_path.stat().st_size,
+    }
 
 
 def bench_viz(
@@ -87,7 +105,9 @@ def bench_viz(
 ) -> dict:
     """Rollout and recorded times [s], relative overheads and recording size [B] per case and decimation.
 
-    ``names`` picks cases by name (default: all of ``cases``).
+    The top-level figures record each rollout into a file of its own; ``shared_recording`` logs the
+    ``repeats`` rollouts into one file, its close shared out. ``names`` picks cases by name (default:
+    all of ``cases``).
     """
     from mjcodesign.backends import MujocoBackend
     from mjcodesign.finger import FingerDesign
@@ -122,7 +142,8 @@ def bench_viz(
             )
             sim.run(scene, scenario)  # warm up
             for dec in decimations:
-                p, r = _measure(sim, scene, scenario, observer, path, dec, repeats)
+                m = _measure(sim, scene, scenario, observer, path, dec, repeats)
+                p, r, sh = m["plain"], m["own"], m["shared"]
                 out["cases"].append(
                     {
                         "case": case.name,
@@ -135,7 +156,16 @@ def bench_viz(
                         "rollout_cpu_s": float(p[1]),
                         "recorded_cpu_s": float(r[1]),
                         "overhead_cpu": float((r[1] - p[1]) / p[1]),
-                        "rrd_bytes": path.stat().st_size,
+                        "rrd_bytes": m["own_bytes"],
+                        "shared_recording": {
+                            "rollouts": repeats,
+                            "recorded_wall_s": float(sh[0]),
+                            "overhead_wall": float((sh[0] - p[0]) / p[0]),
+                            "recorded_cpu_s": float(sh[1]),
+                            "overhead_cpu": float((sh[1] - p[1]) / p[1]),
+                            "close_cpu_s": float(m["close"][1]),
+                            "rrd_bytes": m["shared_bytes"],
+                        },
                     }
                 )
     return out

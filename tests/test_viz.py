@@ -256,7 +256,7 @@ def test_captured_states_equal_replayed_ones(tmp_path):
 
     import mujoco
 
-    from viz.recorder import RerunRecorder, _gripper_of, _Replay, logged_steps
+    from viz.recorder import RerunRecorder, _parts_of, _Replay, logged_steps
 
     scene = _scene()
     got = []
@@ -266,7 +266,7 @@ def test_captured_states_equal_replayed_ones(tmp_path):
     (r,) = got
     steps = logged_steps(len(r.states), scene.model.opt.timestep, r.starts, _DECIMATION)
     assert set(r.captured) == {-1, *steps[:-1].tolist()}  # the last state has no next step to take it
-    g = _gripper_of(r.model, scene)
+    g = _parts_of(r.model, scene)
     frames = [
         _Replay(x, g, mujoco.MjData(r.model)).frames(steps) for x in (r, dataclasses.replace(r, captured={}))
     ]

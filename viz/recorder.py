@@ -59,6 +59,7 @@ _FINGER_CONTACT_RGB = (230, 60, 200)
 _OTHER_CONTACT_RGB = (150, 150, 150)
 _TENDON_RGB = (30, 30, 30)
 _FINGER_CONTACT_RGBA, _OTHER_CONTACT_RGBA = rgba32(_FINGER_CONTACT_RGB), rgba32(_OTHER_CONTACT_RGB)
+_COLOUR_CACHE = 16  # finger colourings kept per model (designs recorded again and again)
 _SERIES_NAMES = {
     "force": ["tendon A", "tendon B", "contact"],
     "object": ["height", "displacement x", "displacement y", "displacement z"],
@@ -176,7 +177,7 @@ class RerunRecorder:
         b.add_once(root, "Transform3D", "translation", [[_SPACING_DESIGNS * self._n_rollouts, 0.0, 0.0]])
         self._n_rollouts += 1
         b.add_once(root, "TextDocument", "text", [json.dumps(r.outcome.as_dict(), indent=1)])  # plain text
-        g = _gripper_of(m, scene)
+        g = _parts_of(m, scene)
         self._geometry(b, root, r, g, log_e)
         for name, names in _SERIES_NAMES.items():
             b.add_once(f"{root}/series/{name}", "SeriesLines", "names", names)
@@ -327,7 +328,7 @@ class RerunRecorder:
             batch.add_once("/legend", "Boxes3D", "labels", [f"{v:.1f}" for v in ticks])
             batch.add_once("/legend", "Boxes3D", "fill_mode", [rr.components.FillMode.Solid.value])
 
-    def _geometry(self, b: ColumnBatch, root, r, g: _Gripper, log_e) -> None:
+    def _geometry(self, b: ColumnBatch, root, r, g: _ModelParts, log_e) -> None:
         """Ground, object mesh, the fingers' and gripper's triangles and colours, on the first time point.
 
         Both fingers are one mesh (finger A's vertices first), coloured per block by stiffness; the
@@ -358,15 +359,15 @@ class RerunRecorder:
         return self._scratch[1]
 
 
-class _Gripper:
-    """The surfaces of a model's fingers (A, B) and rigid parts (palm, carriages), and their fixed parts.
+class _ModelParts:
+    """What the recorder works out once per model.
 
-    The fingers' triangles as one mesh (A's vertices first) and its colour per vertex (block of finger);
-    the rigid parts' neutral colours.
-
-    They depend on the model's geometry only (vertices are placed per state from the geom poses), so
-    :func:`_gripper_of` builds them once per model: rollouts of one model (repeats, poses of one
-    design) are recorded again and again.
+    The surfaces of the fingers (A, B) and the rigid parts (palm, carriages), and how a logged state's
+    data is laid out; the fingers' triangles as one mesh (A's vertices first) and its colour per vertex (block of finger),
+    the rigid parts' neutral colours, the tendon actuators per finger, the finger bodies. They depend
+    on the model only (vertices are placed per state from the geom poses), so :func:`_parts_of` builds
+    them once per model: rollouts of one model (repeats, poses of one design) are recorded again and
+    again.
     """
 
     def __init__(self, m: mujoco.MjModel, scene):
@@ -393,6 +394,27 @@ class _Gripper:
         self._block = np.concatenate([s.vertex_block for s in surfs])
         n = 0 if self.gripper is None else len(self.gripper.vertex_block)
         self.gripper_colours = np.full(n, rgba32(NEUTRAL_RGB), dtype=np.uint32)
+        self._colours: dict[bytes, np.ndarray] = {}
+        # Tendon actuators per finger, in finger order (A, B): their forces sum to the finger's tension.
+        self.acts = [
+            [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in h.actuators]
+            for h in sorted(scene.built.fingers, key=lambda h: h.prefix)
+        ]
+        self.is_finger = np.zeros(m.nbody, dtype=bool)
+        self.is_finger[scene.finger_bodies] = True
+        self.elliptic = m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
+        self._layout: tuple[list, np.ndarray] | None = None
+
+    def layout(self, d: mujoco.MjData) -> tuple[list, np.ndarray]:
+        """Layout of a logged state's flat row (:func:`_grab`).
+
+        The shapes of :data:`_GRABBED`'s arrays in ``d`` (data of this model) and where each ends in
+        the row.
+        """
+        if self._layout is None:
+            shapes = [getattr(d, name).shape for name in _GRABBED]
+            self._layout = shapes, np.cumsum([int(np.prod(sh)) for sh in shapes])
+        return self._layout
 
     def finger_positions(self, gpos: np.ndarray, gmat: np.ndarray, fpos: np.ndarray) -> np.ndarray:
         """World vertices of both fingers (A's first) [m], shape (..., n_vertices, 3) (:meth:`Surface.positions`)."""
@@ -406,20 +428,27 @@ class _Gripper:
         A vertex past the last block takes the last block's colour.
         """
         log_e = np.atleast_2d(log_e)
-        table = np.append(rgba32(stiffness_rgb(log_e)).reshape(-1), rgba32(NEUTRAL_RGB))
-        nb = log_e.shape[1]
-        idx = np.where(self._block >= 0, self._finger * nb + np.clip(self._block, 0, nb - 1), len(table) - 1)
-        return table[idx]
+        key = log_e.tobytes() + bytes(log_e.shape)
+        if key not in self._colours:
+            if len(self._colours) >= _COLOUR_CACHE:
+                self._colours.clear()
+            table = np.append(rgba32(stiffness_rgb(log_e)).reshape(-1), rgba32(NEUTRAL_RGB))
+            nb = log_e.shape[1]
+            idx = np.where(
+                self._block >= 0, self._finger * nb + np.clip(self._block, 0, nb - 1), len(table) - 1
+            )
+            self._colours[key] = table[idx]
+        return self._colours[key]
 
 
-_GRIPPERS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+_PARTS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def _gripper_of(m: mujoco.MjModel, scene) -> _Gripper:
-    """The :class:`_Gripper` of ``m``, built on first use."""
-    if m not in _GRIPPERS:
-        _GRIPPERS[m] = _Gripper(m, scene)
-    return _GRIPPERS[m]
+def _parts_of(m: mujoco.MjModel, scene) -> _ModelParts:
+    """The :class:`_ModelParts` of ``m``, built on first use."""
+    if m not in _PARTS:
+        _PARTS[m] = _ModelParts(m, scene)
+    return _PARTS[m]
 
 
 class _Contacts(NamedTuple):
@@ -471,20 +500,11 @@ class _Replay:
     derived from them (surfaces, series, contact forces in world axes) is computed for all states at once.
     """
 
-    def __init__(self, r: Rollout, g: _Gripper, d: mujoco.MjData):
+    def __init__(self, r: Rollout, g: _ModelParts, d: mujoco.MjData):
         self.r = r
         self.m = r.model
         self.d = d
         self.g = g
-        m = self.m
-        # Tendon actuators per finger, in finger order (A, B): their forces sum to the finger's tension.
-        self.acts = [
-            [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in h.actuators]
-            for h in sorted(r.scene.built.fingers, key=lambda h: h.prefix)
-        ]
-        self.is_finger = np.zeros(m.nbody, dtype=bool)
-        self.is_finger[r.scene.finger_bodies] = True
-        self.elliptic = m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC
 
     def frames(self, steps: np.ndarray) -> _Frames:
         r, m, d = self.r, self.m, self.d
@@ -500,11 +520,10 @@ class _Replay:
                 mujoco.mj_setState(m, d, r.x0 if t < 0 else r.states[t], STATE_SPEC)
                 mujoco.mj_setState(m, d, ctrl[min(t + 1, len(ctrl) - 1)], spec)
                 mujoco.mj_forward(m, d)
-                row = _grab(m, d, self.elliptic)
+                row = _grab(m, d, self.g.elliptic)
             rows.append(row)
         flat = np.stack([row[0] for row in rows])  # (n, sum of the arrays' sizes)
-        shapes = [getattr(d, name).shape for name in _GRABBED]
-        ends = np.cumsum([int(np.prod(sh)) for sh in shapes])
+        shapes, ends = self.g.layout(d)
         gpos, gmat, fpos, xpos, xquat, xipos, xmat, act, wrap, wrap_adr, wrap_num = (
             flat[:, e - size : e].reshape(n, *sh)
             for e, size, sh in zip(ends, np.diff(ends, prepend=0), shapes, strict=True)
@@ -521,7 +540,7 @@ class _Replay:
         ]
         out.contacts, force = self._world_contacts([row[1] for row in rows])
         grasp = _index_of(steps, r.starts["lift"] - 1)
-        tendon = np.stack([act[:, ids].sum(axis=1) for ids in self.acts], axis=1)
+        tendon = np.stack([act[:, ids].sum(axis=1) for ids in self.g.acts], axis=1)
         out.series["force"] = np.column_stack([tendon, force])
         # Object COM in the palm frame; relative to the grasp (end of tightening), as Outcome.displacement,
         # and before it, vs the same state.
@@ -539,7 +558,7 @@ class _Replay:
         ob = self.r.scene.object_body
         world[b1 == ob] *= -1.0  # show the force acting on the object
         other = np.where(b1 == ob, b2, b1)
-        on_object = ((b1 == ob) | (b2 == ob)) & self.is_finger[other]
+        on_object = ((b1 == ob) | (b2 == ob)) & self.g.is_finger[other]
         state = np.repeat(np.arange(len(rows)), counts)
         total = np.zeros((len(rows), 3))
         np.add.at(total, state[on_object], world[on_object])
