@@ -53,8 +53,10 @@ def _time(fn) -> tuple[float, float]:
 
 
 def _measure(sim, scene, scenario, observer: str, path: Path, dec, repeats: int) -> dict:
-    """Medians [s] of (wall, CPU) of plain rollouts, of rollouts in a recording each and of rollouts
-    in one shared recording (its close shared out over them), alternated; and the files' sizes [B]."""
+    """Medians [s] of (wall, CPU) of the rollout three ways, alternated; and the files' sizes [B].
+
+    Plain; into a recording of its own; into one recording shared by the repeats (its close shared out).
+    """
     from mjcodesign.observe import observer_class
 
     cls = observer_class(observer)  # finding the entry point (~20 ms) is start-up, not per rollout

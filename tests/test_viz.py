@@ -809,6 +809,10 @@ def test_bench_viz_json(tmp_path):
     for c in res["cases"]:
         assert c["rollout_wall_s"] > 0 and c["recorded_wall_s"] > 0 and c["rrd_bytes"] > 0
         assert np.isfinite(c["overhead_wall"]) and np.isfinite(c["overhead_cpu"])
+        shared = c["shared_recording"]
+        assert shared["rollouts"] == 1 and shared["recorded_cpu_s"] > 0 and shared["close_cpu_s"] > 0
+        assert np.isfinite(shared["overhead_wall"]) and np.isfinite(shared["overhead_cpu"])
+        assert shared["rrd_bytes"] > 0
 
 
 # -- import boundaries ----------------------------------------------------------------------------

@@ -477,6 +477,7 @@ class _Frames:
         self.series: dict[str, np.ndarray] = {}
 
 
+_XYZ = np.arange(3)
 _GRABBED = (
     "geom_xpos",
     "geom_xmat",
@@ -583,8 +584,7 @@ def _grab(m: mujoco.MjModel, d: mujoco.MjData, elliptic: bool) -> tuple:
             np.zeros((0, 3)),
         )
     else:
-        dim = con.dim
-        if not elliptic or np.any(dim == 1):
+        if not elliptic or (con.dim == 1).any():
             local, f6 = np.zeros((nc, 3)), np.zeros(6)
             for i in range(nc):
                 mujoco.mj_contactForce(m, d, i, f6)
@@ -592,8 +592,11 @@ def _grab(m: mujoco.MjModel, d: mujoco.MjData, elliptic: bool) -> tuple:
         else:
             # Elliptic cones: the first three efc rows of a contact are its normal and tangent forces.
             adr = con.efc_address
-            local = d.efc_force[np.maximum(adr, 0)[:, None] + np.arange(3)]
-            local[adr < 0] = 0.0  # excluded contacts carry no force
+            if adr.min() >= 0:
+                local = d.efc_force[adr[:, None] + _XYZ]
+            else:
+                local = d.efc_force[np.maximum(adr, 0)[:, None] + _XYZ]
+                local[adr < 0] = 0.0  # excluded contacts carry no force
         contacts = (con.pos.copy(), con.frame.copy(), con.geom1.copy(), con.geom2.copy(), local)
     flat = np.concatenate([getattr(d, name) for name in _GRABBED], axis=None, dtype=float)
     return flat, contacts
