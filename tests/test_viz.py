@@ -229,8 +229,9 @@ def test_column_batch_matches_rerun_columns(tmp_path):
     b.add_once("/ours", "Mesh3D", "triangle_indices", tris)
     b.add("/ours", "TextLog", "text", ["a", "c"], rows=[0, 2])
     b.add("/ours", "Arrows3D", "vectors", pos[:3], [1, 2], rows=[1, 2])
-    with pytest.raises(ValueError, match="distinct"):
-        b.add("/ours", "TextLog", "text", ["a", "b"], rows=[1, 1])
+    for bad in ([1, 1], [2, 1], [0, 3]):  # repeated, descending, past the last row
+        with pytest.raises(ValueError, match="distinct, ascending and below 3"):
+            b.add("/ours", "TextLog", "text", ["a", "b"], rows=bad)
     b.send(rec)
     rec.flush()
     rec.disconnect()

@@ -198,9 +198,11 @@ class ColumnBatch:
             valid[0] = True
         else:
             index = np.asarray(rows, dtype=np.int64)
+            if index.size and (index[0] < 0 or index[-1] >= self.n_rows or np.any(np.diff(index) <= 0)):
+                raise ValueError(
+                    f"rows must be distinct, ascending and below {self.n_rows}, got {index.tolist()}"
+                )
             valid[index] = True
-            if np.count_nonzero(valid) != len(index):
-                raise ValueError(f"rows must be distinct and below {self.n_rows}, got {index.tolist()}")
         n = int(np.count_nonzero(valid))
         before = np.zeros(self.n_rows + 1, dtype=np.int32)
         np.cumsum(valid, out=before[1:])

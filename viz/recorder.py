@@ -362,12 +362,12 @@ class RerunRecorder:
 class _ModelParts:
     """What the recorder works out once per model.
 
-    The surfaces of the fingers (A, B) and the rigid parts (palm, carriages), and how a logged state's
-    data is laid out; the fingers' triangles as one mesh (A's vertices first) and its colour per vertex (block of finger),
-    the rigid parts' neutral colours, the tendon actuators per finger, the finger bodies. They depend
-    on the model only (vertices are placed per state from the geom poses), so :func:`_parts_of` builds
-    them once per model: rollouts of one model (repeats, poses of one design) are recorded again and
-    again.
+    The fingers' (A, B) and the rigid parts' (palm, carriages) surfaces; the fingers' triangles as one
+    mesh (A's vertices first) and its colour per vertex for the designs recorded; the rigid parts'
+    neutral colours; the tendon actuators per finger; the finger bodies; the layout of a logged state.
+    They depend on the model only (vertices are placed per state from the geom poses), so
+    :func:`_parts_of` builds them once per model: rollouts of one model (repeats, poses of one design)
+    are recorded again and again.
     """
 
     def __init__(self, m: mujoco.MjModel, scene):
