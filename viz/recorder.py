@@ -124,7 +124,7 @@ class RerunRecorder:
 
     @property
     def rec(self) -> rr.RecordingStream:
-        """The recording stream, opened on first use (a file sink writes from then on)."""
+        """The recording stream, opened on first use."""
         return self._rec if self._rec is not None else self._open()
 
     def _open(self) -> rr.RecordingStream:
@@ -671,7 +671,7 @@ def _check_writable(path: Path) -> None:
     """Refuse a recording path that cannot be written, before anything is simulated.
 
     Asks the file system (the file, else its folder) instead of opening the file: truncating an
-    existing recording costs milliseconds, and the file sink truncates it again.
+    existing recording costs milliseconds, and :meth:`RerunRecorder.close` replaces it anyway.
     """
     if path.is_dir():
         raise OutputError(f"cannot write the recording {path}: it is a folder")
