@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -16,6 +17,7 @@ import pytest
 
 from hardware.dxl_emulator import XL330Emulator
 from hardware.selftest import BOX_CENTRE, BOX_SIZE, sample_box_surface
+from hardware.tendon import TendonConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 pytest.importorskip("dynamixel_sdk")
@@ -52,7 +54,11 @@ def test_tendon_pull_and_release():
     with XL330Emulator(ids=(1, 2), speed_ticks_s=20_000) as emu:
         proc = cli("tendon", "--dxl", emu.port, "--ticks", "1000")
         assert proc.returncode == 0, proc.stderr
-        assert "ID 1: 1000" in proc.stdout and "ID 2: 1000" in proc.stdout
+        # A pull has arrived once every motor is within the tolerance of its goal (TendonConfig): the
+        # displacement printed is read then, and the emulated motors go on to the goal itself.
+        shown = dict(re.findall(r"ID (\d+): (-?\d+)", proc.stdout.splitlines()[0]))
+        assert set(shown) == {"1", "2"}, proc.stdout
+        assert all(abs(int(v) - 1000) <= TendonConfig.tolerance_ticks for v in shown.values()), proc.stdout
         assert emu.value(1, "present_position") == 3048
         assert not emu.torque(1) and not emu.torque(2)
 
