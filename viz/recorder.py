@@ -390,8 +390,6 @@ class _ModelParts:
             if all(s.geom is not None for s in surfs)
             else None
         )
-        self._finger = np.concatenate([np.full(len(s.vertex_block), i) for i, s in enumerate(surfs)])
-        self._block = np.concatenate([s.vertex_block for s in surfs])
         n = 0 if self.gripper is None else len(self.gripper.vertex_block)
         self.gripper_colours = np.full(n, rgba32(NEUTRAL_RGB), dtype=np.uint32)
         self._colours: dict[bytes, np.ndarray] = {}
@@ -432,12 +430,11 @@ class _ModelParts:
         if key not in self._colours:
             if len(self._colours) >= _COLOUR_CACHE:
                 self._colours.clear()
-            table = np.append(rgba32(stiffness_rgb(log_e)).reshape(-1), rgba32(NEUTRAL_RGB))
-            nb = log_e.shape[1]
-            idx = np.where(
-                self._block >= 0, self._finger * nb + np.clip(self._block, 0, nb - 1), len(table) - 1
-            )
-            self._colours[key] = table[idx]
+            rgb = [
+                _block_colours(stiffness_rgb(log_e[i]), s.vertex_block)
+                for i, s in enumerate(self.fingers.values())
+            ]
+            self._colours[key] = rgba32(np.concatenate(rgb))
         return self._colours[key]
 
 
