@@ -2,20 +2,19 @@
 
 `add_parser(subparsers)` registers the ``hw`` command on the main CLI's subparsers; its handler
 is `run(args) -> int`. Library errors propagate as `MjcodesignError` for the main CLI to map to
-exit 2 and one line. ``python -m hardware.cli hw …`` runs it stand-alone with the same mapping.
+exit 2 and one line.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
-from mjcodesign.errors import HardwareError, MjcodesignError
+from mjcodesign.errors import HardwareError
 
-__all__ = ["add_parser", "main", "run"]
+__all__ = ["add_parser", "run"]
 
 _EXIT_REFUSED = 2
 
@@ -220,19 +219,3 @@ _HANDLERS = {
 def run(args: argparse.Namespace) -> int:
     """Run one ``hw`` sub-command; returns the exit code. Raises `MjcodesignError` on refusal."""
     return _HANDLERS[args.hw_command](args)
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Stand-alone entry: ``python -m hardware.cli hw …`` (errors: exit 2 and one line)."""
-    parser = argparse.ArgumentParser(prog="mjcodesign")
-    add_parser(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
-    try:
-        return args.func(args)
-    except MjcodesignError as exc:
-        print(f"error: {str(exc).splitlines()[0]}", file=sys.stderr)
-        return _EXIT_REFUSED
-
-
-if __name__ == "__main__":
-    sys.exit(main())

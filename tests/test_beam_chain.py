@@ -2,12 +2,12 @@ import mujoco
 import numpy as np
 import pytest
 
-from mjcodesign.beam import block_bending_compliance, cantilever_tip_deflection
-from mjcodesign.chain import hinge_stiffness
-from mjcodesign.finger import BlockKind, FingerDesign
-from mjcodesign.mjcf import CONTYPE_FINGER, FingerModel, build_finger, build_gripper
-from mjcodesign.stiffness import Stiffness
-from mjcodesign.validate import validate_beam
+from mjcodesign.design.beam import block_bending_compliance, cantilever_tip_deflection
+from mjcodesign.design.finger import BlockKind, FingerDesign
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.models.builder import CONTYPE_FINGER, FingerModel, build_finger, build_gripper
+from mjcodesign.models.chain import hinge_stiffness
+from mjcodesign.scenarios.static import validate_beam
 
 _TOL_BEAM_CHAIN = 0.05  # issue contract: chain hinge model vs Euler–Bernoulli
 

@@ -1,6 +1,6 @@
 """``grasp`` command: JSON output and bad input (exit 2, one line, no traceback).
 
-Until ``cli_grasp`` is wired into ``mjcodesign.cli`` these run ``python -m mjcodesign.cli_grasp``.
+These run ``python -m mjcodesign.cli grasp``.
 """
 
 import json
@@ -19,7 +19,7 @@ _KEYS = {"success", "body_force", "displacement", "ground_contact", "reason", "w
 def _run(tmp_path, *args, timeout=120):
     env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache")}
     return subprocess.run(
-        [sys.executable, "-m", "mjcodesign.cli_grasp", *args],
+        [sys.executable, "-m", "mjcodesign.cli", "grasp", *args],
         capture_output=True,
         text=True,
         timeout=timeout,
@@ -115,7 +115,7 @@ def test_mjwarp_flex_is_refused_with_one_line(tmp_path):
 def test_mjwarp_cuda_without_a_gpu_exits_2_with_one_line(tmp_path):
     wp = pytest.importorskip("warp")
     pytest.importorskip("mujoco_warp")
-    from mjcodesign.warp_setup import import_warp
+    from mjcodesign.optional import import_warp
 
     import_warp()
     if wp.get_cuda_device_count() > 0:
@@ -130,8 +130,8 @@ def test_mjwarp_cuda_without_a_gpu_exits_2_with_one_line(tmp_path):
 def test_several_designs_load_and_pose_the_object_once(tmp_path, monkeypatch, capsys):
     import argparse
 
-    import mjcodesign.cli_grasp as cg
-    import mjcodesign.objects as objects
+    from mjcodesign.cli import grasp as cg
+    from mjcodesign.objects import mesh as objects
 
     calls = []
     load = objects.load_object

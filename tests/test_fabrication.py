@@ -17,14 +17,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mjcodesign.design.finger import BlockKind, FingerDesign
+from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
 from mjcodesign.errors import CalibrationError
-from mjcodesign.fabrication import INFILL_PATTERNS, SETTINGS, Calibration, plan_print
-from mjcodesign.finger import BlockKind, FingerDesign
-from mjcodesign.print3mf import block_mesh, placements, write_bambu_3mf, write_prusa_3mf, write_stls
-from mjcodesign.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
+from mjcodesign.fabrication.plan import INFILL_PATTERNS, SETTINGS, Calibration, plan_print
+from mjcodesign.fabrication.print3mf import (
+    block_mesh,
+    placements,
+    write_bambu_3mf,
+    write_prusa_3mf,
+    write_stls,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
-DEFAULT_TOML = ROOT / "mjcodesign" / "data" / "calibration_tpu95a.toml"
+DEFAULT_TOML = ROOT / "mjcodesign" / "fabrication" / "calibration_tpu95a.toml"
 AUTHORS_3MF = Path("/work/shared/reference/codesign-soft-gripper/hardware/sim_finger.3mf")
 CORE = "{http://schemas.microsoft.com/3dmanufacturing/core/2015/02}"
 _ROUND_TRIP_TOL = 1e-12  # exp(log(E)) round-off only
@@ -254,7 +260,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
         "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])),
     }
     return subprocess.run(
-        [sys.executable, "-m", "mjcodesign.cli_fabrication", *args],
+        [sys.executable, "-m", "mjcodesign.cli", "export-print", *args],
         capture_output=True,
         text=True,
         env=env,

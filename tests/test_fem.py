@@ -6,10 +6,10 @@ import sys
 import numpy as np
 import pytest
 
-from mjcodesign.femmesh import mesh_finger
-from mjcodesign.finger import FingerDesign, Routing
-from mjcodesign.press import PRESS_METRICS
-from mjcodesign.stiffness import Stiffness
+from mjcodesign.design.finger import FingerDesign, Routing
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.scenarios.press import PRESS_METRICS
+from mjcodesign.sim.fem.mesh import mesh_finger
 
 _TOL_BEAM = 0.05  # FEM vs Euler–Bernoulli tip deflection (issue 4)
 _TOL_CURL = 0.10  # chain vs FEM bend angle and tip displacement (issue 4)
@@ -50,7 +50,7 @@ def wp():
 
 @pytest.fixture(scope="module")
 def coarse(wp):
-    from mjcodesign.fem import FemFinger, FemOptions
+    from mjcodesign.sim.fem.finger import FemFinger, FemOptions
 
     return FemFinger(
         FingerDesign(), Stiffness.preset("paper-optimized"), options=FemOptions(h=4e-3, spine_layers=2)
@@ -74,7 +74,7 @@ def test_rest_state_and_forces_are_energy_gradient(coarse):
 
 @pytest.mark.parametrize("preset", ["soft", "paper-optimized"])
 def test_quadratic_fem_cantilever_matches_beam_theory(wp, preset):
-    from mjcodesign.fem import FemFinger, FemOptions
+    from mjcodesign.sim.fem.finger import FemFinger, FemOptions
 
     fem = FemFinger(
         FingerDesign(), Stiffness.preset(preset), options=FemOptions(h=4e-3, spine_layers=2, order=2)
@@ -108,7 +108,7 @@ def test_static_gradient_matches_central_differences(coarse):
 
 
 def test_explicit_dynamics_free_fall_start(coarse):
-    from mjcodesign.fem import FemDynamics
+    from mjcodesign.sim.fem.finger import FemDynamics
 
     dyn = FemDynamics(dt=0.5 * coarse.stable_dt(), mass_damping=0.0)
     t = 5e-4
@@ -121,7 +121,7 @@ _TOL_GROUND = 1e-4  # [m]: a soft finger's weight on ke = 1e7 Pa/m presses verti
 
 
 def test_explicit_dynamics_rests_on_the_ground(coarse):
-    from mjcodesign.fem import FemDynamics
+    from mjcodesign.sim.fem.finger import FemDynamics
 
     # Clamped 0.5 mm above the ground: the finger sags onto it and stays there (bounded friction).
     dyn = FemDynamics(dt=min(FemDynamics().dt, coarse.stable_dt()))
@@ -134,9 +134,9 @@ def test_explicit_dynamics_rests_on_the_ground(coarse):
 
 @pytest.fixture(scope="module")
 def soft_curl(wp):
-    from mjcodesign.fem import FemFinger, FemOptions
-    from mjcodesign.mjcf import TendonMode
-    from mjcodesign.validate import curl
+    from mjcodesign.models.builder import TendonMode
+    from mjcodesign.scenarios.static import curl
+    from mjcodesign.sim.fem.finger import FemFinger, FemOptions
 
     stiffness = Stiffness.preset("soft")
     # Linear tets keep this under 20 s; the quadratic FEM curl takes minutes here (numbers in the xfail).
@@ -169,7 +169,7 @@ def test_crosscheck_cli_json(wp, capsys):
     import argparse
     import json
 
-    from mjcodesign import cli_crosscheck
+    from mjcodesign.cli import crosscheck as cli_crosscheck
 
     p = argparse.ArgumentParser()
     sub = p.add_subparsers(dest="command")
@@ -196,15 +196,15 @@ _TOL_DYN_GRAD = 1e-3  # adjoint vs central FD of a 0.5 ms contact rollout (measu
 
 @pytest.fixture(scope="module")
 def dyn_finger(wp):
-    from mjcodesign.fem import FemFinger, FemOptions
+    from mjcodesign.sim.fem.finger import FemFinger, FemOptions
 
     opts = FemOptions(h=4e-3, spine_layers=2, waypoint_layers=False)
     return FemFinger(FingerDesign(), Stiffness.preset("paper-optimized"), options=opts)
 
 
 def test_free_finger_resting_on_box_carries_its_weight(dyn_finger):
-    from mjcodesign.fem import FemDynamics
-    from mjcodesign.fem_grasp import FemContact, RigidObject
+    from mjcodesign.sim.fem.finger import FemDynamics
+    from mjcodesign.sim.fem.grasp import FemContact, RigidObject
 
     top = 0.01
     box = RigidObject.box((0.068, 0.0, 0.5 * top), (0.08, 0.02, 0.5 * top))
@@ -222,7 +222,7 @@ def test_free_finger_resting_on_box_carries_its_weight(dyn_finger):
 
 
 def test_contact_gradient_matches_central_differences(dyn_finger):
-    from mjcodesign.fem_grasp import FemContact, RigidObject
+    from mjcodesign.sim.fem.grasp import FemContact, RigidObject
 
     # A box pressed 0.2 mm into the tip segment's top, the tendon pulling the finger into it.
     box = RigidObject.box((0.135, 0.0, 0.0162), (0.015, 0.015, 0.01))
@@ -249,9 +249,9 @@ def test_contact_gradient_matches_central_differences(dyn_finger):
 
 @pytest.fixture(scope="module")
 def press_results(wp):
-    from mjcodesign.cli_crosscheck import press_tension
-    from mjcodesign.fem import FemFinger, FemOptions
-    from mjcodesign.press import press_fem, press_linear, press_mujoco
+    from mjcodesign.cli.crosscheck import press_tension
+    from mjcodesign.scenarios.press import press_fem, press_linear, press_mujoco
+    from mjcodesign.sim.fem.finger import FemFinger, FemOptions
 
     stiffness = Stiffness.preset("paper-optimized")
     tension = press_tension(stiffness)
@@ -311,7 +311,7 @@ def test_linear_press_matches_flex_dynamics(press_results):
 
 
 def test_press_settling_tells_drift_from_jitter():
-    from mjcodesign.press import _settled
+    from mjcodesign.scenarios.press import _settled
 
     rng = np.random.default_rng(0)
     t = np.arange(10) * 0.1
@@ -325,9 +325,9 @@ def test_press_settling_tells_drift_from_jitter():
 
 def test_plot_curves_writes_png(tmp_path):
     pytest.importorskip("matplotlib")
-    from mjcodesign.cli_crosscheck import plot_curves
-    from mjcodesign.mjcf import TendonMode
-    from mjcodesign.validate import curl
+    from mjcodesign.cli.crosscheck import plot_curves
+    from mjcodesign.models.builder import TendonMode
+    from mjcodesign.scenarios.static import curl
 
     tensions = [0.02, 0.04]
     rs = [
@@ -349,9 +349,9 @@ def test_plot_curves_writes_png(tmp_path):
 
 
 def test_flex_linear_curl_matches_its_dynamics_at_small_bend():
-    from mjcodesign.flex import linear_curl
-    from mjcodesign.mjcf import SimOptions, TendonMode, build_finger
-    from mjcodesign.validate import curl
+    from mjcodesign.models.builder import SimOptions, TendonMode, build_finger
+    from mjcodesign.models.flex import linear_curl
+    from mjcodesign.scenarios.static import curl
 
     design, stiffness, tension = FingerDesign(), Stiffness.preset("soft"), 0.02  # ≈ 0.3 rad of bend
     built = build_finger(
@@ -382,7 +382,7 @@ _FEM_CURL = {
 @pytest.mark.parametrize("model", ["chain", "flex", "flex-quadratic"])
 @pytest.mark.parametrize("design", sorted(_FEM_CURL))
 def test_curl_within_tolerance_of_recorded_fem(design, model):
-    from mjcodesign.cli_crosscheck import _curl
+    from mjcodesign.cli.crosscheck import _curl
 
     tension, bend, tip = _FEM_CURL[design]
     r = _curl(FingerDesign(), Stiffness.parse(design), model, tension)
@@ -402,7 +402,7 @@ _FEM_CURL_LARGE = ("random:0", 0.17333, 1.3023, 0.1229)
 )
 @pytest.mark.parametrize("model", ["chain", "flex"])
 def test_large_curl_within_tolerance_of_recorded_fem(model):
-    from mjcodesign.cli_crosscheck import _curl
+    from mjcodesign.cli.crosscheck import _curl
 
     design, tension, bend, tip = _FEM_CURL_LARGE
     r = _curl(FingerDesign(), Stiffness.parse(design), model, tension)

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
+from mjcodesign.design.finger import BlockKind, FingerDesign, Routing
 from mjcodesign.errors import DesignError
-from mjcodesign.finger import BlockKind, FingerDesign, Routing
 
 # The printed finger's envelope (STL) is 20 x 14 x 136.35 mm; trimesh reads it exactly.
 _TOL_ENVELOPE_M = 1e-4

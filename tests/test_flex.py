@@ -2,11 +2,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from mjcodesign.finger import FingerDesign
-from mjcodesign.flex import add_flex_finger, apply_cell_young, cell_young, flex_cells
-from mjcodesign.mjcf import SimOptions, new_spec
-from mjcodesign.stiffness import Stiffness
-from mjcodesign.validate import validate_beam
+from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.models.builder import SimOptions, new_spec
+from mjcodesign.models.flex import add_flex_finger, apply_cell_young, cell_young, flex_cells
+from mjcodesign.scenarios.static import validate_beam
 
 # Compiled flex stiffness is linear in E; scaling a record reproduces a recompile to round-off.
 _TOL_SCALED_VS_COMPILED = 1e-12
@@ -72,8 +72,8 @@ def test_static_solve_equals_dynamics_to_rest():
 
 
 def test_assembled_stiffness_has_rigid_modes_in_its_null_space():
-    from mjcodesign.flex import assemble_stiffness
-    from mjcodesign.mjcf import build_finger
+    from mjcodesign.models.builder import build_finger
+    from mjcodesign.models.flex import assemble_stiffness
 
     for model in ("flex", "flex-quadratic"):
         built = build_finger(FingerDesign(), Stiffness.preset("soft"), model)
@@ -98,8 +98,8 @@ def test_assembled_stiffness_has_rigid_modes_in_its_null_space():
 
 def test_under_converged_flex_raises_not_ignored():
     from mjcodesign.errors import SimulationDiverged
-    from mjcodesign.mjcf import build_finger
-    from mjcodesign.simulate import check_state
+    from mjcodesign.models.builder import build_finger
+    from mjcodesign.models.simulate import check_state
 
     # Too few solver iterations for the quadratic flex's M+K solve: MuJoCo warns, we must refuse.
     opts = SimOptions(flex_quadratic_iterations=20)

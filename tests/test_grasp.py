@@ -6,13 +6,13 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from mjcodesign.backends import MujocoBackend, with_stiffness
+from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import PoseError
-from mjcodesign.finger import FingerDesign
-from mjcodesign.mjcf import FingerModel, GripperPose
-from mjcodesign.objects import box_object
-from mjcodesign.scenario import GraspScenario, auto_pose, build_scene
-from mjcodesign.stiffness import Stiffness
+from mjcodesign.models.builder import FingerModel, GripperPose
+from mjcodesign.objects.mesh import box_object
+from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
+from mjcodesign.sim.protocol import MujocoBackend, with_stiffness
 
 _G = 9.81
 _TOL_HOLD = 0.05  # issue: vertical finger force during the hold equals m g within 5%
@@ -82,7 +82,7 @@ def test_object_too_wide_is_refused():
 
 def test_impulse_is_one_step_of_force(box_scene):
     # xfrc_applied for one step of dt: ∫ F dt = -J ẑ on the object, nothing else pushed.
-    from mjcodesign.scenario import phase_controls
+    from mjcodesign.scenarios.grasp import phase_controls
 
     scenario = GraspScenario(impulse=0.2)
     ctrl, starts = phase_controls(box_scene, scenario)
@@ -95,7 +95,7 @@ def test_impulse_is_one_step_of_force(box_scene):
 def test_bench_grasp_smoke(tmp_path):
     import trimesh
 
-    from mjcodesign.bench_grasp import bench_grasp
+    from mjcodesign.bench.grasp import bench_grasp
 
     path = tmp_path / "box.stl"
     trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(path)
@@ -127,7 +127,7 @@ _TOL_POSE_MODEL = 1e-12  # relative: a moved model vs a recompile differ only by
 
 
 def test_scene_at_pose_equals_recompile(box_scene):
-    from mjcodesign.scenario import scene_at_pose
+    from mjcodesign.scenarios.grasp import scene_at_pose
 
     p0 = box_scene.pose
     half = 0.15  # half of a 0.3 rad yaw
@@ -147,7 +147,7 @@ def test_scene_at_pose_equals_recompile(box_scene):
 
 
 def test_pose_batch_equals_single_bitwise(box_scene):
-    from mjcodesign.scenario import scene_at_pose
+    from mjcodesign.scenarios.grasp import scene_at_pose
 
     scenario = GraspScenario(hold_s=0.05, post_hold_s=0.05)
     p0 = box_scene.pose
@@ -165,7 +165,7 @@ def test_batch_flags_a_diverged_rollout(box_scene):
     # An undamped hinge 1e6 times too stiff blows up the explicit spring; MuJoCo then resets that
     # rollout's data (its clock restarts), which the batch must report, not average into outcomes.
     # One thread: the good rollout that follows on the same MjData clears the bad one's warning.
-    from mjcodesign.backends.mujoco_c import _scene_with
+    from mjcodesign.sim.mujoco_c import _scene_with
 
     bad = with_stiffness(box_scene, Stiffness.preset("soft"))
     bad.jnt_stiffness[:] *= 1e6
@@ -180,7 +180,7 @@ def test_batch_flags_a_diverged_rollout(box_scene):
 
 def test_default_impulse_is_the_papers_at_real_scale():
     # J = J_paper / (s³/50 · √s): the authors' 0.1 N s on a 5x scene at 1/50 of our density, Froude-scaled.
-    from mjcodesign.scenario import DEFAULT_IMPULSE, paper_impulse
+    from mjcodesign.scenarios.grasp import DEFAULT_IMPULSE, paper_impulse
 
     assert DEFAULT_IMPULSE == pytest.approx(0.1 / (125 / 50 * 5**0.5), rel=1e-12)
     assert GraspScenario().impulse == DEFAULT_IMPULSE
@@ -193,8 +193,8 @@ def test_flex_contacts_count_as_finger_contacts():
     # (geom_bodyid[-1] would name the object itself). Step until the closing fingers touch the box.
     import mujoco
 
-    from mjcodesign.backends.mujoco_c import _initial_state
-    from mjcodesign.scenario import STATE_SPEC, _finger_wrench, control_spec, phase_controls
+    from mjcodesign.scenarios.grasp import STATE_SPEC, _finger_wrench, control_spec, phase_controls
+    from mjcodesign.sim.mujoco_c import _initial_state
 
     obj = box_object((_BOX,) * 3, _RHO)
     scene = build_scene(obj, FingerDesign(), Stiffness.preset("semi-rigid"), FingerModel.FLEX, auto_pose(obj))
@@ -242,7 +242,7 @@ def test_grasp_scene_is_sparse_and_matches_dense(box_scene):
 
     import mujoco
 
-    from mjcodesign.backends.mujoco_c import _scene_with
+    from mjcodesign.sim.mujoco_c import _scene_with
 
     assert box_scene.model.opt.jacobian == mujoco.mjtJacobian.mjJAC_SPARSE
     dense = copy.copy(box_scene.model)

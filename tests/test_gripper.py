@@ -2,12 +2,12 @@ import mujoco
 import numpy as np
 import pytest
 
+from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import PoseError
-from mjcodesign.finger import FingerDesign
-from mjcodesign.mjcf import FingerModel, GripperPose, TendonMode, build_gripper, make_data
-from mjcodesign.simulate import check_state
-from mjcodesign.stiffness import Stiffness
-from mjcodesign.tendon import TendonDriver
+from mjcodesign.models.builder import FingerModel, GripperPose, TendonMode, build_gripper, make_data
+from mjcodesign.models.simulate import check_state
+from mjcodesign.models.tendon import TendonDriver
 
 
 def _tips_y(m, d):

@@ -8,13 +8,13 @@ import pytest
 
 pytest.importorskip("mujoco_warp")
 
-from mjcodesign.backends import MujocoBackend  # noqa: E402
-from mjcodesign.backends.mjwarp import MjwarpBackend  # noqa: E402
-from mjcodesign.finger import FingerDesign  # noqa: E402
-from mjcodesign.mjcf import FingerModel  # noqa: E402
-from mjcodesign.objects import box_object  # noqa: E402
-from mjcodesign.scenario import GraspScenario, auto_pose, build_scene  # noqa: E402
-from mjcodesign.stiffness import Stiffness  # noqa: E402
+from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.models.builder import FingerModel
+from mjcodesign.objects.mesh import box_object
+from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
+from mjcodesign.sim.mjwarp import MjwarpBackend
+from mjcodesign.sim.protocol import MujocoBackend
 
 _TOL_PATH = 5e-4  # object COM path [m]: float32 MJWarp vs float64 MuJoCo C, 0.5 mm over ~0.4 s
 _TOL_FORCE = 0.05  # relative, hold force along the palm z
@@ -43,7 +43,7 @@ def test_mjwarp_matches_mujoco_c():
 @pytest.mark.slow
 def test_mjwarp_pose_batch_matches_mujoco_c():
     # Two poses of one design as two worlds (batched body_pos/body_quat, per-world state and controls).
-    from mjcodesign.mjcf import GripperPose
+    from mjcodesign.models.builder import GripperPose
 
     obj = box_object((0.05,) * 3, 400.0)
     p0 = auto_pose(obj)
@@ -87,8 +87,8 @@ def flex_runs():
     A whole flex rollout takes ~20 min on Warp's CPU device; the first steps (28 s with compiled kernels)
     already show the difference below.
     """
-    from mjcodesign.mjcf import GripperPose
-    from mjcodesign.scenario import scene_at_pose
+    from mjcodesign.models.builder import GripperPose
+    from mjcodesign.scenarios.grasp import scene_at_pose
 
     obj = box_object((0.05,) * 3, 400.0)
     p0 = auto_pose(obj)
@@ -152,7 +152,7 @@ class _Keep:
 def test_mjwarp_hands_every_step_to_an_observer():
     import mujoco
 
-    from mjcodesign.scenario import STATE_SPEC
+    from mjcodesign.scenarios.grasp import STATE_SPEC
 
     obj = box_object((0.05,) * 3, 400.0)
     scene = build_scene(

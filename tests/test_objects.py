@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from mjcodesign import objects
 from mjcodesign.errors import MeshError
-from mjcodesign.objects import (
+from mjcodesign.objects import mesh as objects
+from mjcodesign.objects.mesh import (
     DENSITY_PRESETS,
     YCB_IN_DOMAIN,
     box_object,

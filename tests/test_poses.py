@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import trimesh
 
+from mjcodesign.design.finger import FingerDesign
 from mjcodesign.errors import PoseError
-from mjcodesign.finger import FingerDesign
-from mjcodesign.objects import box_object
-from mjcodesign.poses import (
+from mjcodesign.objects.mesh import box_object
+from mjcodesign.poses.sampler import (
     ANYGRASP_DEPTH,
     MAX_PENETRATION,
     NOISE_TRANSLATION,
@@ -66,7 +66,7 @@ def test_import_does_not_load_warp():
 
 
 def test_sdf_matches_sphere():
-    from mjcodesign.sdf import _NEAR, MeshSDF
+    from mjcodesign.poses.sdf import _NEAR, MeshSDF
 
     r = 0.05
     sdf = MeshSDF.from_trimesh(trimesh.creation.icosphere(subdivisions=4, radius=r))
@@ -163,7 +163,7 @@ def test_too_large_object_raises():
 
 
 def test_no_candidate_is_a_pose_error():
-    from mjcodesign.poses import Candidates, to_gripper_pose
+    from mjcodesign.poses.sampler import Candidates, to_gripper_pose
 
     empty = Candidates(np.zeros((0, 4, 4)), np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), {"x": 3})
     with pytest.raises(PoseError, match="rejected"):
@@ -214,9 +214,9 @@ def test_anygrasp_mapping_matches_the_authors_frames():
 
 
 def test_anygrasp_reference_poses_cross_the_object(reference_dir):
-    from mjcodesign.objects import load_mesh, load_object
-    from mjcodesign.poses import _slab_openings
-    from mjcodesign.sdf import MeshSDF
+    from mjcodesign.objects.mesh import load_mesh, load_object
+    from mjcodesign.poses.sampler import _slab_openings
+    from mjcodesign.poses.sdf import MeshSDF
 
     name = "012_strawberry"
     obj = load_object(name, 100.0)
@@ -295,7 +295,7 @@ def test_cli_bad_input_exit_2(tmp_path, case):
 
 
 def test_grasp_pose_best_is_the_top_ranked(box):
-    from mjcodesign.cli_grasp import _read_pose
+    from mjcodesign.cli.grasp import _read_pose
 
     pose = _read_pose("best", box, FingerDesign(), 0)
     top = sample_poses(box, 10, seed=0)
@@ -304,8 +304,8 @@ def test_grasp_pose_best_is_the_top_ranked(box):
 
 
 def test_start_openings_are_relative_to_the_palm(box):
-    from mjcodesign.mjcf import GripperPose
-    from mjcodesign.scenario import _START_CLEARANCE, _start_openings
+    from mjcodesign.models.builder import GripperPose
+    from mjcodesign.scenarios.grasp import _START_CLEARANCE, _start_openings
 
     # The box spans y in ±25 mm; a palm 10 mm towards +y sees 15 mm on A's side and 35 mm on B's.
     pose = GripperPose((0.0, 0.01, 0.2), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0))

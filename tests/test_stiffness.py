@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
+from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
 from mjcodesign.errors import StiffnessError
-from mjcodesign.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
 
 
 def test_presets():

@@ -2,11 +2,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from mjcodesign.finger import FingerDesign
-from mjcodesign.mjcf import FingerModel, TendonMode, build_finger
-from mjcodesign.stiffness import Stiffness
-from mjcodesign.tendon import TendonDriver
-from mjcodesign.validate import curl
+from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.models.builder import FingerModel, TendonMode, build_finger
+from mjcodesign.models.tendon import TendonDriver
+from mjcodesign.scenarios.static import curl
 
 # Point forces of a frictionless tendon are the native spatial tendon's forces: same rest shape.
 _TOL_NATIVE_VS_POINT_RAD = 1e-4

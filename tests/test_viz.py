@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 import trimesh
 
-from mjcodesign.backends import MujocoBackend
-from mjcodesign.finger import FingerDesign
-from mjcodesign.mjcf import FingerModel
-from mjcodesign.objects import box_object
-from mjcodesign.scenario import GraspScenario, auto_pose, build_scene
-from mjcodesign.stiffness import Stiffness
+from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.models.builder import FingerModel
+from mjcodesign.objects.mesh import box_object
+from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
+from mjcodesign.sim.protocol import MujocoBackend
 
 ROOT = Path(__file__).resolve().parents[1]
 _KEYS = {"success", "body_force", "displacement", "ground_contact", "reason", "wall_time_s"}
@@ -119,7 +119,7 @@ def _verify(path: Path) -> None:
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     pytest.importorskip("rerun")
-    from mjcodesign.observe import load_observer
+    from mjcodesign.sim.observe import load_observer
 
     path = tmp_path_factory.mktemp("viz") / "grasp.rrd"
     scene = _scene()
@@ -191,7 +191,7 @@ def test_time_points(recorded):
 
 
 def test_finger_colours_follow_stiffness(recorded):
-    from viz.colormap import stiffness_rgb
+    from mjcodesign.viz.colormap import stiffness_rgb
 
     _, scene, _, data = recorded
     _, colours = _column(data[f"{_ROOT}/fingers"], "Mesh3D:vertex_colors")
@@ -207,7 +207,7 @@ def test_column_batch_matches_rerun_columns(tmp_path):
     """A ColumnBatch writes the same column types and values as Rerun's own send_columns, and
     add_once fills the first time point only."""
     rr = pytest.importorskip("rerun")
-    from viz.batch import ColumnBatch
+    from mjcodesign.viz.batch import ColumnBatch
 
     times = np.array([0.0, 0.1, 0.2])
     pos = np.arange(18, dtype=float).reshape(6, 3) / 7.0
@@ -256,8 +256,7 @@ def test_captured_states_equal_replayed_ones(tmp_path):
     import dataclasses
 
     import mujoco
-
-    from viz.recorder import RerunRecorder, _parts_of, _Replay, logged_steps
+    from mjcodesign.viz.recorder import RerunRecorder, _parts_of, _Replay, logged_steps
 
     scene = _scene()
     got = []
@@ -287,8 +286,8 @@ def test_captured_states_equal_replayed_ones(tmp_path):
 def test_diverged_rollout_is_recorded_up_to_its_failure(tmp_path):
     """A blown-up run is logged up to the step before the failure, with the reason in its outcome."""
     pytest.importorskip("rerun")
-    from mjcodesign.backends.mujoco_c import with_stiffness
-    from mjcodesign.observe import load_observer
+    from mjcodesign.sim.mujoco_c import with_stiffness
+    from mjcodesign.sim.observe import load_observer
 
     scene = _scene()
     bad = with_stiffness(scene, Stiffness.preset("soft"))
@@ -313,8 +312,9 @@ def test_diverged_rollout_is_recorded_up_to_its_failure(tmp_path):
 def test_recordings_leave_no_threads_behind(tmp_path):
     """A closed recorder ends its stream's threads: a process writing many recordings keeps its count."""
     pytest.importorskip("rerun")
+    from mjcodesign.viz.recorder import RerunRecorder
+
     from mjcodesign.errors import OutputError
-    from viz.recorder import RerunRecorder
 
     def threads() -> int:
         return len(os.listdir("/proc/self/task"))
@@ -335,8 +335,9 @@ def test_recording_replaces_an_old_file_and_reports_a_failed_write(tmp_path):
     """close() writes the file: over an older one (replaced, not appended to), through a symlink,
     and a write that fails raises OutputError naming the file."""
     pytest.importorskip("rerun")
+    from mjcodesign.viz.recorder import RerunRecorder
+
     from mjcodesign.errors import OutputError
-    from viz.recorder import RerunRecorder
 
     old = tmp_path / "grasp.rrd"
     old.write_bytes(b"not a recording" * 10_000)
@@ -358,7 +359,7 @@ def test_recording_replaces_an_old_file_and_reports_a_failed_write(tmp_path):
 
 def test_colormap_ends_and_monotone():
     pytest.importorskip("rerun")
-    from viz.colormap import stiffness_rgb
+    from mjcodesign.viz.colormap import stiffness_rgb
 
     soft, stiff = stiffness_rgb([13.5, 17.0])
     assert soft[0] > 2 * soft[1] and stiff[1] > 2 * stiff[0]  # red = soft, green = stiff
@@ -400,8 +401,9 @@ def test_contact_arrows_at_contacts(recorded):
 
 def test_run_batch_hands_every_design_to_the_observer(tmp_path):
     pytest.importorskip("rerun")
-    from mjcodesign.observe import load_observer
-    from viz.colormap import stiffness_rgb
+    from mjcodesign.viz.colormap import stiffness_rgb
+
+    from mjcodesign.sim.observe import load_observer
 
     scene = _scene()
     designs = ["soft", "semi-rigid"]
@@ -432,8 +434,9 @@ def test_run_batch_hands_every_design_to_the_observer(tmp_path):
 
 def test_flex_fingers_deform_and_are_coloured(tmp_path):
     pytest.importorskip("rerun")
-    from mjcodesign.observe import load_observer
-    from viz.colormap import stiffness_rgb
+    from mjcodesign.viz.colormap import stiffness_rgb
+
+    from mjcodesign.sim.observe import load_observer
 
     scene = _scene(model=FingerModel.FLEX)
     scenario = GraspScenario(
@@ -457,9 +460,9 @@ def test_flex_fingers_deform_and_are_coloured(tmp_path):
 
 
 def _crosscheck_recorded(tmp_path, scenario, models, design, **kw):
-    from mjcodesign.cli_crosscheck import crosscheck
-    from mjcodesign.fem import FemOptions
-    from mjcodesign.observe import load_observer
+    from mjcodesign.cli.crosscheck import crosscheck
+    from mjcodesign.sim.fem.finger import FemOptions
+    from mjcodesign.sim.observe import load_observer
 
     path = tmp_path / f"{scenario}.rrd"
     rec = load_observer("rerun", path=path)
@@ -538,9 +541,10 @@ def test_crosscheck_press_records_contact_forces_and_plate(tmp_path):
 
 def test_tet_snapshot_is_a_closed_coloured_surface(tmp_path):
     pytest.importorskip("rerun")
-    from mjcodesign.femmesh import mesh_finger
-    from mjcodesign.observe import Snapshot, load_observer
-    from viz.colormap import stiffness_rgb
+    from mjcodesign.viz.colormap import stiffness_rgb
+
+    from mjcodesign.sim.fem.mesh import mesh_finger
+    from mjcodesign.sim.observe import Snapshot, load_observer
 
     mesh = mesh_finger(FingerDesign(), h=6e-3, spine_layers=2)
     log_e = Stiffness.preset("paper-optimized").log_e[0]
@@ -732,7 +736,7 @@ def test_view_web_serves_on_loopback_only(tmp_path):
 def test_spawn_streams_the_grasp_to_the_viewer_on_its_port(tmp_path):
     """``--spawn`` reuses a viewer already on ``--viewer-port``: here a headless gRPC proxy saving to a file."""
     pytest.importorskip("rerun")
-    from mjcodesign.cli_viz import _viewer_executable
+    from mjcodesign.cli.viz import _viewer_executable
 
     port, saved = _free_port(), tmp_path / "viewer.rrd"
     server = subprocess.Popen(
@@ -781,7 +785,7 @@ def test_spawn_streams_the_grasp_to_the_viewer_on_its_port(tmp_path):
 
 
 def test_view_binds_loopback():
-    from mjcodesign.cli_viz import view_command
+    from mjcodesign.cli.viz import view_command
 
     web = view_command("f.rrd", web=True, port=1234, web_port=5678)
     assert web[web.index("--bind") + 1] == "127.0.0.1" and "--serve-web" in web
@@ -819,15 +823,16 @@ def test_bench_viz_json(tmp_path):
 # -- import boundaries ----------------------------------------------------------------------------
 def test_import_mjcodesign_never_imports_rerun_or_viz():
     code = (
-        "import sys, mjcodesign, mjcodesign.cli, mjcodesign.backends, mjcodesign.observe, mjcodesign.cli_viz\n"
-        "mjcodesign.cli.build_parser()\n"
-        "print(','.join(m for m in ('rerun', 'viz', 'pyarrow') if m in sys.modules))"
+        "import sys, mjcodesign, mjcodesign.cli, mjcodesign.sim, mjcodesign.cli.viz\n"
+        "from mjcodesign.cli.main import build_parser; build_parser()\n"
+        "print(','.join(m for m in ('rerun', 'mjcodesign.viz', 'pyarrow') if m in sys.modules))"
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 0 and r.stdout.strip() == "", r.stdout + r.stderr
 
 
 def test_core_never_names_viz():
+    # viz/ installs as mjcodesign.viz (pyproject package-dir); the core is mjcodesign/ itself.
     for path in (ROOT / "mjcodesign").rglob("*.py"):
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             if isinstance(node, ast.Import):
@@ -836,15 +841,16 @@ def test_core_never_names_viz():
                 names = [node.module or ""]
             else:
                 continue
-            assert not any(n == "viz" or n.startswith("viz.") for n in names), path
+            bad = ("viz", "mjcodesign.viz")
+            assert not any(n in bad or n.startswith(tuple(b + "." for b in bad)) for n in names), path
 
 
 def test_observer_entry_point_is_registered():
     from importlib.metadata import entry_points
 
     from mjcodesign.errors import ObserverError
-    from mjcodesign.observe import ENTRY_POINT_GROUP, load_observer
+    from mjcodesign.sim.observe import ENTRY_POINT_GROUP, load_observer
 
-    assert entry_points(group=ENTRY_POINT_GROUP)["rerun"].value == "viz.recorder:RerunRecorder"
+    assert entry_points(group=ENTRY_POINT_GROUP)["rerun"].value == "mjcodesign.viz.recorder:RerunRecorder"
     with pytest.raises(ObserverError, match="no observer named"):
         load_observer("no-such-observer")

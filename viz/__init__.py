@@ -4,7 +4,7 @@ The core never imports this package: it finds :class:`RerunRecorder` through the
 entry point ``rerun`` (:func:`mjcodesign.observe.load_observer`).
 """
 
-from viz.colormap import stiffness_rgb
-from viz.recorder import DEFAULT_FRAME_RATE, TIMELINE, RerunRecorder, logged_steps
+from mjcodesign.viz.colormap import stiffness_rgb
+from mjcodesign.viz.recorder import DEFAULT_FRAME_RATE, TIMELINE, RerunRecorder, logged_steps
 
 __all__ = ["RerunRecorder", "DEFAULT_FRAME_RATE", "TIMELINE", "logged_steps", "stiffness_rgb"]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mjcodesign.stiffness import LOG_E_MAX, LOG_E_MIN
+from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN
 
 __all__ = ["NEUTRAL_RGB", "stiffness_rgb", "legend_markdown", "legend_ticks"]
 

@@ -30,13 +30,20 @@ from typing import NamedTuple
 import mujoco
 import numpy as np
 import rerun as rr
+from mjcodesign.viz.batch import ColumnBatch, rgba32
+from mjcodesign.viz.colormap import NEUTRAL_RGB, legend_markdown, legend_ticks, stiffness_rgb
+from mjcodesign.viz.geometry import (
+    BOX_TRIANGLES,
+    Surface,
+    body_geom_surface,
+    box_corners,
+    finger_surfaces,
+    tet_surface,
+)
 
 from mjcodesign.errors import OutputError
-from mjcodesign.observe import Rollout, Snapshot
-from mjcodesign.scenario import STATE_SPEC, control_spec
-from viz.batch import ColumnBatch, rgba32
-from viz.colormap import NEUTRAL_RGB, legend_markdown, legend_ticks, stiffness_rgb
-from viz.geometry import BOX_TRIANGLES, Surface, body_geom_surface, box_corners, finger_surfaces, tet_surface
+from mjcodesign.scenarios.grasp import STATE_SPEC, control_spec
+from mjcodesign.sim.observe import Rollout, Snapshot
 
 __all__ = ["RerunRecorder", "DEFAULT_FRAME_RATE", "TIMELINE", "logged_steps"]
 
@@ -636,7 +643,7 @@ def _block_colours(block_rgb: np.ndarray, vertex_block: np.ndarray) -> np.ndarra
 
 def _log_e_of(r: Rollout) -> np.ndarray:
     """The ln E of a rollout whose model replaces the scene's: read back from the chain's hinge stiffness."""
-    from mjcodesign.beam import block_effective_ei
+    from mjcodesign.design.beam import block_effective_ei
 
     built = r.scene.built
     if built.finger_model.is_flex:

@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import pytest
-
-from hardware.dxl_emulator import XL330Emulator
-from hardware.tendon import port_handler
+from mjcodesign.hardware.dxl_emulator import XL330Emulator
+from mjcodesign.hardware.tendon import port_handler
 
 FAST_TICKS_S = 20_000.0  # emulated motor speed: fast enough that a 1000-tick pull takes 50 ms
 SDK_LATENCY_MS = 100.0

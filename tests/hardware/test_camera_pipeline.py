@@ -6,9 +6,8 @@ import json
 
 import numpy as np
 import pytest
-
-from hardware.arm import Workspace
-from hardware.camera import (
+from mjcodesign.hardware.arm import Workspace
+from mjcodesign.hardware.camera import (
     FileCamera,
     GripperGeometry,
     crop_to_gripper,
@@ -16,8 +15,8 @@ from hardware.camera import (
     load_point_cloud,
     save_point_cloud,
 )
-from hardware.grasp import GraspJob, run_job
-from hardware.pipeline import (
+from mjcodesign.hardware.grasp import GraspJob, run_job
+from mjcodesign.hardware.pipeline import (
     Candidate,
     GraspPlan,
     GraspSettings,
@@ -26,8 +25,9 @@ from hardware.pipeline import (
     plan_grasp,
     select_candidate,
 )
-from hardware.selftest import BOX_CENTRE, BOX_SIZE, sample_box_surface
-from hardware.tendon import FingerMotor, TendonConfig
+from mjcodesign.hardware.selftest import BOX_CENTRE, BOX_SIZE, sample_box_surface
+from mjcodesign.hardware.tendon import FingerMotor, TendonConfig
+
 from mjcodesign.errors import HardwareError, PoseError
 
 GEO = GripperGeometry()

@@ -6,9 +6,8 @@ import os
 import time
 
 import pytest
-
-from hardware.dxl_emulator import XL330Emulator, crc16, stuff, unstuff
-from hardware.xl330 import ADDR, XL330_MODEL_NUMBER
+from mjcodesign.hardware.dxl_emulator import XL330Emulator, crc16, stuff, unstuff
+from mjcodesign.hardware.xl330 import ADDR, XL330_MODEL_NUMBER
 
 dxl = pytest.importorskip("dynamixel_sdk")
 

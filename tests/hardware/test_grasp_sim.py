@@ -13,11 +13,11 @@ pytest.importorskip("franky")
 pytest.importorskip("franky_sim")
 pytest.importorskip("dynamixel_sdk")
 
-from hardware.camera import save_point_cloud  # noqa: E402
-from hardware.dxl_emulator import emulator_process  # noqa: E402
-from hardware.grasp import GraspJob, run_job  # noqa: E402
-from hardware.pipeline import GraspReport  # noqa: E402
-from hardware.selftest import (  # noqa: E402
+from mjcodesign.hardware.camera import save_point_cloud
+from mjcodesign.hardware.dxl_emulator import emulator_process
+from mjcodesign.hardware.grasp import GraspJob, run_job
+from mjcodesign.hardware.pipeline import GraspReport
+from mjcodesign.hardware.selftest import (
     BOX_CENTRE,
     BOX_SIZE,
     SETTLE_S,
@@ -25,6 +25,7 @@ from hardware.selftest import (  # noqa: E402
     sample_box_surface,
     torque_over_bus,
 )
+
 from mjcodesign.errors import HardwareError  # noqa: E402
 
 IDS = (1, 2)
@@ -89,7 +90,7 @@ def test_lost_link_mid_grasp_no_lift_torque_off(scene, cloud_files):
 
 
 def test_motion_past_its_timeout_is_stopped_and_reported(scene):
-    from hardware.arm import ArmConfig, FrankaArm
+    from mjcodesign.hardware.arm import ArmConfig, FrankaArm
 
     # A 10 cm move at 0.1 of the dynamics limits takes about a second; allow it 0.1 s.
     with FrankaArm(ArmConfig(scene.host, realtime=False, motion_timeout_s=0.1)) as arm:
@@ -108,7 +109,7 @@ def test_motion_past_its_timeout_is_stopped_and_reported(scene):
 
 
 def test_hand_command_past_its_timeout_is_stopped_and_reported():
-    from hardware.arm import ArmConfig, FrankaArm
+    from mjcodesign.hardware.arm import ArmConfig, FrankaArm
 
     class Future:  # a hand command that ends only when stopped, as the real hand's does
         def __init__(self):
@@ -142,9 +143,8 @@ def test_hand_command_past_its_timeout_is_stopped_and_reported():
 
 def test_arm_that_does_not_stop_is_parked_not_waited_for(monkeypatch):
     import franky
-
-    import hardware.arm as arm_module
-    from hardware.arm import ArmConfig, FrankaArm
+    from mjcodesign.hardware import arm as arm_module
+    from mjcodesign.hardware.arm import ArmConfig, FrankaArm
 
     class Robot:  # a connection whose motion never ends, stop or not (a stalled simulator)
         def __init__(self):

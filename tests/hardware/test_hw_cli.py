@@ -1,4 +1,4 @@
-"""`python -m hardware.cli hw …` end to end, in a subprocess, against the protocol peers.
+"""`python -m mjcodesign.cli hw …` end to end, in a subprocess, against the protocol peers.
 
 Each refusal exits 2 with one line on stderr, and nothing moves; motors end with torque off.
 """
@@ -14,10 +14,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from hardware.dxl_emulator import XL330Emulator
-from hardware.selftest import BOX_CENTRE, BOX_SIZE, sample_box_surface
-from hardware.tendon import TendonConfig
+from mjcodesign.hardware.dxl_emulator import XL330Emulator
+from mjcodesign.hardware.selftest import BOX_CENTRE, BOX_SIZE, sample_box_surface
+from mjcodesign.hardware.tendon import TendonConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 pytest.importorskip("dynamixel_sdk")
@@ -31,7 +30,7 @@ def cli(*args, timeout=120):
         args = (*args, "--latency-ms", _LATENCY_MS)
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     return subprocess.run(
-        [sys.executable, "-m", "hardware.cli", "hw", *args],
+        [sys.executable, "-m", "mjcodesign.cli", "hw", *args],
         capture_output=True, text=True, timeout=timeout, env=env, cwd=ROOT,
     )  # fmt: skip
 
@@ -126,11 +125,11 @@ def test_emulate_dxl_prints_port():
 
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     proc = subprocess.Popen(
-        [sys.executable, "-m", "hardware.cli", "hw", "emulate-dxl", "--seconds", "20"],
+        [sys.executable, "-m", "mjcodesign.cli", "hw", "emulate-dxl", "--seconds", "20"],
         stdout=subprocess.PIPE, text=True, env=env, cwd=ROOT,
     )  # fmt: skip
     try:
-        from hardware.tendon import port_handler
+        from mjcodesign.hardware.tendon import port_handler
 
         port = proc.stdout.readline().strip()
         assert port.startswith("/dev/")

@@ -8,8 +8,8 @@ import threading
 import time
 
 import pytest
+from mjcodesign.hardware.tendon import FingerMotor, TendonConfig, TendonMotors, raise_on_signals
 
-from hardware.tendon import FingerMotor, TendonConfig, TendonMotors, raise_on_signals
 from mjcodesign.errors import HardwareError
 
 pytest.importorskip("dynamixel_sdk")
@@ -74,7 +74,7 @@ def test_missing_id_fails_cleanly(emulator):
 def test_wrong_model_refused(emulator):
     # Pretend another motor model by checking that a model mismatch message is produced:
     # the emulator only emulates XL330, so patch the expected number through the module.
-    import hardware.tendon as tendon
+    from mjcodesign.hardware import tendon
 
     old = tendon.XL330_MODEL_NUMBER
     tendon.XL330_MODEL_NUMBER = 1060  # XL430-W250

@@ -1,0 +1,5 @@
+"""Command line: argument parsing, calls into the library, printing. Nothing else lives here."""
+
+from mjcodesign.cli.main import main
+
+__all__ = ["main"]

@@ -1,0 +1,183 @@
+"""``mjcodesign poses`` and ``mjcodesign bench poses``.
+
+Wire them into the main CLI with ``cli_poses.add_parser(subparsers)`` and
+``cli_poses.add_bench_parser(bench_subparsers)``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+__all__ = ["add_parser", "add_bench_parser", "run", "run_bench", "poses"]
+
+_DEFAULT_BENCH_OBJECTS = "012_strawberry,013_apple,005_tomato_soup_can,010_potted_meat_can"
+
+
+def add_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``poses`` on an ``argparse`` subparsers object."""
+    p = subparsers.add_parser(
+        "poses", help="antipodal grasp candidates, refined on the rigid counterpart of the fingers"
+    )
+    p.add_argument(
+        "--object", required=True, help="YCB name (e.g. 025_mug), egad-like:N, or an OBJ/STL/PLY file"
+    )
+    p.add_argument("--n", type=int, default=10, help="poses to return (best first)")
+    p.add_argument("--seed", type=int, default=0, help="seeds the surface samples, picks, tilts and noise")
+    p.add_argument(
+        "--top-fraction", type=float, default=0.5, help="share of candidates approached from above"
+    )
+    p.add_argument("--augment", type=int, default=2, help="noisy copies per candidate (σ 3 mm, 5e-3 rad)")
+    p.add_argument(
+        "--import",
+        dest="import_file",
+        default=None,
+        help="refine external candidates instead of sampling: AnyGrasp .npz (T_pose, N×4×4), .npy 4×4 / "
+        "N×4×4 / N×17, or text rows of 17 GraspNet floats, in the authors' camera frame",
+    )
+    p.add_argument(
+        "--point-cloud",
+        default=None,
+        help="sample contacts from a .npy of shape (n, 6): points [m] and outward normals, object COM frame",
+    )
+    p.add_argument(
+        "--allow-open", action="store_true", help="use the convex hull of a mesh that cannot be repaired"
+    )
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--out", default=None, help="write the poses to FILE.npz (grasp --pose FILE reads it)")
+    p.set_defaults(func=run)
+    return p
+
+
+def add_bench_parser(bench_subparsers) -> argparse.ArgumentParser:
+    """Register ``poses`` on the ``bench`` command's subparsers object."""
+    p = bench_subparsers.add_parser(
+        "poses", help="grasp candidates: penetration, approach spread, MuJoCo success (semi-rigid), poses/s"
+    )
+    p.add_argument(
+        "--objects",
+        default=_DEFAULT_BENCH_OBJECTS,
+        help="comma-separated names, or 'ycb-in-domain' for the paper's 46 training objects",
+    )
+    p.add_argument("--per-object", type=int, default=4, help="poses per object")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--density", default="light", help="object density [kg/m³] or light / heavy")
+    p.add_argument(
+        "--impulse",
+        type=float,
+        default=None,
+        help="disturbance impulse [N s] of the grasp motion (default: the grasp scenario's, 0.0179)",
+    )
+    p.add_argument("--top-fraction", type=float, default=0.5)
+    p.add_argument(
+        "--anygrasp", default=None, help="folder of the authors' pose_info/*.npz, imported beside the sampler"
+    )
+    p.add_argument("--no-sim", action="store_true", help="skip the MuJoCo grasps")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=run_bench)
+    return p
+
+
+def poses(
+    source: str,
+    n: int = 10,
+    seed: int = 0,
+    *,
+    top_fraction: float = 0.5,
+    augment: int = 2,
+    import_file: str | None = None,
+    point_cloud: str | None = None,
+    allow_open: bool = False,
+):
+    """(object, candidates) for the ``poses`` command."""
+    import numpy as np
+
+    from mjcodesign.errors import PoseError
+    from mjcodesign.objects.mesh import load_mesh, load_object
+    from mjcodesign.poses.sampler import SamplerOptions, import_anygrasp, load_external, sample_poses
+
+    obj = load_object(source, 100.0, allow_open=allow_open, seed=seed)
+    if import_file is not None:
+        cands = import_anygrasp(
+            obj, load_external(import_file), load_mesh(source).vertices, seed=seed, augment=augment
+        )
+        return obj, cands.head(n)
+    points = normals = None
+    if point_cloud is not None:
+        try:
+            cloud = np.load(point_cloud)
+        except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
+            raise PoseError(f"{point_cloud}: cannot read the point cloud ({type(exc).__name__})") from exc
+        if cloud.ndim != 2 or cloud.shape[1] != 6:
+            raise PoseError(f"{point_cloud}: point cloud must have shape (n, 6), got {cloud.shape}")
+        points, normals = cloud[:, :3], cloud[:, 3:]
+    options = SamplerOptions(top_fraction=top_fraction, augment=augment)
+    return obj, sample_poses(obj, n, seed=seed, options=options, points=points, normals=normals)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``poses``; library errors propagate to the caller (exit 2 there)."""
+    from mjcodesign.errors import OutputError, PoseError
+
+    obj, cands = poses(
+        args.object,
+        args.n,
+        args.seed,
+        top_fraction=args.top_fraction,
+        augment=args.augment,
+        import_file=args.import_file,
+        point_cloud=args.point_cloud,
+        allow_open=args.allow_open,
+    )
+    if not cands.as_dicts():  # e.g. an object wider than every opening once refined
+        top = sorted(cands.rejected.items(), key=lambda kv: -kv[1])[:3]
+        raise PoseError(
+            f"no grasp pose accepted for {obj.name} (most rejections: "
+            + ", ".join(f"{k} {v}" for k, v in top)
+            + ")"
+        )
+    if args.out is not None:
+        out = Path(args.out)
+        if out.suffix != ".npz":
+            raise OutputError(f"--out must name an .npz file, got {out}")
+        try:
+            cands.save(out, obj.name)
+        except OSError as exc:
+            raise OutputError(f"cannot write {out}: {exc}") from exc
+    result = {"object": obj.name, "poses": cands.as_dicts(), "rejected": cands.rejected}
+    if args.json:
+        print(json.dumps(result))
+    elif args.out is None:
+        for i, row in enumerate(result["poses"]):
+            print(
+                f"{i:3d} score {row['score']:.3f} openings {row['openings']} sd {row['min_signed_distance_m']:.2e}"
+            )
+        print("rejected", result["rejected"])
+    return 0
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    """Run ``bench poses``."""
+    from mjcodesign.bench.poses import bench_poses
+    from mjcodesign.cli.grasp import user_cache_dir
+    from mjcodesign.objects.mesh import named_set, parse_density
+
+    names = list(named_set(args.objects)) if args.objects == "ycb-in-domain" else args.objects.split(",")
+    res = bench_poses(
+        names,
+        args.per_object,
+        seed=args.seed,
+        density=parse_density(args.density),
+        impulse=args.impulse,
+        top_fraction=args.top_fraction,
+        anygrasp_dir=args.anygrasp,
+        simulate=not args.no_sim,
+        cache_dir=user_cache_dir(),
+    )
+    if args.json:
+        print(json.dumps(res))
+    else:
+        for k in ("sampler", "anygrasp"):
+            print(k, res[k])
+    return 0

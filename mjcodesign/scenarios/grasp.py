@@ -1,0 +1,574 @@
+"""The paper's fixed grasp motion: scene, open-loop phase controls and the outcome of a rollout.
+
+Phases (durations and forces in :class:`GraspScenario`):
+
+0. settle: the object rests on the ground, the fingers wait at their start openings;
+1. close: the openings ramp linearly to the pose's openings;
+2. tighten: the tendon tension ramps linearly from 0 to ``tension``;
+3. lift: the palm rises ``lift`` metres (smooth-step);
+4. hold;
+5. impulse: one step of a downward force ``impulse / dt`` at the object's COM (``xfrc_applied``);
+6. hold.
+
+The default durations (0.7 s in all, 351 steps of 2 ms) are longer than the authors' whole simulated
+grasp (850 frames at 4000 fps, 0.21 s). Every phase spans several time constants of what it drives
+(finger servos ~13 ms, contacts 4 ms); a dropped object reaches the ground 3 cm below in 78 ms, inside
+the 0.1 s final hold. Shortening close and tighten to 0.1 s each let a held 50 g box slip, so the
+tension ramp stays at 0.15 s.
+
+The controls are open loop, so a rollout is a control array of shape (nstep, ncontrol) with
+``ncontrol = nu + 6 nbody`` (``mjSTATE_CTRL | mjSTATE_XFRC_APPLIED``); the single-step loop and
+``mujoco.rollout`` consume the same array (``mujoco.rollout`` accepts per-step ``xfrc_applied``
+through ``control_spec``), so both paths integrate the same impulse.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from mjcodesign.design.finger import BlockKind, FingerDesign
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.errors import DesignError, PoseError
+from mjcodesign.models.builder import (
+    CONTYPE_FINGER,
+    CONTYPE_WORLD,
+    Built,
+    FingerModel,
+    GripperPose,
+    SimOptions,
+    TendonMode,
+    build_gripper,
+    make_data,
+)
+from mjcodesign.objects.mesh import GraspObject
+
+__all__ = [
+    "DEFAULT_IMPULSE",
+    "MAX_OPENING",
+    "GraspScenario",
+    "GraspScene",
+    "Outcome",
+    "auto_pose",
+    "build_scene",
+    "phase_controls",
+    "scene_at_pose",
+    "control_spec",
+    "outcome_from_states",
+    "outcome_steps",
+    "failed_outcome",
+    "paper_impulse",
+]
+
+MAX_OPENING = 0.06
+"""Largest opening of one finger [m] (the gripper's stroke, as in :mod:`mjcodesign.mjcf`)."""
+_FINGER_LENGTH = 0.136  # fingers hang this far below the palm [m]
+_GROUND_CLEARANCE = 0.005  # auto pose: palm above the object's top, tips above the ground [m]
+_START_CLEARANCE = 0.01  # start openings this far outside the object [m]
+_SQUEEZE = 0.003  # auto pose: closing target inside the object's half-width [m]
+_REST_GAP = 5e-4  # object's lowest point above the ground at t=0 [m]
+_FORCE_EPS = 1e-6  # a finger wrench below this is "no force" [N]
+_MIN_HOLD_STEPS = 4  # the hold-force samples need a few steps before the impulse
+_HOLD_SAMPLES = 5  # body force: mean over this many states in the second half of the first hold (each
+# costs an mj_forward replay; 10 cost the pipeline ~10% of the rollout time)
+_OBJECT_FRICTION = (1.0, 0.005, 0.0001)  # paper: mu = 1
+# Sparse constraint Jacobian in every grasp scene. MuJoCo's "auto" picks dense below nv = 60, but a
+# contact row touches only the object and one finger's chain (<= 14 of the chain scene's 31 dofs):
+# sparse took 0.89-0.90x the CPU time of dense on the can (min of 12 alternated single-thread runs,
+# docs/benchmarks.md) with the same outcomes on 12 designs. Flex scenes (nv > 400) were sparse already.
+_GRASP_JACOBIAN = mujoco.mjtJacobian.mjJAC_SPARSE
+STATE_SPEC = mujoco.mjtState.mjSTATE_FULLPHYSICS
+
+# The authors' disturbance (code/sim_gen.py, code/evaluation.py): a constant -500 N body force held for
+# one 0.2 ms frame (100 substeps at 5000 fps), i.e. 0.1 N s, on an object in a scene built 5x larger
+# in length, at density 2 (light) or 8 (heavy) kg/m³, under the real g.
+_PAPER_IMPULSE = 0.1  # [N s] in the authors' 5x scene (0.2 and 0.4 also appear in the paper)
+_PAPER_LENGTH_SCALE = 5.0  # sim_gen.py: scale=5.0
+_PAPER_DENSITY_RATIO = 50.0  # our density presets are 50x the paper's figure (objects.DENSITY_PRESETS)
+
+
+def paper_impulse(paper_ns: float = _PAPER_IMPULSE) -> float:
+    """The authors' disturbance ``paper_ns`` [N s] (in their 5x scene) as an impulse on our objects [N s].
+
+    The same object in their scene weighs ``s³ ρ/50 V = 2.5 m`` (lengths s = 5, our presets at 50x
+    their density), so their impulse gives it Δv_p = J_p / (2.5 m). Their scene keeps the real g, so
+    gravity-driven motion (an object slipping out of the grasp) maps to real size by Froude similarity,
+    velocities scaling with √L: Δv = Δv_p / √5. Hence J = m Δv = J_p / (2.5 √5) = 0.0179 N s for 0.1,
+    whatever the object (Δv 0.5 m/s for a 35 g can, 3.7 m/s for a 5 g strawberry).
+    """
+    mass_ratio = _PAPER_LENGTH_SCALE**3 / _PAPER_DENSITY_RATIO  # their mass / ours, same object
+    return float(paper_ns / (mass_ratio * np.sqrt(_PAPER_LENGTH_SCALE)))
+
+
+DEFAULT_IMPULSE = paper_impulse()
+"""Default downward disturbance [N s]: the paper's 0.1 N s mapped to real scale (:func:`paper_impulse`)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class GraspScenario:
+    """Phase durations [s], tendon tension [N], lift [m] and disturbance impulse [N s]."""
+
+    settle_s: float = 0.05
+    close_s: float = 0.1
+    tighten_s: float = 0.15
+    """Tension ramp [s]: 0.1 s (with a 0.1 s close) let a held 50 g box slip; 0.15 s holds it."""
+    tension: float = 10.0
+    """Tendon tension per finger at the end of the ramp [N] (the actuator allows up to 50 N)."""
+    lift: float = 0.03
+    """Lift distance [m] (paper: about 3 cm in simulation)."""
+    lift_s: float = 0.2
+    hold_s: float = 0.1
+    impulse: float = DEFAULT_IMPULSE
+    """Downward impulse on the object [N s], applied as a force over one step.
+
+    Default 0.0179 N s: the paper's 0.1 N s acts on a 5x larger scene, and maps to this on real-size
+    objects (:func:`paper_impulse`; its 0.2 and 0.4 map to 0.036 and 0.072). A raw 0.1 N s gives a
+    5-140 g object Δv = 0.7-20 m/s and knocks every light YCB object out of any grasp.
+    """
+    post_hold_s: float = 0.1
+    lifted_fraction: float = 0.5
+    """Success needs the object to rise by at least this fraction of ``lift``."""
+
+    def __post_init__(self) -> None:
+        for name in ("settle_s", "close_s", "tighten_s", "lift_s", "hold_s", "post_hold_s"):
+            if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
+                raise DesignError(f"{name} must be a finite duration >= 0 s")
+        if not (0 < self.tension <= 50.0):
+            raise DesignError(f"tension must be in (0, 50] N, got {self.tension}")
+        if not (0 < self.lift <= 0.2):
+            raise DesignError(f"lift must be in (0, 0.2] m, got {self.lift}")
+        if not (0 <= self.impulse <= 5.0):
+            raise DesignError(f"impulse must be in [0, 5] N s, got {self.impulse}")
+        if self.hold_s <= 0:
+            raise DesignError("hold_s must be > 0: the body force is measured during the hold")
+
+    def phase_steps(self, dt: float) -> dict[str, int]:
+        """Steps per phase, in order; the impulse phase is one step."""
+        n = {k: int(round(getattr(self, f"{k}_s") / dt)) for k in ("settle", "close", "tighten", "lift")}
+        n["hold"] = max(_MIN_HOLD_STEPS, int(round(self.hold_s / dt)))
+        n["impulse"] = 1
+        n["post_hold"] = int(round(self.post_hold_s / dt))
+        return n
+
+
+@dataclass
+class GraspScene:
+    """A compiled gripper + free object, and the ids the controller and outcome need."""
+
+    built: Built
+    obj: GraspObject
+    pose: GripperPose
+    """Palm pose with the *target* openings of phase 1."""
+    start_openings: tuple[float, float]
+    model: mujoco.MjModel = field(init=False)
+    object_body: int = field(init=False)
+    palm_body: int = field(init=False)
+    mount_body: int = field(init=False)
+    ground_geom: int = field(init=False)
+    finger_bodies: np.ndarray = field(init=False)
+    finger_mask: np.ndarray = field(init=False)
+    """True for the finger bodies, shape (nbody,)."""
+
+    def __post_init__(self) -> None:
+        m = self.built.model
+        self.model = m
+        self.object_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "object")
+        self.palm_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "palm")
+        self.mount_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "mount")
+        self.ground_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "ground")
+        roots = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, f"{c}_base") for c in "AB"]
+        fingers = [b for b in range(m.nbody) if _has_ancestor(m, b, roots)]
+        self.finger_bodies = np.array(sorted(fingers))
+        self.finger_mask = np.zeros(m.nbody, dtype=bool)
+        self.finger_mask[self.finger_bodies] = True
+
+
+@dataclass
+class Outcome:
+    """Result of one grasp rollout. Vectors are in the gripper (palm) frame; never NaN."""
+
+    success: bool
+    body_force: list[float]
+    """Wrench of the fingers on the object, (torque about the COM [N m] (3), force [N] (3)), mean
+    over the second half of the first hold."""
+    displacement: list[float]
+    """Object position change relative to the palm from the grasp (end of tightening) to the end [m]."""
+    ground_contact: bool
+    reason: str
+    wall_time_s: float = 0.0
+    finger_contact: bool = False
+    lift_height: float = 0.0
+    """Rise of the object's COM from t=0 to the end [m] (world z)."""
+    object_path: np.ndarray | None = None
+    """Object COM in the world at the steps of :func:`outcome_steps`, in order [m], shape (k, 3)."""
+
+    def as_dict(self) -> dict:
+        """JSON-ready dict."""
+        return {
+            "success": bool(self.success),
+            "body_force": [float(x) for x in self.body_force],
+            "displacement": [float(x) for x in self.displacement],
+            "ground_contact": bool(self.ground_contact),
+            "reason": self.reason,
+            "wall_time_s": float(self.wall_time_s),
+            "finger_contact": bool(self.finger_contact),
+            "lift_height": float(self.lift_height),
+        }
+
+
+def failed_outcome(reason: str, wall_time_s: float = 0.0) -> Outcome:
+    """A failed sample (divergence, bad pose): zeros, never NaN."""
+    return Outcome(False, [0.0] * 6, [0.0] * 3, False, reason, wall_time_s)
+
+
+def _has_ancestor(m: mujoco.MjModel, b: int, roots: list[int]) -> bool:
+    while b > 0:
+        if b in roots:
+            return True
+        b = int(m.body_parentid[b])
+    return False
+
+
+def _object_vertices(obj: GraspObject) -> np.ndarray:
+    if obj.hulls:
+        return np.vstack([v for v, _ in obj.hulls])
+    return np.asarray(obj.mesh.vertices)
+
+
+def auto_pose(obj: GraspObject, design: FingerDesign | None = None) -> GripperPose:
+    """A simple top-down pose: palm level above the object's top, closing along world y.
+
+    The object's COM sits at the world origin in x and y (see :func:`build_scene`). Each target opening
+    is the object's extent on that side, less the fingers' taper at the object's mid-height and a 3 mm
+    squeeze.
+    """
+    v = _object_vertices(obj)
+    rest_z = _REST_GAP - v[:, 2].min()
+    top = rest_z + v[:, 2].max()
+    palm_z = max(top + _GROUND_CLEARANCE, _FINGER_LENGTH + _GROUND_CLEARANCE)
+    ext_a, ext_b = float(v[:, 1].max()), float(-v[:, 1].min())
+    if max(ext_a, ext_b) + _START_CLEARANCE > MAX_OPENING:
+        raise PoseError(
+            f"object {obj.name} is too big for the gripper: {1000 * (ext_a + ext_b):.0f} mm across the "
+            f"closing axis, the opening allows {1000 * 2 * (MAX_OPENING - _START_CLEARANCE):.0f} mm"
+        )
+    # The fingers taper: at the object's mid-height the inner face lies (h_base - h(x)) further out.
+    x_mid = palm_z - 0.5 * (rest_z + v[:, 2].min() + top)
+    taper = _taper(design or FingerDesign(), x_mid)
+    openings = tuple(max(0.0, e - taper - _SQUEEZE) for e in (ext_a, ext_b))
+    return GripperPose((0.0, 0.0, palm_z), (1.0, 0.0, 0.0, 0.0), openings)
+
+
+def _taper(design: FingerDesign, x: float) -> float:
+    """How far the finger's inner face near distance ``x`` from its base lies outside the base's [m].
+
+    Flexures are thin, so the face that touches is the nearest segment block's at or before ``x``.
+    """
+    x = float(np.clip(x, 0.0, design.length))
+    h = design.height_base
+    for blk in design.blocks():
+        if blk.x0 <= x and blk.kind is not BlockKind.FLEXURE:
+            h = float(blk.height(blk.mid))
+    return float(design.height_base - h)
+
+
+def _start_openings(obj: GraspObject, pose: GripperPose) -> tuple[float, float]:
+    """Openings at t=0: outside the object's extent along the palm's y axis (clipped to the stroke)."""
+    R = np.zeros(9)
+    mujoco.mju_quat2Mat(R, np.asarray(pose.quat, dtype=float))
+    y_axis = R.reshape(3, 3)[:, 1]
+    v = _object_vertices(obj)
+    # Object points relative to the palm (COM at x = y = 0, resting on the ground as in build_scene).
+    rel = v + [0.0, 0.0, _REST_GAP - float(v[:, 2].min())] - np.asarray(pose.position, dtype=float)
+    proj = rel @ y_axis
+    ext_a, ext_b = float(proj.max()), float(-proj.min())
+    if max(ext_a, ext_b) + _START_CLEARANCE > MAX_OPENING:
+        raise PoseError(
+            f"object {obj.name} is too big for the gripper opening: {1000 * (ext_a + ext_b):.0f} mm "
+            "across the closing axis"
+        )
+    return tuple(
+        float(min(MAX_OPENING, max(e + _START_CLEARANCE, s)))
+        for e, s in zip((ext_a, ext_b), pose.openings, strict=True)
+    )
+
+
+def build_scene(
+    obj: GraspObject,
+    design: FingerDesign,
+    stiffness: Stiffness,
+    model: FingerModel,
+    pose: GripperPose,
+    *,
+    options: SimOptions | None = None,
+) -> GraspScene:
+    """Gripper (native tendons) at ``pose`` plus ``obj`` as a free body of convex hulls on the ground.
+
+    The object's COM starts at world (0, 0, z) with its lowest point 0.5 mm above the ground. Raises
+    :class:`PoseError` if a fingertip or the palm starts below the ground or the object is too wide.
+    """
+    if not obj.hulls:
+        raise DesignError(f"object {obj.name} has no collision hulls: run convex_decomposition first")
+    start = _start_openings(obj, pose)
+    start_pose = GripperPose(pose.position, pose.quat, start)
+    built = build_gripper(
+        design, stiffness, model, pose=start_pose, tendon_mode=TendonMode.NATIVE, options=options
+    )
+    spec = built.spec
+    v = _object_vertices(obj)
+    body = spec.worldbody.add_body(name="object", pos=[0.0, 0.0, _REST_GAP - float(v[:, 2].min())])
+    body.add_freejoint(name="object_free")
+    body.explicitinertial = True
+    body.mass = obj.mass
+    body.ipos = [0.0, 0.0, 0.0]
+    inertia = obj.inertia
+    body.fullinertia = [inertia[i, j] for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))]
+    for i, (hv, hf) in enumerate(obj.hulls):
+        mesh = spec.add_mesh(name=f"object_hull{i}")
+        mesh.uservert = np.asarray(hv, dtype=float).ravel().tolist()
+        mesh.userface = np.asarray(hf, dtype=np.int64).ravel().tolist()
+        mesh.inertia = mujoco.mjtMeshInertia.mjMESH_INERTIA_CONVEX
+        body.add_geom(
+            name=f"object_hull{i}",
+            type=mujoco.mjtGeom.mjGEOM_MESH,
+            meshname=mesh.name,
+            contype=CONTYPE_WORLD,
+            conaffinity=CONTYPE_WORLD | CONTYPE_FINGER,
+            friction=list(_OBJECT_FRICTION),
+            density=0.0,
+            rgba=[0.8, 0.75, 0.3, 1],
+        )
+    spec.option.jacobian = _GRASP_JACOBIAN
+    try:
+        m = spec.compile()
+    except ValueError as exc:
+        raise DesignError(f"MuJoCo could not compile the grasp scene: {exc}") from exc
+    if built.finger_model.is_flex:
+        from mjcodesign.models.flex import apply_cell_young
+
+        for h in built.fingers:
+            apply_cell_young(m, h)
+    built.model = m
+    built.openings = start
+    scene = GraspScene(built, obj, pose, start)
+    _check_above_ground(scene)
+    return scene
+
+
+def scene_at_pose(scene: GraspScene, pose: GripperPose) -> GraspScene:
+    """The scene with the gripper at another ``pose``, without recompiling.
+
+    A pose only moves the mount (``body_pos``) and turns the palm (``body_quat``); the start openings go
+    into the initial state (:func:`mjcodesign.mjcf.make_data`). The test checks that the model equals a
+    recompiled :func:`build_scene` at that pose. Raises :class:`PoseError` like :func:`build_scene`.
+    """
+    start = _start_openings(scene.obj, pose)
+    m = copy.copy(scene.model)
+    m.body_pos[scene.mount_body] = pose.position
+    if m.body_mass[scene.mount_body] == 0.0:
+        m.body_ipos[scene.mount_body] = pose.position  # the compiler's value for a massless body
+    m.body_quat[scene.palm_body] = pose.quat
+    built = dataclasses.replace(scene.built, model=m, openings=start)
+    moved = GraspScene(built, scene.obj, pose, start)
+    _check_above_ground(moved)
+    return moved
+
+
+def _check_above_ground(scene: GraspScene) -> None:
+    m = scene.model
+    d = make_data(scene.built)
+    tips = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, h.tip_site) for h in scene.built.fingers]
+    z = [float(d.site_xpos[t][2]) for t in tips] + [float(d.xpos[scene.palm_body][2])]
+    if min(z) < 0.0:
+        raise PoseError(f"pose puts the gripper below the ground (lowest point z = {1000 * min(z):.1f} mm)")
+
+
+def control_spec() -> int:
+    """``mjtState`` bits of one control vector: actuator controls and ``xfrc_applied``."""
+    return int(mujoco.mjtState.mjSTATE_CTRL | mujoco.mjtState.mjSTATE_XFRC_APPLIED)
+
+
+def phase_controls(scene: GraspScene, scenario: GraspScenario) -> tuple[np.ndarray, dict[str, int]]:
+    """Open-loop controls, shape (nstep, nu + 6 nbody), and the first step of every phase."""
+    m = scene.model
+    n = scenario.phase_steps(m.opt.timestep)
+    total = sum(n.values())
+    nu = m.nu
+    ctrl = np.zeros((total, nu + 6 * m.nbody))
+    starts, t = {}, 0
+    for k, v in n.items():
+        starts[k] = t
+        t += v
+    starts["end"] = total
+
+    def aid(name: str) -> int:
+        return mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
+
+    steps = np.arange(total)
+    # Openings: hold the start, ramp to the target over the close phase, then keep it.
+    for i, letter in enumerate("AB"):
+        a = scene.start_openings[i]
+        b = scene.pose.openings[i]
+        frac = np.clip((steps - starts["close"] + 1) / max(n["close"], 1), 0.0, 1.0)
+        ctrl[:, aid(f"{letter}_opening")] = a + (b - a) * frac
+    # Tension: ramp over the tighten phase, split among each finger's native tendon actuators.
+    frac = np.clip((steps - starts["tighten"] + 1) / max(n["tighten"], 1), 0.0, 1.0)
+    for h in scene.built.fingers:
+        for act in h.actuators:
+            ctrl[:, aid(act)] = scenario.tension * frac / len(h.actuators)
+    # Lift: smooth-step over the lift phase.
+    s = np.clip((steps - starts["lift"] + 1) / max(n["lift"], 1), 0.0, 1.0)
+    ctrl[:, aid("lift")] = scenario.lift * s * s * (3.0 - 2.0 * s)
+    # Impulse J over one step: F = J / dt downward at the object's COM (xfrc_applied acts at xipos).
+    ctrl[starts["impulse"], nu + 6 * scene.object_body + 2] = -scenario.impulse / m.opt.timestep
+    return ctrl, starts
+
+
+def _finger_wrench(
+    scene: GraspScene, d: mujoco.MjData, *, forces: bool = True
+) -> tuple[np.ndarray, bool, bool]:
+    """(wrench on the object by the fingers [torque about COM, force] in world, finger contact, ground).
+
+    With ``forces=False`` only the two flags are read (``d`` needs contacts, not constraint forces).
+    """
+    m = scene.model
+    ob = scene.object_body
+    wrench = np.zeros(6)
+    if d.ncon == 0:
+        return wrench, False, False
+    con = d.contact
+    g1, g2 = np.asarray(con.geom1), np.asarray(con.geom2)
+    # A flex side of a contact has geom -1 and its flex id in con.flex; every flex is a finger.
+    flex = np.asarray(con.flex).reshape(-1, 2)
+    b1 = np.where(g1 >= 0, m.geom_bodyid[g1], -1)
+    b2 = np.where(g2 >= 0, m.geom_bodyid[g2], -1)
+    on_obj = (b1 == ob) | (b2 == ob)
+    ground = bool(np.any(on_obj & ((g1 == scene.ground_geom) | (g2 == scene.ground_geom))))
+    other = np.where(b1 == ob, b2, b1)
+    other_flex = np.where(b1 == ob, flex[:, 1], flex[:, 0])
+    finger = (other_flex >= 0) | ((other >= 0) & scene.finger_mask[np.maximum(other, 0)])
+    sel = np.flatnonzero(on_obj & finger)
+    if sel.size == 0 or not forces:
+        return wrench, sel.size > 0, ground
+    f6 = np.zeros(6)
+    local = np.empty((sel.size, 6))
+    for k, i in enumerate(sel):
+        mujoco.mj_contactForce(m, d, int(i), f6)
+        local[k] = f6
+    # mj_contactForce gives the force of geom1 on geom2 in the contact frame (rows = axes).
+    frames = np.asarray(con.frame)[sel].reshape(-1, 3, 3)
+    sign = np.where(b2[sel] == ob, 1.0, -1.0)[:, None]
+    F = sign * np.einsum("kji,kj->ki", frames, local[:, :3])
+    T = sign * np.einsum("kji,kj->ki", frames, local[:, 3:])
+    r = np.asarray(con.pos)[sel] - d.xipos[ob]
+    wrench[3:] = F.sum(axis=0)
+    # Σ r × F, written out: np.cross costs more than the rest of this function on ~20 contacts.
+    rxf = r[:, [1, 2, 0]] * F[:, [2, 0, 1]] - r[:, [2, 0, 1]] * F[:, [1, 2, 0]]
+    wrench[:3] = rxf.sum(axis=0) + T.sum(axis=0)
+    return wrench, True, ground
+
+
+def _palm_frame(scene: GraspScene, d: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+    return d.xpos[scene.palm_body].copy(), d.xmat[scene.palm_body].reshape(3, 3).copy()
+
+
+def _hold_steps(starts: dict[str, int]) -> np.ndarray:
+    # States are evaluated under the control of the following step, so the last sample is h1 - 2: the
+    # state after h1 - 1 would be evaluated with the impulse force applied.
+    h0, h1 = starts["hold"], starts["impulse"]
+    last = h1 - 2
+    return np.unique(np.linspace(min(h0 + (h1 - h0) // 2, last), last, _HOLD_SAMPLES).astype(int))
+
+
+def outcome_steps(starts: dict[str, int]) -> set[int]:
+    """Steps whose states :func:`outcome_from_states` reads (a backend may record only these)."""
+    return {int(t) for t in _hold_steps(starts)} | {starts["lift"] - 1, starts["end"] - 1}
+
+
+def outcome_from_states(
+    scene: GraspScene,
+    scenario: GraspScenario,
+    x0: np.ndarray,
+    states: np.ndarray,
+    ctrl: np.ndarray,
+    starts: dict[str, int],
+    data: mujoco.MjData | None = None,
+) -> Outcome:
+    """The outcome of a rollout from its initial state ``x0`` and per-step states (nstep, nstate).
+
+    ``states[t]`` is the state after step t, ``ctrl`` the controls of :func:`phase_controls`. Contact
+    forces are recomputed with ``mj_forward`` at the sampled states under the control of the step that
+    follows (so they equal that step's), and the single-step and batched paths share this function.
+    ``data`` is scratch space of the same model structure (allocated when None).
+    """
+    m = scene.model
+    d = data if data is not None else mujoco.MjData(m)
+    spec = control_spec()
+    d.qacc_warmstart[:] = 0.0  # as in a fresh MjData, so reused scratch data gives equal forces
+
+    def load(x: np.ndarray, t: int, stage: str) -> None:
+        # "forward": contact forces (mj_forward, warm-started by the previous replay); "collide":
+        # contacts only (mj_fwdPosition, which also places flex vertices); "kinematics": poses only.
+        mujoco.mj_setState(m, d, x, STATE_SPEC)
+        mujoco.mj_setState(m, d, ctrl[min(t + 1, len(ctrl) - 1)], spec)
+        if stage == "forward":
+            mujoco.mj_forward(m, d)
+            d.qacc_warmstart[:] = d.qacc  # the hold samples are a few steps apart
+            return
+        if stage == "collide":
+            mujoco.mj_fwdPosition(m, d)
+        else:
+            mujoco.mj_kinematics(m, d)
+
+    ob = scene.object_body
+    # The object's body frame is at its COM (build_scene), so the free joint's position is the COM.
+    z0 = float(x0[1 + m.jnt_qposadr[m.body_jntadr[ob]] + 2])  # state = (time, qpos, ...)
+    # Body force: mean over the second half of the first hold (before the impulse).
+    idx = _hold_steps(starts)
+    acc = np.zeros(6)
+    path: dict[int, np.ndarray] = {}
+    for t in idx:
+        load(states[t], t, "forward")
+        path[int(t)] = d.xipos[ob].copy()
+        w, _, _ = _finger_wrench(scene, d)
+        _, R = _palm_frame(scene, d)
+        acc[:3] += R.T @ w[:3]
+        acc[3:] += R.T @ w[3:]
+    body_force = acc / len(idx)
+    # Displacement relative to the palm, from the grasp (end of tightening) to the end.
+    rel = []
+    for t, stage in ((starts["lift"] - 1, "kinematics"), (starts["end"] - 1, "collide")):
+        load(states[t], t, stage)
+        path[int(t)] = d.xipos[ob].copy()
+        p, R = _palm_frame(scene, d)
+        rel.append(R.T @ (d.xipos[ob] - p))
+    displacement = rel[1] - rel[0]
+    _, finger, ground = _finger_wrench(scene, d, forces=False)  # d holds the final contacts
+    rise = float(d.xipos[ob][2]) - z0
+    lifted = rise >= scenario.lifted_fraction * scenario.lift
+    force_ok = float(np.linalg.norm(body_force[3:])) > _FORCE_EPS
+    if not np.all(np.isfinite(body_force)) or not np.all(np.isfinite(displacement)):
+        return failed_outcome("diverged: non-finite outcome")
+    reasons = []
+    if not lifted:
+        reasons.append(f"not lifted (rose {1000 * rise:.1f} mm of {1000 * scenario.lift:.0f})")
+    if ground:
+        reasons.append("ground contact")
+    if not finger:
+        reasons.append("no finger contact")
+    if not force_ok:
+        reasons.append("zero finger force")
+    return Outcome(
+        success=not reasons,
+        body_force=body_force.tolist(),
+        displacement=displacement.tolist(),
+        ground_contact=ground,
+        reason="; ".join(reasons) if reasons else "ok",
+        finger_contact=finger,
+        lift_height=rise,
+        object_path=np.array([path[t] for t in sorted(path)]),
+    )

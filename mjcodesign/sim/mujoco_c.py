@@ -1,0 +1,378 @@
+"""MuJoCo C backend: one rollout stepped from Python, or a batch through ``mujoco.rollout``."""
+
+from __future__ import annotations
+
+import copy
+import functools
+import os
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from typing import NamedTuple, Protocol
+
+import mujoco
+import numpy as np
+from mujoco import rollout as mj_rollout
+
+from mjcodesign.design.beam import block_bending_compliance
+from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.errors import SimulationDiverged
+from mjcodesign.models.builder import GripperPose, make_data
+from mjcodesign.models.chain import contact_solref
+from mjcodesign.models.simulate import check_state, has_warning, reset_warnings
+from mjcodesign.scenarios.grasp import (
+    STATE_SPEC,
+    GraspScenario,
+    GraspScene,
+    Outcome,
+    control_spec,
+    failed_outcome,
+    outcome_from_states,
+    phase_controls,
+    scene_at_pose,
+)
+from mjcodesign.sim.observe import Capture, Observer, Rollout
+
+__all__ = ["GraspBackend", "MujocoBackend", "with_stiffness"]
+
+_CLOCK_TOL = 0.5  # [steps]: a rollout's time off by half a step means MuJoCo reset it
+
+
+class GraspBackend(Protocol):
+    """What every grasp simulator offers."""
+
+    def run(
+        self,
+        scene: GraspScene,
+        scenario: GraspScenario,
+        *,
+        observer: Observer | None = None,
+        label: str = "grasp",
+    ) -> Outcome:
+        """One rollout of the scenario; a divergence is a failed outcome, never an exception.
+
+        ``observer`` receives the whole rollout (:class:`mjcodesign.observe.Rollout`) as ``label``.
+        """
+        ...
+
+    def run_batch(
+        self, scene: GraspScene, scenario: GraspScenario, stiffnesses: list[Stiffness]
+    ) -> list[Outcome]:
+        """One rollout per design on the same object and pose."""
+        ...
+
+    def run_poses(
+        self, scene: GraspScene, scenario: GraspScenario, poses: list[GripperPose]
+    ) -> list[Outcome]:
+        """One rollout per pose of the scene's design."""
+        ...
+
+
+class _BlockFacts(NamedTuple):
+    """What the chain's stiffness and contact formulas read from a block (computed once per design)."""
+
+    length: float
+    width: float
+    volume: float
+    compliance: float
+    """∫ dx / I(x) over the block [m^-3]."""
+
+
+@functools.lru_cache(maxsize=8)
+def _block_facts(design: FingerDesign) -> tuple[_BlockFacts, ...]:
+    return tuple(
+        _BlockFacts(b.length, b.width, b.volume, block_bending_compliance(b)) for b in design.blocks()
+    )
+
+
+def with_stiffness(scene: GraspScene, stiffness: Stiffness) -> mujoco.MjModel:
+    """A copy of the scene's model with another design's stiffness.
+
+    Chain: hinge stiffness k = E I / l (the arithmetic of :func:`mjcodesign.chain.hinge_stiffness`),
+    damping ``damping_time`` k and the blocks' contact solref (:func:`mjcodesign.chain.contact_solref`)
+    are rewritten instead of a recompile; the test checks they equal a recompiled model bitwise. Flex:
+    each cell's stiffness record is rescaled to the design's cell modulus
+    (:func:`mjcodesign.flex.rescale_cell_young`; equal to a recompile to round-off, tested).
+    """
+    built = scene.built
+    m = copy.copy(scene.model)
+    if built.finger_model.is_flex:
+        from mjcodesign.models.flex import rescale_cell_young
+
+        for h, young in zip(built.fingers, stiffness.young, strict=True):
+            rescale_cell_young(m, h, built.design, young, built.options.poisson)
+        return m
+    design, opts = built.design, built.options
+    facts = _block_facts(design)
+    ids = _chain_ids(scene)
+    for i, young in enumerate(stiffness.young):
+        for j, (f, e) in enumerate(zip(facts, young, strict=True)):
+            k = float(e) * f.length / f.compliance / f.length  # == block_effective_ei(b, e) / b.length
+            jid, gids = ids[i][j]
+            m.jnt_stiffness[jid] = k
+            m.dof_damping[m.jnt_dofadr[jid]] = opts.damping_time * k
+            solref = contact_solref(f, float(e), design.density, opts.timestep)
+            for gid in gids:
+                m.geom_solref[gid] = solref
+    return m
+
+
+def _chain_ids(scene: GraspScene) -> list[list[tuple[int, list[int]]]]:
+    """Per finger, per block: (hinge joint id, ids of the geoms carrying the block's contact solref)."""
+    m = scene.model
+    out = []
+    for h in scene.built.fingers:
+        rows = []
+        for j, name in enumerate(h.joints):
+            gids = [
+                mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"{h.prefix}b{j}_{part}")
+                for part in ("p", "d")
+            ]
+            rows.append((mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name), [g for g in gids if g >= 0]))
+        out.append(rows)
+    return out
+
+
+def _initial_state(scene: GraspScene) -> np.ndarray:
+    d = make_data(scene.built)
+    x0 = np.empty(mujoco.mj_stateSize(scene.model, STATE_SPEC))
+    mujoco.mj_getState(scene.model, d, x0, STATE_SPEC)
+    return x0
+
+
+def _step_all(
+    m: mujoco.MjModel,
+    d: mujoco.MjData,
+    x0: np.ndarray,
+    ctrl: np.ndarray,
+    states: np.ndarray,
+    *,
+    checked: bool,
+    capture: Capture | None = None,
+    steps: frozenset[int] = frozenset(),
+    captured: dict | None = None,
+) -> tuple[int, SimulationDiverged] | None:
+    """Run every step from ``x0`` into ``states``.
+
+    ``checked`` checks MuJoCo's warnings and the state after every step and stops at the first bad
+    one: ``(step, error)``; None when every step passed, or always when unchecked. ``capture`` takes
+    state t (of ``steps``, -1 the initial state) into ``captured[t]`` right after step t+1, while the
+    data still holds that state's forward quantities (:class:`~mjcodesign.observe.Capture`).
+    """
+    reset_warnings(d)
+    mujoco.mj_setState(m, d, x0, STATE_SPEC)
+    spec = control_spec()
+    for t in range(len(ctrl)):
+        mujoco.mj_setState(m, d, ctrl[t], spec)
+        mujoco.mj_step(m, d)
+        if t - 1 in steps:
+            captured[t - 1] = capture.capture(m, d)
+        if checked:
+            try:
+                check_state(d, f"step {t}: ")
+            except SimulationDiverged as exc:
+                return t, exc
+        mujoco.mj_getState(m, d, states[t], STATE_SPEC)
+    return None
+
+
+class MujocoBackend:
+    """MuJoCo C. ``nthread`` defaults to every core the process may use."""
+
+    def __init__(self, nthread: int | None = None):
+        self.nthread = nthread or len(os.sched_getaffinity(0))
+
+    def run(
+        self,
+        scene: GraspScene,
+        scenario: GraspScenario,
+        model: mujoco.MjModel | None = None,
+        *,
+        observer: Observer | None = None,
+        label: str = "grasp",
+    ) -> Outcome:
+        """Step the scenario one ``mj_step`` at a time; MuJoCo's warnings are failures.
+
+        The steps run unchecked, and the warnings and the states are checked once at the end; if
+        either is bad, the same (deterministic) steps run again with a check after every one, which
+        names the first bad step. ``observer`` receives the full rollout (its states up to a
+        divergence) under ``label``.
+        """
+        t0 = time.perf_counter()
+        m = model or scene.model
+        ctrl, starts = phase_controls(scene, scenario)
+        x0 = _initial_state(scene)
+        d = mujoco.MjData(m)
+        states = np.empty((len(ctrl), x0.size))
+        captured: dict = {}
+        capture = observer if isinstance(observer, Capture) else None
+        steps = (
+            frozenset(capture.capture_steps(len(ctrl), m.opt.timestep, starts)) if capture else frozenset()
+        )
+        bad = _step_all(
+            m, d, x0, ctrl, states, checked=False, capture=capture, steps=steps, captured=captured
+        )
+        if has_warning(d) or not np.isfinite(states).all():  # again, step by step, to name the step
+            bad = _step_all(m, d, x0, ctrl, states, checked=True)
+        if bad is not None:
+            t, exc = bad
+            out = failed_outcome(f"diverged: {exc}", time.perf_counter() - t0)
+            captured = {k: v for k, v in captured.items() if k < t}
+            _observe(
+                observer, label, scene, scenario, m, x0, states[:t], ctrl, starts, out, captured=captured
+            )
+            return out
+        out = outcome_from_states(_scene_with(scene, m), scenario, x0, states, ctrl, starts)
+        out.wall_time_s = time.perf_counter() - t0
+        _observe(
+            observer, label, scene, scenario, m, x0, states, ctrl, starts, out, scratch=d, captured=captured
+        )
+        return out
+
+    def run_batch(
+        self,
+        scene: GraspScene,
+        scenario: GraspScenario,
+        stiffnesses: list[Stiffness],
+        *,
+        observer: Observer | None = None,
+        labels: list[str] | None = None,
+    ) -> list[Outcome]:
+        """All designs at the scene's pose through one ``mujoco.rollout`` call on ``nthread`` threads.
+
+        ``wall_time_s`` is the batch's wall time shared evenly (see :meth:`run_scenes`). ``observer``
+        receives every rollout, labelled ``labels[i]`` (default ``design{i}``).
+        """
+        models = [with_stiffness(scene, s) for s in stiffnesses]
+        labels = labels or [f"design{i}" for i in range(len(stiffnesses))]
+        return self.run_scenes(
+            [_scene_with(scene, m) for m in models], scenario, observer=observer, labels=labels
+        )
+
+    def run_poses(
+        self,
+        scene: GraspScene,
+        scenario: GraspScenario,
+        poses: list[GripperPose],
+        *,
+        observer: Observer | None = None,
+        labels: list[str] | None = None,
+    ) -> list[Outcome]:
+        """The scene's design at every pose (one model structure): one ``mujoco.rollout`` call.
+
+        A pose moves the mount and palm in a copy of the model and sets the initial openings and the
+        controls (:func:`mjcodesign.scenario.scene_at_pose`); raises :class:`PoseError` for a bad pose.
+        ``observer`` receives every rollout, labelled ``labels[i]`` (default ``pose{i}``).
+        """
+        labels = labels or [f"pose{i}" for i in range(len(poses))]
+        scenes = [scene_at_pose(scene, p) for p in poses]
+        return self.run_scenes(scenes, scenario, observer=observer, labels=labels)
+
+    def run_scenes(
+        self,
+        scenes: list[GraspScene],
+        scenario: GraspScenario,
+        *,
+        observer: Observer | None = None,
+        labels: list[str] | None = None,
+    ) -> list[Outcome]:
+        """Scenes of one model structure (other designs or poses), batched through ``mujoco.rollout``.
+
+        A rollout diverged if its recorded time is not the step count times dt (MuJoCo resets the data
+        after a bad acceleration) or its state is not finite; MuJoCo warnings left in a thread's data
+        are checked too. Diverged rollouts, or all when a warning is left, are re-run one step at a
+        time by :meth:`run`, which names the warning. The outcomes (contact-force replays) are then
+        evaluated on ``nthread`` threads; MuJoCo releases the GIL in ``mj_forward``. ``observer``
+        receives every rollout, labelled ``labels[i]`` (default ``scene{i}``).
+        """
+        labels = labels or [f"scene{i}" for i in range(len(scenes))]
+        t0 = time.perf_counter()
+        plans: dict[tuple, tuple[np.ndarray, dict[str, int], np.ndarray]] = {}
+        for sc in scenes:  # designs of one pose share their controls and initial state
+            key = (id(sc.built), sc.pose)
+            if key not in plans:
+                plans[key] = (*phase_controls(sc, scenario), _initial_state(sc))
+        rows = [plans[(id(sc.built), sc.pose)] for sc in scenes]
+        starts = rows[0][1]
+        ctrl = np.stack([c for c, _, _ in rows])
+        x0 = np.stack([x for _, _, x in rows])
+        models = [sc.model for sc in scenes]
+        datas = [mujoco.MjData(models[0]) for _ in range(min(self.nthread, len(models)))]
+        for d in datas:
+            reset_warnings(d)
+        states, _ = mj_rollout.rollout(models, datas, x0, ctrl, control_spec=control_spec())
+        bad = _diverged(states, x0, models[0].opt.timestep)
+        warned = False
+        for d in datas:
+            try:
+                check_state(d)
+            except SimulationDiverged:
+                warned = True
+        if warned:
+            bad[:] = True
+        outs: list[Outcome | None] = [None] * len(scenes)
+        for i in np.flatnonzero(bad):  # run() hands these to the observer itself
+            outs[i] = self.run(scenes[i], scenario, observer=observer, label=labels[i])
+        good = np.flatnonzero(~bad)
+        with ThreadPoolExecutor(max_workers=self.nthread) as pool:
+            scratch = threading.local()
+
+            def evaluate(i: int) -> Outcome:
+                if not hasattr(scratch, "data"):
+                    scratch.data = mujoco.MjData(models[0])
+                return outcome_from_states(
+                    scenes[i], scenario, x0[i], states[i], ctrl[i], starts, scratch.data
+                )
+
+            for i, out in zip(good, pool.map(evaluate, good), strict=True):
+                outs[i] = out
+        wall = (time.perf_counter() - t0) / len(scenes)
+        for o in outs:
+            o.wall_time_s = wall
+        for i in good if observer is not None else ():
+            sc = scenes[i]
+            observer.rollout(
+                Rollout(labels[i], sc, scenario, sc.model, x0[i], states[i], ctrl[i], starts, outs[i])
+            )
+        return outs
+
+
+def _observe(
+    observer, label, scene, scenario, m, x0, states, ctrl, starts, out, scratch=None, captured=None
+) -> None:
+    if observer is not None:
+        sc = _scene_with(scene, m)
+        observer.rollout(
+            Rollout(
+                label,
+                sc,
+                scenario,
+                m,
+                x0,
+                states,
+                ctrl,
+                starts,
+                out,
+                scratch=scratch,
+                captured=captured or {},
+            )
+        )
+
+
+def _diverged(states: np.ndarray, x0: np.ndarray, dt: float) -> np.ndarray:
+    """Per rollout: True if its state is not finite or its clock was reset (MuJoCo's auto-reset)."""
+    nstep = states.shape[1]
+    expected = x0[:, :1] + dt * np.arange(1, nstep + 1)[None, :]
+    finite = np.all(np.isfinite(states), axis=(1, 2))
+    clock = np.all(np.abs(states[:, :, 0] - expected) < _CLOCK_TOL * dt, axis=1)
+    return ~(finite & clock)
+
+
+def _scene_with(scene: GraspScene, m: mujoco.MjModel) -> GraspScene:
+    """The scene with another model of the same structure (ids unchanged)."""
+    if m is scene.model:
+        return scene
+    other = copy.copy(scene)
+    other.model = m
+    return other
