@@ -5,8 +5,9 @@ import pytest
 from mjcodesign.design.beam import block_bending_compliance, cantilever_tip_deflection
 from mjcodesign.design.finger import BlockKind, FingerDesign
 from mjcodesign.design.stiffness import Stiffness
-from mjcodesign.models.builder import CONTYPE_FINGER, FingerModel, build_finger, build_gripper
+from mjcodesign.models.builder import build_finger, build_gripper
 from mjcodesign.models.chain import hinge_stiffness
+from mjcodesign.models.types import CONTYPE_FINGER, FingerModel
 from mjcodesign.scenarios.static import validate_beam
 
 _TOL_BEAM_CHAIN = 0.05  # issue contract: chain hinge model vs Euler–Bernoulli

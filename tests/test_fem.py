@@ -134,7 +134,7 @@ def test_explicit_dynamics_rests_on_the_ground(coarse):
 
 @pytest.fixture(scope="module")
 def soft_curl(wp):
-    from mjcodesign.models.builder import TendonMode
+    from mjcodesign.models.types import TendonMode
     from mjcodesign.scenarios.static import curl
     from mjcodesign.sim.fem.finger import FemFinger, FemOptions
 
@@ -326,7 +326,7 @@ def test_press_settling_tells_drift_from_jitter():
 def test_plot_curves_writes_png(tmp_path):
     pytest.importorskip("matplotlib")
     from mjcodesign.cli.crosscheck import plot_curves
-    from mjcodesign.models.builder import TendonMode
+    from mjcodesign.models.types import TendonMode
     from mjcodesign.scenarios.static import curl
 
     tensions = [0.02, 0.04]
@@ -349,8 +349,9 @@ def test_plot_curves_writes_png(tmp_path):
 
 
 def test_flex_linear_curl_matches_its_dynamics_at_small_bend():
-    from mjcodesign.models.builder import SimOptions, TendonMode, build_finger
+    from mjcodesign.models.builder import build_finger
     from mjcodesign.models.flex import linear_curl
+    from mjcodesign.models.types import SimOptions, TendonMode
     from mjcodesign.scenarios.static import curl
 
     design, stiffness, tension = FingerDesign(), Stiffness.preset("soft"), 0.02  # ≈ 0.3 rad of bend

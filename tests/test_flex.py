@@ -4,8 +4,9 @@ import pytest
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
-from mjcodesign.models.builder import SimOptions, new_spec
 from mjcodesign.models.flex import add_flex_finger, apply_cell_young, cell_young, flex_cells
+from mjcodesign.models.spec import new_spec
+from mjcodesign.models.types import SimOptions
 from mjcodesign.scenarios.static import validate_beam
 
 # Compiled flex stiffness is linear in E; scaling a record reproduces a recompile to round-off.

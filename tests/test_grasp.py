@@ -9,7 +9,7 @@ from numpy.testing import assert_array_equal
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import PoseError
-from mjcodesign.models.builder import FingerModel, GripperPose
+from mjcodesign.models.types import FingerModel, GripperPose
 from mjcodesign.objects.mesh import box_object
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
 from mjcodesign.sim.protocol import MujocoBackend, with_stiffness
@@ -165,13 +165,13 @@ def test_batch_flags_a_diverged_rollout(box_scene):
     # An undamped hinge 1e6 times too stiff blows up the explicit spring; MuJoCo then resets that
     # rollout's data (its clock restarts), which the batch must report, not average into outcomes.
     # One thread: the good rollout that follows on the same MjData clears the bad one's warning.
-    from mjcodesign.sim.mujoco_c import _scene_with
+    from mjcodesign.sim.mujoco_c import scene_with_model
 
     bad = with_stiffness(box_scene, Stiffness.preset("soft"))
     bad.jnt_stiffness[:] *= 1e6
     bad.dof_damping[:] = 0.0
     scenario = GraspScenario(hold_s=0.02, post_hold_s=0.02)
-    outs = MujocoBackend(nthread=1).run_scenes([_scene_with(box_scene, bad), box_scene], scenario)
+    outs = MujocoBackend(nthread=1).run_scenes([scene_with_model(box_scene, bad), box_scene], scenario)
     assert outs[0].reason.startswith("diverged") and not outs[0].success
     assert not outs[1].reason.startswith("diverged")
     # Re-run alone, step by step after the unchecked pass saw the warning: the first bad step is named.
@@ -194,14 +194,14 @@ def test_flex_contacts_count_as_finger_contacts():
     import mujoco
 
     from mjcodesign.scenarios.grasp import STATE_SPEC, _finger_wrench, control_spec, phase_controls
-    from mjcodesign.sim.mujoco_c import _initial_state
+    from mjcodesign.sim.mujoco_c import initial_state
 
     obj = box_object((_BOX,) * 3, _RHO)
     scene = build_scene(obj, FingerDesign(), Stiffness.preset("semi-rigid"), FingerModel.FLEX, auto_pose(obj))
     m = scene.model
     ctrl, starts = phase_controls(scene, GraspScenario())
     d = mujoco.MjData(m)
-    mujoco.mj_setState(m, d, _initial_state(scene), STATE_SPEC)
+    mujoco.mj_setState(m, d, initial_state(scene), STATE_SPEC)
     for t in range(starts["lift"]):
         mujoco.mj_setState(m, d, ctrl[t], control_spec())
         mujoco.mj_step(m, d)
@@ -242,14 +242,14 @@ def test_grasp_scene_is_sparse_and_matches_dense(box_scene):
 
     import mujoco
 
-    from mjcodesign.sim.mujoco_c import _scene_with
+    from mjcodesign.sim.mujoco_c import scene_with_model
 
     assert box_scene.model.opt.jacobian == mujoco.mjtJacobian.mjJAC_SPARSE
     dense = copy.copy(box_scene.model)
     dense.opt.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
     scenario = GraspScenario(impulse=0.0)
     a = MujocoBackend().run(box_scene, scenario)
-    b = MujocoBackend().run(_scene_with(box_scene, dense), scenario, dense)
+    b = MujocoBackend().run(scene_with_model(box_scene, dense), scenario, dense)
     mg = box_scene.obj.mass * _G
     assert a.success and b.success
     np.testing.assert_allclose(a.body_force[3:], b.body_force[3:], rtol=0, atol=_TOL_JACOBIAN * mg)

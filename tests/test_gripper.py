@@ -5,9 +5,10 @@ import pytest
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import PoseError
-from mjcodesign.models.builder import FingerModel, GripperPose, TendonMode, build_gripper, make_data
+from mjcodesign.models.builder import build_gripper, make_data
 from mjcodesign.models.simulate import check_state
 from mjcodesign.models.tendon import TendonDriver
+from mjcodesign.models.types import FingerModel, GripperPose, TendonMode
 
 
 def _tips_y(m, d):

@@ -10,7 +10,7 @@ pytest.importorskip("mujoco_warp")
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
-from mjcodesign.models.builder import FingerModel
+from mjcodesign.models.types import FingerModel
 from mjcodesign.objects.mesh import box_object
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
 from mjcodesign.sim.mjwarp import MjwarpBackend
@@ -43,7 +43,7 @@ def test_mjwarp_matches_mujoco_c():
 @pytest.mark.slow
 def test_mjwarp_pose_batch_matches_mujoco_c():
     # Two poses of one design as two worlds (batched body_pos/body_quat, per-world state and controls).
-    from mjcodesign.models.builder import GripperPose
+    from mjcodesign.models.types import GripperPose
 
     obj = box_object((0.05,) * 3, 400.0)
     p0 = auto_pose(obj)
@@ -87,7 +87,7 @@ def flex_runs():
     A whole flex rollout takes ~20 min on Warp's CPU device; the first steps (28 s with compiled kernels)
     already show the difference below.
     """
-    from mjcodesign.models.builder import GripperPose
+    from mjcodesign.models.types import GripperPose
     from mjcodesign.scenarios.grasp import scene_at_pose
 
     obj = box_object((0.05,) * 3, 400.0)

@@ -304,11 +304,11 @@ def test_grasp_pose_best_is_the_top_ranked(box):
 
 
 def test_start_openings_are_relative_to_the_palm(box):
-    from mjcodesign.models.builder import GripperPose
-    from mjcodesign.scenarios.grasp import _START_CLEARANCE, _start_openings
+    from mjcodesign.models.types import GripperPose
+    from mjcodesign.scenarios.grasp import _START_CLEARANCE, start_openings
 
     # The box spans y in ±25 mm; a palm 10 mm towards +y sees 15 mm on A's side and 35 mm on B's.
     pose = GripperPose((0.0, 0.01, 0.2), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0))
     np.testing.assert_allclose(
-        _start_openings(box, pose), (0.015 + _START_CLEARANCE, 0.035 + _START_CLEARANCE), atol=1e-9
+        start_openings(box, pose), (0.015 + _START_CLEARANCE, 0.035 + _START_CLEARANCE), atol=1e-9
     )

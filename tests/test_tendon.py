@@ -4,8 +4,9 @@ import pytest
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
-from mjcodesign.models.builder import FingerModel, TendonMode, build_finger
+from mjcodesign.models.builder import build_finger
 from mjcodesign.models.tendon import TendonDriver
+from mjcodesign.models.types import FingerModel, TendonMode
 from mjcodesign.scenarios.static import curl
 
 # Point forces of a frictionless tendon are the native spatial tendon's forces: same rest shape.

@@ -20,7 +20,7 @@ import trimesh
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
-from mjcodesign.models.builder import FingerModel
+from mjcodesign.models.types import FingerModel
 from mjcodesign.objects.mesh import box_object
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
 from mjcodesign.sim.protocol import MujocoBackend

@@ -14,8 +14,9 @@ from mujoco import rollout
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import OutputError, SimulationDiverged
-from mjcodesign.models.builder import FingerModel, SimOptions, build_finger
+from mjcodesign.models.builder import build_finger
 from mjcodesign.models.simulate import check_state
+from mjcodesign.models.types import FingerModel, SimOptions
 
 __all__ = ["bench_finger"]
 

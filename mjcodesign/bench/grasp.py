@@ -12,11 +12,11 @@ from mujoco import rollout as mj_rollout
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
-from mjcodesign.models.builder import FingerModel
 from mjcodesign.models.simulate import check_state, reset_warnings
+from mjcodesign.models.types import FingerModel
 from mjcodesign.objects.mesh import CoacdSettings, convex_decomposition, load_object
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene, control_spec, phase_controls
-from mjcodesign.sim.mujoco_c import MujocoBackend, _initial_state, with_stiffness
+from mjcodesign.sim.mujoco_c import MujocoBackend, initial_state, with_stiffness
 
 __all__ = ["bench_grasp"]
 
@@ -55,7 +55,7 @@ def bench_grasp(
     scenario = GraspScenario()
     nthread = len(os.sched_getaffinity(0))
     ctrl, _ = phase_controls(scene, scenario)
-    x0 = _initial_state(scene)
+    x0 = initial_state(scene)
     models = [with_stiffness(scene, s) for s in designs]
     datas = [mujoco.MjData(scene.model) for _ in range(min(nthread, n))]
     backend = MujocoBackend(nthread=nthread)

@@ -22,7 +22,7 @@ _DESIGN = "semi-rigid"  # the issue's reference design: log E 16.5 everywhere
 def _simulate(obj, cands, scenario, sim) -> list[dict]:
     from mjcodesign.design.finger import FingerDesign
     from mjcodesign.design.stiffness import Stiffness
-    from mjcodesign.models.builder import FingerModel
+    from mjcodesign.models.types import FingerModel
     from mjcodesign.poses.sampler import to_gripper_pose
     from mjcodesign.scenarios.grasp import build_scene
 

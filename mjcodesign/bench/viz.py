@@ -120,7 +120,7 @@ def bench_viz(
     """
     from mjcodesign.design.finger import FingerDesign
     from mjcodesign.design.stiffness import Stiffness
-    from mjcodesign.models.builder import FingerModel
+    from mjcodesign.models.types import FingerModel
     from mjcodesign.objects.mesh import CoacdSettings, box_object, convex_decomposition, load_object
     from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
     from mjcodesign.sim.observe import load_observer

@@ -175,7 +175,8 @@ def _curl(design, stiffness, model: str, tension: float, *, observe=None) -> dic
     (`mjcodesign.flex.linear_curl`; its dynamics runs at 3.4 steps/s), valid for bends of a few tenths
     of a radian only. ``observe(built, data)`` as in `mjcodesign.validate.curl`.
     """
-    from mjcodesign.models.builder import FingerModel, SimOptions, TendonMode, build_finger
+    from mjcodesign.models.builder import build_finger
+    from mjcodesign.models.types import FingerModel, SimOptions, TendonMode
     from mjcodesign.scenarios.static import curl
 
     if FingerModel(model) is not FingerModel.FLEX_QUADRATIC:
@@ -288,7 +289,7 @@ def _press_rows(models, design_name, stiffness, fem_options, tensions, shapes) -
 
     from mjcodesign.design.finger import FingerDesign, Routing
     from mjcodesign.errors import SimulationDiverged
-    from mjcodesign.models.builder import FingerModel
+    from mjcodesign.models.types import FingerModel
     from mjcodesign.scenarios.press import PRESS_METRICS, plate_pose, press_fem, press_linear, press_mujoco
     from mjcodesign.sim.fem.finger import FemFinger, FemOptions
 

@@ -124,7 +124,7 @@ def add_bench_parser(bench_subparsers) -> argparse.ArgumentParser:
 
 def _read_pose(text: str, obj, design, seed: int = 0):
     from mjcodesign.errors import PoseError
-    from mjcodesign.models.builder import GripperPose
+    from mjcodesign.models.types import GripperPose
     from mjcodesign.scenarios.grasp import auto_pose
 
     if text == "auto":
@@ -175,7 +175,7 @@ def grasp(
     from mjcodesign.design.finger import FingerDesign
     from mjcodesign.design.stiffness import Stiffness
     from mjcodesign.errors import DesignError
-    from mjcodesign.models.builder import FingerModel
+    from mjcodesign.models.types import FingerModel
     from mjcodesign.scenarios.grasp import GraspScenario, build_scene
     from mjcodesign.sim.protocol import get_backend
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from mjcodesign.design.beam import block_effective_ei
 from mjcodesign.design.finger import Block, BlockKind, FingerDesign
-from mjcodesign.models.builder import CONTYPE_FINGER, CONTYPE_WORLD, FingerHandle, FingerModel, SimOptions
+from mjcodesign.models.types import CONTYPE_FINGER, CONTYPE_WORLD, FingerHandle, FingerModel, SimOptions
 
 __all__ = ["add_chain_finger", "hinge_stiffness", "contact_solref"]
 

@@ -9,7 +9,7 @@ import mujoco
 import numpy as np
 
 from mjcodesign.errors import OutputError
-from mjcodesign.models.builder import Built
+from mjcodesign.models.types import Built
 
 __all__ = ["export_model", "block_meshes"]
 

@@ -32,10 +32,12 @@ import functools
 import mujoco
 import numpy as np
 
-from mjcodesign.design.beam import section_compliance
+from mjcodesign.design.beam import cantilever_tip_deflection, section_compliance
 from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.tendon_law import tendon_forces
 from mjcodesign.errors import DesignError
-from mjcodesign.models.builder import CONTYPE_FINGER, CONTYPE_WORLD, FingerHandle, FingerModel, SimOptions
+from mjcodesign.models.spec import new_spec
+from mjcodesign.models.types import CONTYPE_FINGER, CONTYPE_WORLD, FingerHandle, FingerModel, SimOptions
 
 __all__ = [
     "add_flex_finger",
@@ -395,11 +397,9 @@ def linear_tendon_load(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Node rest positions [m] (n_nodes, 3) and the frictionless tendon's nodal load [N] (3 n_nodes,).
 
-    The point-force law (`mjcodesign.fem.tendon_forces`) at the *rest* waypoints, spread to the nodes by
+    The point-force law (`mjcodesign.design.tendon_law.tendon_forces`) at the *rest* waypoints, spread to the nodes by
     the interpolation weights: the first-order load of the linear solves.
     """
-    from mjcodesign.sim.fem.finger import tendon_forces
-
     _, _, _, n_cells, order = handle.grid
     X = grid_rest(design, handle)
     W = grid_weights(design, n_cells, order, design.waypoints())
@@ -411,7 +411,7 @@ def linear_tendon_load(
 def linear_curl(m: mujoco.MjModel, handle: FingerHandle, design: FingerDesign, tension: float) -> dict:
     """Small-deflection tendon curl of a base-clamped flex: ``K u = Wᵀ F`` with the compiled stiffness.
 
-    F is the frictionless point-force tendon (`mjcodesign.fem.tendon_forces`, the law of
+    F is the frictionless point-force tendon (`mjcodesign.design.tendon_law.tendon_forces`, the law of
     `mjcodesign.tendon`) at the *rest* waypoints, spread to the nodes by the interpolation weights W.
     It is the first-order rest state of the dynamics: on the soft trilinear flex the tip rises 29.4 mm
     against 28.9 mm from the dynamics at 0.02 N (0.3 rad), but 118 mm against 90 mm at 0.08 N
@@ -447,9 +447,6 @@ def locking_factor(design: FingerDesign, n_cells: int, poisson: float, order: in
     which a test checks against running the dynamics to rest. Dividing every cell's modulus by it
     makes the uniform finger match beam theory exactly; piecewise designs are then checked, not fitted.
     """
-    from mjcodesign.design.beam import cantilever_tip_deflection
-    from mjcodesign.models.builder import new_spec
-
     opts = SimOptions(gravity=False, flex_cells=n_cells, poisson=poisson)
     spec = new_spec("locking", opts, flex=True, scene=False)
     base = spec.worldbody.add_body(name="base")

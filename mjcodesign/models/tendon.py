@@ -20,25 +20,19 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from mjcodesign.design.tendon_law import TENDON_VARIANTS, tendon_forces
 from mjcodesign.errors import DesignError
-from mjcodesign.models.builder import Built, FingerHandle, TendonMode
+from mjcodesign.models.types import Built, FingerHandle, TendonMode
 
 __all__ = ["TendonDriver"]
-
-_VARIANTS = ("frictionless", "paper")
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.maximum(n, 1e-12)
 
 
 class TendonDriver:
     """Applies a per-finger tendon tension [N] to a built model, in either mode."""
 
     def __init__(self, built: Built, variant: str = "frictionless"):
-        if variant not in _VARIANTS:
-            raise DesignError(f"unknown point-force variant {variant!r}; choose from {_VARIANTS}")
+        if variant not in TENDON_VARIANTS:
+            raise DesignError(f"unknown point-force variant {variant!r}; choose from {TENDON_VARIANTS}")
         self.built = built
         self.variant = variant
         m = built.model
@@ -117,16 +111,8 @@ class _FingerForces:
         else:
             nodes = self._flex_positions(d)
             P = self.W @ nodes
-        exit_p = d.site_xpos[self.exit_site]
-        prev = np.vstack([exit_p[None], P[:-1]])
-        F = np.zeros_like(P)
-        F[:-1] = f * (_unit(prev[:-1] - P[:-1]) + _unit(P[1:] - P[:-1]))
-        F[-1] = f * _unit(P[-2] - P[-1])
-        if variant == "paper":
-            n = self._normals(d, P)
-            F = F - np.sum(F * n, axis=1, keepdims=True) * n
-            F[0] = 0.0
-            F[-1] = f * n[-1]
+        normals = self._normals(d, P) if variant == "paper" else P
+        F = tendon_forces(P, normals, d.site_xpos[self.exit_site], f, variant)
         if self.sites is not None:
             for p, F_i, b in zip(P, F, self.site_body, strict=True):
                 mujoco.mj_applyFT(self.m, d, F_i, np.zeros(3), p, b, d.qfrc_applied)

@@ -1,7 +1,7 @@
 """Grasp candidates: an antipodal sampler, AnyGrasp/GraspNet import, and the rigid-counterpart refinement.
 
 Frames. Every pose is a palm pose in the grasp scene's world (:func:`mjcodesign.scenario.build_scene`):
-the object's COM at world x = y = 0, its lowest point ``_REST_GAP`` above the ground (z = 0), the
+the object's COM at world x = y = 0, its lowest point ``REST_GAP`` above the ground (z = 0), the
 object mesh keeping its source orientation. The palm frame is :class:`mjcodesign.mjcf.GripperPose`'s:
 ``-z`` is the approach, ``y`` the closing axis (finger A at ``+y``), fingers hang to ``z = -L``.
 
@@ -29,9 +29,9 @@ import numpy as np
 
 from mjcodesign.design.finger import BlockKind, FingerDesign
 from mjcodesign.errors import MeshError, PoseError
-from mjcodesign.models.builder import _PALM_HALF
+from mjcodesign.models.types import MAX_OPENING, PALM_HALF
 from mjcodesign.objects.mesh import GraspObject
-from mjcodesign.scenarios.grasp import _REST_GAP, MAX_OPENING, _object_vertices, _start_openings
+from mjcodesign.scenarios.grasp import REST_GAP, object_vertices, start_openings
 
 __all__ = [
     "ANYGRASP_DEPTH",
@@ -204,7 +204,7 @@ def _block_points(design: FingerDesign, edge: float) -> tuple[np.ndarray, np.nda
 def _palm_points(edge: float) -> np.ndarray:
     import trimesh
 
-    return _surface_points(trimesh.creation.box(extents=2 * _PALM_HALF), edge) + [0.0, 0.0, _PALM_HALF[2]]
+    return _surface_points(trimesh.creation.box(extents=2 * PALM_HALF), edge) + [0.0, 0.0, PALM_HALF[2]]
 
 
 @dataclass
@@ -246,7 +246,7 @@ class RigidGripper:
 
 def _scene_offset(obj: GraspObject) -> np.ndarray:
     """World position of the object's COM frame origin [m], as :func:`build_scene` places it."""
-    return np.array([0.0, 0.0, _REST_GAP - float(_object_vertices(obj)[:, 2].min())])
+    return np.array([0.0, 0.0, REST_GAP - float(object_vertices(obj)[:, 2].min())])
 
 
 def _distances(sdf, gripper: RigidGripper, offset, R, p, s) -> tuple[np.ndarray, ...]:
@@ -458,15 +458,15 @@ def _below_ground(T, s, design) -> np.ndarray:
 def _start_below_ground(obj, T, s, design) -> np.ndarray:
     """Poses that the grasp motion cannot open: too wide, or a finger under the ground (P,).
 
-    The scene starts each finger outside the object (:func:`mjcodesign.scenario._start_openings`).
+    The scene starts each finger outside the object (:func:`mjcodesign.scenario.start_openings`).
     """
-    from mjcodesign.models.builder import GripperPose
+    from mjcodesign.models.types import GripperPose
 
     starts = np.zeros_like(s)
     bad = np.zeros(len(T), bool)
     for k in range(len(T)):
         try:
-            starts[k] = _start_openings(obj, GripperPose.from_matrix(T[k], tuple(s[k])))
+            starts[k] = start_openings(obj, GripperPose.from_matrix(T[k], tuple(s[k])))
         except PoseError:
             bad[k] = True
     g = RigidGripper.build(design, _COARSE_EDGE)
@@ -726,7 +726,7 @@ def read_candidates(path: str | Path) -> Candidates:
 
 def to_gripper_pose(c: Candidates, index: int = 0):
     """Row ``index`` as a :class:`mjcodesign.mjcf.GripperPose`; :class:`PoseError` if there is none."""
-    from mjcodesign.models.builder import GripperPose
+    from mjcodesign.models.types import GripperPose
 
     if not (0 <= index < len(c)):
         raise PoseError(f"no grasp candidate {index} (of {len(c)}); rejected: {c.rejected}")

@@ -34,47 +34,41 @@ import numpy as np
 from mjcodesign.design.finger import BlockKind, FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError, PoseError
-from mjcodesign.models.builder import (
+from mjcodesign.models.builder import build_gripper, make_data
+from mjcodesign.models.types import (
     CONTYPE_FINGER,
     CONTYPE_WORLD,
+    MAX_OPENING,
     Built,
     FingerModel,
     GripperPose,
     SimOptions,
     TendonMode,
-    build_gripper,
-    make_data,
 )
 from mjcodesign.objects.mesh import GraspObject
 
 __all__ = [
     "DEFAULT_IMPULSE",
-    "MAX_OPENING",
+    "REST_GAP",
+    "STATE_SPEC",
     "GraspScenario",
     "GraspScene",
-    "Outcome",
     "auto_pose",
     "build_scene",
     "phase_controls",
     "scene_at_pose",
     "control_spec",
-    "outcome_from_states",
-    "outcome_steps",
-    "failed_outcome",
+    "object_vertices",
+    "start_openings",
     "paper_impulse",
 ]
 
-MAX_OPENING = 0.06
-"""Largest opening of one finger [m] (the gripper's stroke, as in :mod:`mjcodesign.mjcf`)."""
-_FINGER_LENGTH = 0.136  # fingers hang this far below the palm [m]
 _GROUND_CLEARANCE = 0.005  # auto pose: palm above the object's top, tips above the ground [m]
 _START_CLEARANCE = 0.01  # start openings this far outside the object [m]
 _SQUEEZE = 0.003  # auto pose: closing target inside the object's half-width [m]
-_REST_GAP = 5e-4  # object's lowest point above the ground at t=0 [m]
-_FORCE_EPS = 1e-6  # a finger wrench below this is "no force" [N]
+REST_GAP = 5e-4
+"""Height of the object's lowest point above the ground at t=0 [m]."""
 _MIN_HOLD_STEPS = 4  # the hold-force samples need a few steps before the impulse
-_HOLD_SAMPLES = 5  # body force: mean over this many states in the second half of the first hold (each
-# costs an mj_forward replay; 10 cost the pipeline ~10% of the rollout time)
 _OBJECT_FRICTION = (1.0, 0.005, 0.0001)  # paper: mu = 1
 # Sparse constraint Jacobian in every grasp scene. MuJoCo's "auto" picks dense below nv = 60, but a
 # contact row touches only the object and one finger's chain (<= 14 of the chain scene's 31 dofs):
@@ -117,7 +111,7 @@ class GraspScenario:
     tighten_s: float = 0.15
     """Tension ramp [s]: 0.1 s (with a 0.1 s close) let a held 50 g box slip; 0.15 s holds it."""
     tension: float = 10.0
-    """Tendon tension per finger at the end of the ramp [N] (the actuator allows up to 50 N)."""
+    """Tendon tension per finger at the end of the ramp [N] (at most ``SimOptions.max_tension``)."""
     lift: float = 0.03
     """Lift distance [m] (paper: about 3 cm in simulation)."""
     lift_s: float = 0.2
@@ -137,8 +131,9 @@ class GraspScenario:
         for name in ("settle_s", "close_s", "tighten_s", "lift_s", "hold_s", "post_hold_s"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise DesignError(f"{name} must be a finite duration >= 0 s")
-        if not (0 < self.tension <= 50.0):
-            raise DesignError(f"tension must be in (0, 50] N, got {self.tension}")
+        max_tension = SimOptions().max_tension
+        if not (0 < self.tension <= max_tension):
+            raise DesignError(f"tension must be in (0, {max_tension:g}] N, got {self.tension}")
         if not (0 < self.lift <= 0.2):
             raise DesignError(f"lift must be in (0, 0.2] m, got {self.lift}")
         if not (0 <= self.impulse <= 5.0):
@@ -187,44 +182,6 @@ class GraspScene:
         self.finger_mask[self.finger_bodies] = True
 
 
-@dataclass
-class Outcome:
-    """Result of one grasp rollout. Vectors are in the gripper (palm) frame; never NaN."""
-
-    success: bool
-    body_force: list[float]
-    """Wrench of the fingers on the object, (torque about the COM [N m] (3), force [N] (3)), mean
-    over the second half of the first hold."""
-    displacement: list[float]
-    """Object position change relative to the palm from the grasp (end of tightening) to the end [m]."""
-    ground_contact: bool
-    reason: str
-    wall_time_s: float = 0.0
-    finger_contact: bool = False
-    lift_height: float = 0.0
-    """Rise of the object's COM from t=0 to the end [m] (world z)."""
-    object_path: np.ndarray | None = None
-    """Object COM in the world at the steps of :func:`outcome_steps`, in order [m], shape (k, 3)."""
-
-    def as_dict(self) -> dict:
-        """JSON-ready dict."""
-        return {
-            "success": bool(self.success),
-            "body_force": [float(x) for x in self.body_force],
-            "displacement": [float(x) for x in self.displacement],
-            "ground_contact": bool(self.ground_contact),
-            "reason": self.reason,
-            "wall_time_s": float(self.wall_time_s),
-            "finger_contact": bool(self.finger_contact),
-            "lift_height": float(self.lift_height),
-        }
-
-
-def failed_outcome(reason: str, wall_time_s: float = 0.0) -> Outcome:
-    """A failed sample (divergence, bad pose): zeros, never NaN."""
-    return Outcome(False, [0.0] * 6, [0.0] * 3, False, reason, wall_time_s)
-
-
 def _has_ancestor(m: mujoco.MjModel, b: int, roots: list[int]) -> bool:
     while b > 0:
         if b in roots:
@@ -233,7 +190,8 @@ def _has_ancestor(m: mujoco.MjModel, b: int, roots: list[int]) -> bool:
     return False
 
 
-def _object_vertices(obj: GraspObject) -> np.ndarray:
+def object_vertices(obj: GraspObject) -> np.ndarray:
+    """The object's collision vertices (its convex hulls', or the mesh's) in its body frame [m], (n, 3)."""
     if obj.hulls:
         return np.vstack([v for v, _ in obj.hulls])
     return np.asarray(obj.mesh.vertices)
@@ -246,10 +204,11 @@ def auto_pose(obj: GraspObject, design: FingerDesign | None = None) -> GripperPo
     is the object's extent on that side, less the fingers' taper at the object's mid-height and a 3 mm
     squeeze.
     """
-    v = _object_vertices(obj)
-    rest_z = _REST_GAP - v[:, 2].min()
+    v = object_vertices(obj)
+    rest_z = REST_GAP - v[:, 2].min()
     top = rest_z + v[:, 2].max()
-    palm_z = max(top + _GROUND_CLEARANCE, _FINGER_LENGTH + _GROUND_CLEARANCE)
+    design = design or FingerDesign()
+    palm_z = max(top + _GROUND_CLEARANCE, design.length + _GROUND_CLEARANCE)
     ext_a, ext_b = float(v[:, 1].max()), float(-v[:, 1].min())
     if max(ext_a, ext_b) + _START_CLEARANCE > MAX_OPENING:
         raise PoseError(
@@ -258,7 +217,7 @@ def auto_pose(obj: GraspObject, design: FingerDesign | None = None) -> GripperPo
         )
     # The fingers taper: at the object's mid-height the inner face lies (h_base - h(x)) further out.
     x_mid = palm_z - 0.5 * (rest_z + v[:, 2].min() + top)
-    taper = _taper(design or FingerDesign(), x_mid)
+    taper = _taper(design, x_mid)
     openings = tuple(max(0.0, e - taper - _SQUEEZE) for e in (ext_a, ext_b))
     return GripperPose((0.0, 0.0, palm_z), (1.0, 0.0, 0.0, 0.0), openings)
 
@@ -276,14 +235,14 @@ def _taper(design: FingerDesign, x: float) -> float:
     return float(design.height_base - h)
 
 
-def _start_openings(obj: GraspObject, pose: GripperPose) -> tuple[float, float]:
+def start_openings(obj: GraspObject, pose: GripperPose) -> tuple[float, float]:
     """Openings at t=0: outside the object's extent along the palm's y axis (clipped to the stroke)."""
     R = np.zeros(9)
     mujoco.mju_quat2Mat(R, np.asarray(pose.quat, dtype=float))
     y_axis = R.reshape(3, 3)[:, 1]
-    v = _object_vertices(obj)
+    v = object_vertices(obj)
     # Object points relative to the palm (COM at x = y = 0, resting on the ground as in build_scene).
-    rel = v + [0.0, 0.0, _REST_GAP - float(v[:, 2].min())] - np.asarray(pose.position, dtype=float)
+    rel = v + [0.0, 0.0, REST_GAP - float(v[:, 2].min())] - np.asarray(pose.position, dtype=float)
     proj = rel @ y_axis
     ext_a, ext_b = float(proj.max()), float(-proj.min())
     if max(ext_a, ext_b) + _START_CLEARANCE > MAX_OPENING:
@@ -313,14 +272,14 @@ def build_scene(
     """
     if not obj.hulls:
         raise DesignError(f"object {obj.name} has no collision hulls: run convex_decomposition first")
-    start = _start_openings(obj, pose)
+    start = start_openings(obj, pose)
     start_pose = GripperPose(pose.position, pose.quat, start)
     built = build_gripper(
         design, stiffness, model, pose=start_pose, tendon_mode=TendonMode.NATIVE, options=options
     )
     spec = built.spec
-    v = _object_vertices(obj)
-    body = spec.worldbody.add_body(name="object", pos=[0.0, 0.0, _REST_GAP - float(v[:, 2].min())])
+    v = object_vertices(obj)
+    body = spec.worldbody.add_body(name="object", pos=[0.0, 0.0, REST_GAP - float(v[:, 2].min())])
     body.add_freejoint(name="object_free")
     body.explicitinertial = True
     body.mass = obj.mass
@@ -366,7 +325,7 @@ def scene_at_pose(scene: GraspScene, pose: GripperPose) -> GraspScene:
     into the initial state (:func:`mjcodesign.mjcf.make_data`). The test checks that the model equals a
     recompiled :func:`build_scene` at that pose. Raises :class:`PoseError` like :func:`build_scene`.
     """
-    start = _start_openings(scene.obj, pose)
+    start = start_openings(scene.obj, pose)
     m = copy.copy(scene.model)
     m.body_pos[scene.mount_body] = pose.position
     if m.body_mass[scene.mount_body] == 0.0:
@@ -426,149 +385,3 @@ def phase_controls(scene: GraspScene, scenario: GraspScenario) -> tuple[np.ndarr
     # Impulse J over one step: F = J / dt downward at the object's COM (xfrc_applied acts at xipos).
     ctrl[starts["impulse"], nu + 6 * scene.object_body + 2] = -scenario.impulse / m.opt.timestep
     return ctrl, starts
-
-
-def _finger_wrench(
-    scene: GraspScene, d: mujoco.MjData, *, forces: bool = True
-) -> tuple[np.ndarray, bool, bool]:
-    """(wrench on the object by the fingers [torque about COM, force] in world, finger contact, ground).
-
-    With ``forces=False`` only the two flags are read (``d`` needs contacts, not constraint forces).
-    """
-    m = scene.model
-    ob = scene.object_body
-    wrench = np.zeros(6)
-    if d.ncon == 0:
-        return wrench, False, False
-    con = d.contact
-    g1, g2 = np.asarray(con.geom1), np.asarray(con.geom2)
-    # A flex side of a contact has geom -1 and its flex id in con.flex; every flex is a finger.
-    flex = np.asarray(con.flex).reshape(-1, 2)
-    b1 = np.where(g1 >= 0, m.geom_bodyid[g1], -1)
-    b2 = np.where(g2 >= 0, m.geom_bodyid[g2], -1)
-    on_obj = (b1 == ob) | (b2 == ob)
-    ground = bool(np.any(on_obj & ((g1 == scene.ground_geom) | (g2 == scene.ground_geom))))
-    other = np.where(b1 == ob, b2, b1)
-    other_flex = np.where(b1 == ob, flex[:, 1], flex[:, 0])
-    finger = (other_flex >= 0) | ((other >= 0) & scene.finger_mask[np.maximum(other, 0)])
-    sel = np.flatnonzero(on_obj & finger)
-    if sel.size == 0 or not forces:
-        return wrench, sel.size > 0, ground
-    f6 = np.zeros(6)
-    local = np.empty((sel.size, 6))
-    for k, i in enumerate(sel):
-        mujoco.mj_contactForce(m, d, int(i), f6)
-        local[k] = f6
-    # mj_contactForce gives the force of geom1 on geom2 in the contact frame (rows = axes).
-    frames = np.asarray(con.frame)[sel].reshape(-1, 3, 3)
-    sign = np.where(b2[sel] == ob, 1.0, -1.0)[:, None]
-    F = sign * np.einsum("kji,kj->ki", frames, local[:, :3])
-    T = sign * np.einsum("kji,kj->ki", frames, local[:, 3:])
-    r = np.asarray(con.pos)[sel] - d.xipos[ob]
-    wrench[3:] = F.sum(axis=0)
-    # Σ r × F, written out: np.cross costs more than the rest of this function on ~20 contacts.
-    rxf = r[:, [1, 2, 0]] * F[:, [2, 0, 1]] - r[:, [2, 0, 1]] * F[:, [1, 2, 0]]
-    wrench[:3] = rxf.sum(axis=0) + T.sum(axis=0)
-    return wrench, True, ground
-
-
-def _palm_frame(scene: GraspScene, d: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
-    return d.xpos[scene.palm_body].copy(), d.xmat[scene.palm_body].reshape(3, 3).copy()
-
-
-def _hold_steps(starts: dict[str, int]) -> np.ndarray:
-    # States are evaluated under the control of the following step, so the last sample is h1 - 2: the
-    # state after h1 - 1 would be evaluated with the impulse force applied.
-    h0, h1 = starts["hold"], starts["impulse"]
-    last = h1 - 2
-    return np.unique(np.linspace(min(h0 + (h1 - h0) // 2, last), last, _HOLD_SAMPLES).astype(int))
-
-
-def outcome_steps(starts: dict[str, int]) -> set[int]:
-    """Steps whose states :func:`outcome_from_states` reads (a backend may record only these)."""
-    return {int(t) for t in _hold_steps(starts)} | {starts["lift"] - 1, starts["end"] - 1}
-
-
-def outcome_from_states(
-    scene: GraspScene,
-    scenario: GraspScenario,
-    x0: np.ndarray,
-    states: np.ndarray,
-    ctrl: np.ndarray,
-    starts: dict[str, int],
-    data: mujoco.MjData | None = None,
-) -> Outcome:
-    """The outcome of a rollout from its initial state ``x0`` and per-step states (nstep, nstate).
-
-    ``states[t]`` is the state after step t, ``ctrl`` the controls of :func:`phase_controls`. Contact
-    forces are recomputed with ``mj_forward`` at the sampled states under the control of the step that
-    follows (so they equal that step's), and the single-step and batched paths share this function.
-    ``data`` is scratch space of the same model structure (allocated when None).
-    """
-    m = scene.model
-    d = data if data is not None else mujoco.MjData(m)
-    spec = control_spec()
-    d.qacc_warmstart[:] = 0.0  # as in a fresh MjData, so reused scratch data gives equal forces
-
-    def load(x: np.ndarray, t: int, stage: str) -> None:
-        # "forward": contact forces (mj_forward, warm-started by the previous replay); "collide":
-        # contacts only (mj_fwdPosition, which also places flex vertices); "kinematics": poses only.
-        mujoco.mj_setState(m, d, x, STATE_SPEC)
-        mujoco.mj_setState(m, d, ctrl[min(t + 1, len(ctrl) - 1)], spec)
-        if stage == "forward":
-            mujoco.mj_forward(m, d)
-            d.qacc_warmstart[:] = d.qacc  # the hold samples are a few steps apart
-            return
-        if stage == "collide":
-            mujoco.mj_fwdPosition(m, d)
-        else:
-            mujoco.mj_kinematics(m, d)
-
-    ob = scene.object_body
-    # The object's body frame is at its COM (build_scene), so the free joint's position is the COM.
-    z0 = float(x0[1 + m.jnt_qposadr[m.body_jntadr[ob]] + 2])  # state = (time, qpos, ...)
-    # Body force: mean over the second half of the first hold (before the impulse).
-    idx = _hold_steps(starts)
-    acc = np.zeros(6)
-    path: dict[int, np.ndarray] = {}
-    for t in idx:
-        load(states[t], t, "forward")
-        path[int(t)] = d.xipos[ob].copy()
-        w, _, _ = _finger_wrench(scene, d)
-        _, R = _palm_frame(scene, d)
-        acc[:3] += R.T @ w[:3]
-        acc[3:] += R.T @ w[3:]
-    body_force = acc / len(idx)
-    # Displacement relative to the palm, from the grasp (end of tightening) to the end.
-    rel = []
-    for t, stage in ((starts["lift"] - 1, "kinematics"), (starts["end"] - 1, "collide")):
-        load(states[t], t, stage)
-        path[int(t)] = d.xipos[ob].copy()
-        p, R = _palm_frame(scene, d)
-        rel.append(R.T @ (d.xipos[ob] - p))
-    displacement = rel[1] - rel[0]
-    _, finger, ground = _finger_wrench(scene, d, forces=False)  # d holds the final contacts
-    rise = float(d.xipos[ob][2]) - z0
-    lifted = rise >= scenario.lifted_fraction * scenario.lift
-    force_ok = float(np.linalg.norm(body_force[3:])) > _FORCE_EPS
-    if not np.all(np.isfinite(body_force)) or not np.all(np.isfinite(displacement)):
-        return failed_outcome("diverged: non-finite outcome")
-    reasons = []
-    if not lifted:
-        reasons.append(f"not lifted (rose {1000 * rise:.1f} mm of {1000 * scenario.lift:.0f})")
-    if ground:
-        reasons.append("ground contact")
-    if not finger:
-        reasons.append("no finger contact")
-    if not force_ok:
-        reasons.append("zero finger force")
-    return Outcome(
-        success=not reasons,
-        body_force=body_force.tolist(),
-        displacement=displacement.tolist(),
-        ground_contact=ground,
-        reason="; ".join(reasons) if reasons else "ok",
-        finger_contact=finger,
-        lift_height=rise,
-        object_path=np.array([path[t] for t in sorted(path)]),
-    )

@@ -112,20 +112,15 @@ def press_mujoco(
     Returns the force distribution's window means (:func:`_settle_on_plate`). ``observe(built, data)``,
     if given, is called with the model (plate included) and its data at the end.
     """
-    from mjcodesign.models.builder import (
-        CONTYPE_FINGER,
-        CONTYPE_WORLD,
-        FingerModel,
-        TendonMode,
-        _compile,
-        _finalise,
-    )
+    from mjcodesign.models.builder import apply_cell_moduli
     from mjcodesign.models.builder import build_finger as _build
+    from mjcodesign.models.spec import compile_spec
     from mjcodesign.models.tendon import TendonDriver
-    from mjcodesign.scenarios.static import _rest_options
+    from mjcodesign.models.types import CONTYPE_FINGER, CONTYPE_WORLD, FingerModel, TendonMode
+    from mjcodesign.scenarios.static import rest_options
 
     model = FingerModel(model)
-    opts = _rest_options(design, stiffness.finger(0), None)
+    opts = rest_options(design, stiffness.finger(0), None)
     built = _build(design, stiffness, model, options=opts, tendon_mode=TendonMode.POINT_FORCE)
     # The flex collides with a skin of its collision radius around its surface: the plate keeps the same
     # gap from that skin as from the chain's and the FEM's surfaces (at the bare surface the skin would
@@ -143,8 +138,8 @@ def press_mujoco(
         contype=CONTYPE_WORLD,
         conaffinity=CONTYPE_FINGER,
     )
-    m = _compile(built.spec)
-    _finalise(m, built.fingers)
+    m = compile_spec(built.spec)
+    apply_cell_moduli(m, built.fingers)
     built = replace(built, model=m)
     d = mujoco.MjData(m)
     drv = TendonDriver(built)
@@ -258,8 +253,9 @@ def press_linear(
     import scipy.linalg as sla
     from scipy.optimize import nnls
 
-    from mjcodesign.models.builder import FingerModel, SimOptions, TendonMode, build_finger
+    from mjcodesign.models.builder import build_finger
     from mjcodesign.models.flex import assemble_stiffness, grid_weights, linear_tendon_load, load_nodes
+    from mjcodesign.models.types import FingerModel, SimOptions, TendonMode
 
     model = FingerModel(model)
     if not model.is_flex:

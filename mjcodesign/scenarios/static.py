@@ -13,8 +13,9 @@ from mjcodesign.design.beam import cantilever_tip_deflection
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError, SimulationDiverged
-from mjcodesign.models.builder import Built, FingerModel, SimOptions, TendonMode, build_finger
+from mjcodesign.models.builder import build_finger
 from mjcodesign.models.simulate import check_state
+from mjcodesign.models.types import Built, FingerModel, SimOptions, TendonMode
 
 __all__ = ["run_to_rest", "validate_beam", "curl", "bend_angles", "AUTO_DEFLECTION"]
 
@@ -60,7 +61,7 @@ def run_to_rest(
     raise SimulationDiverged(f"did not come to rest within {max_time:.1f} s of simulated time")
 
 
-def _rest_options(design: FingerDesign, young: np.ndarray, options: SimOptions | None) -> SimOptions:
+def rest_options(design: FingerDesign, young: np.ndarray, options: SimOptions | None) -> SimOptions:
     """Gravity off, and Rayleigh damping near-critical for the first bending mode (statics only)."""
     options = options or SimOptions()
     k_tip = 1.0 / cantilever_tip_deflection(design, young, 1.0)
@@ -114,7 +115,7 @@ def validate_beam(
     if not np.isfinite(force) or force <= 0:
         raise DesignError(f"tip force must be positive and finite, got {force}")
     dynamic = (not model.is_flex) if dynamic is None else dynamic
-    opts = _rest_options(design, young, options)
+    opts = rest_options(design, young, options)
     t0 = time.perf_counter()
     built = build_finger(design, stiffness, model, options=opts, tendon_mode=TendonMode.NATIVE)
     settled = None
@@ -194,7 +195,7 @@ def curl(
     from mjcodesign.models.tendon import TendonDriver
 
     model = FingerModel(model)
-    opts = _rest_options(design, stiffness.finger(0), options)
+    opts = rest_options(design, stiffness.finger(0), options)
     built = build_finger(design, stiffness, model, options=opts, tendon_mode=tendon_mode)
     d = mujoco.MjData(built.model)
     drv = TendonDriver(built, variant)

@@ -24,20 +24,11 @@ import numpy as np
 
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError, UnsupportedError
-from mjcodesign.models.builder import GripperPose
+from mjcodesign.models.types import GripperPose
 from mjcodesign.optional import import_warp
-from mjcodesign.scenarios.grasp import (
-    STATE_SPEC,
-    GraspScenario,
-    GraspScene,
-    Outcome,
-    failed_outcome,
-    outcome_from_states,
-    outcome_steps,
-    phase_controls,
-    scene_at_pose,
-)
-from mjcodesign.sim.mujoco_c import _initial_state, with_stiffness
+from mjcodesign.scenarios.grasp import STATE_SPEC, GraspScenario, GraspScene, phase_controls, scene_at_pose
+from mjcodesign.scenarios.outcome import Outcome, failed_outcome, outcome_from_states, outcome_steps
+from mjcodesign.sim.mujoco_c import initial_state, with_stiffness
 from mjcodesign.sim.observe import Observer, Rollout
 
 __all__ = ["MjwarpBackend"]
@@ -126,7 +117,7 @@ class MjwarpBackend:
         plans = [phase_controls(sc, scenario) for sc in scenes]
         starts = plans[0][1]
         ctrl = np.stack([c for c, _ in plans])
-        x0 = np.stack([_initial_state(sc) for sc in scenes])
+        x0 = np.stack([initial_state(sc) for sc in scenes])
         nq, nv, na = mjm.nq, mjm.nv, mjm.na
         mjd = mujoco.MjData(mjm)
         mujoco.mj_setState(mjm, mjd, x0[0], STATE_SPEC)
@@ -181,6 +172,6 @@ def _flex_design(scene: GraspScene, stiffness: Stiffness) -> GraspScene:
 
 
 def _with_model(scene: GraspScene, m: mujoco.MjModel) -> GraspScene:
-    from mjcodesign.sim.mujoco_c import _scene_with
+    from mjcodesign.sim.mujoco_c import scene_with_model
 
-    return _scene_with(scene, m)
+    return scene_with_model(scene, m)

@@ -18,20 +18,19 @@ from mjcodesign.design.beam import block_bending_compliance
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import SimulationDiverged
-from mjcodesign.models.builder import GripperPose, make_data
+from mjcodesign.models.builder import make_data
 from mjcodesign.models.chain import contact_solref
 from mjcodesign.models.simulate import check_state, has_warning, reset_warnings
+from mjcodesign.models.types import GripperPose
 from mjcodesign.scenarios.grasp import (
     STATE_SPEC,
     GraspScenario,
     GraspScene,
-    Outcome,
     control_spec,
-    failed_outcome,
-    outcome_from_states,
     phase_controls,
     scene_at_pose,
 )
+from mjcodesign.scenarios.outcome import Outcome, failed_outcome, outcome_from_states
 from mjcodesign.sim.observe import Capture, Observer, Rollout
 
 __all__ = ["GraspBackend", "MujocoBackend", "with_stiffness"]
@@ -134,7 +133,7 @@ def _chain_ids(scene: GraspScene) -> list[list[tuple[int, list[int]]]]:
     return out
 
 
-def _initial_state(scene: GraspScene) -> np.ndarray:
+def initial_state(scene: GraspScene) -> np.ndarray:
     d = make_data(scene.built)
     x0 = np.empty(mujoco.mj_stateSize(scene.model, STATE_SPEC))
     mujoco.mj_getState(scene.model, d, x0, STATE_SPEC)
@@ -202,7 +201,7 @@ class MujocoBackend:
         t0 = time.perf_counter()
         m = model or scene.model
         ctrl, starts = phase_controls(scene, scenario)
-        x0 = _initial_state(scene)
+        x0 = initial_state(scene)
         d = mujoco.MjData(m)
         states = np.empty((len(ctrl), x0.size))
         captured: dict = {}
@@ -223,7 +222,7 @@ class MujocoBackend:
                 observer, label, scene, scenario, m, x0, states[:t], ctrl, starts, out, captured=captured
             )
             return out
-        out = outcome_from_states(_scene_with(scene, m), scenario, x0, states, ctrl, starts)
+        out = outcome_from_states(scene_with_model(scene, m), scenario, x0, states, ctrl, starts)
         out.wall_time_s = time.perf_counter() - t0
         _observe(
             observer, label, scene, scenario, m, x0, states, ctrl, starts, out, scratch=d, captured=captured
@@ -247,7 +246,7 @@ class MujocoBackend:
         models = [with_stiffness(scene, s) for s in stiffnesses]
         labels = labels or [f"design{i}" for i in range(len(stiffnesses))]
         return self.run_scenes(
-            [_scene_with(scene, m) for m in models], scenario, observer=observer, labels=labels
+            [scene_with_model(scene, m) for m in models], scenario, observer=observer, labels=labels
         )
 
     def run_poses(
@@ -292,7 +291,7 @@ class MujocoBackend:
         for sc in scenes:  # designs of one pose share their controls and initial state
             key = (id(sc.built), sc.pose)
             if key not in plans:
-                plans[key] = (*phase_controls(sc, scenario), _initial_state(sc))
+                plans[key] = (*phase_controls(sc, scenario), initial_state(sc))
         rows = [plans[(id(sc.built), sc.pose)] for sc in scenes]
         starts = rows[0][1]
         ctrl = np.stack([c for c, _, _ in rows])
@@ -342,7 +341,7 @@ def _observe(
     observer, label, scene, scenario, m, x0, states, ctrl, starts, out, scratch=None, captured=None
 ) -> None:
     if observer is not None:
-        sc = _scene_with(scene, m)
+        sc = scene_with_model(scene, m)
         observer.rollout(
             Rollout(
                 label,
@@ -369,7 +368,7 @@ def _diverged(states: np.ndarray, x0: np.ndarray, dt: float) -> np.ndarray:
     return ~(finite & clock)
 
 
-def _scene_with(scene: GraspScene, m: mujoco.MjModel) -> GraspScene:
+def scene_with_model(scene: GraspScene, m: mujoco.MjModel) -> GraspScene:
     """The scene with another model of the same structure (ids unchanged)."""
     if m is scene.model:
         return scene

@@ -24,8 +24,9 @@ from mjcodesign.errors import ObserverError
 if TYPE_CHECKING:
     import mujoco
 
-    from mjcodesign.models.builder import Built
-    from mjcodesign.scenarios.grasp import GraspScenario, GraspScene, Outcome
+    from mjcodesign.models.types import Built
+    from mjcodesign.scenarios.grasp import GraspScenario, GraspScene
+    from mjcodesign.scenarios.outcome import Outcome
 
 __all__ = [
     "ENTRY_POINT_GROUP",

@@ -65,13 +65,13 @@ import scipy.sparse.linalg as spla
 from mjcodesign.design.beam import cantilever_tip_deflection
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.design.tendon_law import tendon_forces
 from mjcodesign.errors import DesignError, SimulationDiverged
 from mjcodesign.optional import import_warp
 from mjcodesign.sim.fem.mesh import FingerMesh, mesh_finger, to_quadratic
 
-__all__ = ["FemOptions", "FemDynamics", "FemFinger", "tendon_forces", "TENDON_VARIANTS"]
+__all__ = ["FemOptions", "FemDynamics", "FemFinger"]
 
-TENDON_VARIANTS = ("frictionless", "paper")
 _POISSON = 0.45
 """Poisson's ratio of the paper's TPU model (shared/NOTES.md)."""
 _NEWTON_RTOL = 1e-5
@@ -164,41 +164,6 @@ class FemDynamics:
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise DesignError(f"dt must be positive, got {self.dt}")
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-15)
-
-
-def tendon_forces(
-    points: np.ndarray, normals: np.ndarray, exit_point: np.ndarray, tension: float, variant: str
-) -> np.ndarray:
-    """Tendon point forces [N] at the waypoints ``points`` (n, 3), the same law as `mjcodesign.tendon`.
-
-    ``frictionless``: F_i = f_T (u(P_{i−1} − P_i) + u(P_{i+1} − P_i)) with P_{−1} the exit point, and
-    F_tip = f_T u(P_{n−2} − P_{n−1}). ``paper``: the first waypoint carries nothing, middle ones keep the
-    part tangent to the surface (normal ``normals[i]`` removed), the tip takes f_T·n (inwards, i.e.
-    −f_T times the spine's outward normal).
-
-    `FemFinger.tendon_load` takes ``normals`` as each block's deformed section axis (spine top minus
-    bottom at the block's middle, y = 0), the FEM counterpart of the chain's block z axis. Where this
-    differs from the authors' code: they take the normal of the mesh surface face at the waypoint, and
-    their waypoints are particles of a coarse mesh; here segment waypoints are vertices and flexure
-    waypoints are carried by the flexure's mid-section (`mjcodesign.femmesh`). The ``frictionless``
-    default is not the authors' model; it is the exact statics of a frictionless tendon.
-    """
-    if variant not in TENDON_VARIANTS:
-        raise DesignError(f"unknown tendon variant {variant!r}; choose from {TENDON_VARIANTS}")
-    prev = np.vstack([exit_point[None], points[:-1]])
-    f = np.zeros_like(points)
-    f[:-1] = tension * (_unit(prev[:-1] - points[:-1]) + _unit(points[1:] - points[:-1]))
-    f[-1] = tension * _unit(points[-2] - points[-1])
-    if variant == "paper":
-        n = _unit(normals)
-        f = f - np.sum(f * n, axis=1, keepdims=True) * n
-        f[0] = 0.0
-        f[-1] = tension * n[-1]
-    return f
 
 
 class FemFinger:

@@ -1,0 +1,194 @@
+"""Shared model types: finger discretisations, tendon modes, simulation options, poses, handles and the built model.
+
+This module imports no builder, so the builders (:mod:`~mjcodesign.models.chain`, :mod:`~mjcodesign.models.flex`,
+:mod:`~mjcodesign.models.builder`) can all depend on it.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.errors import DesignError, PoseError
+
+__all__ = [
+    "CONTYPE_FINGER",
+    "CONTYPE_WORLD",
+    "MAX_OPENING",
+    "LIFT_KP",
+    "PALM_HALF",
+    "FingerModel",
+    "TendonMode",
+    "SimOptions",
+    "FingerHandle",
+    "GripperPose",
+    "Built",
+]
+
+
+CONTYPE_WORLD = 1
+"""Contact bit of the ground and objects."""
+
+
+CONTYPE_FINGER = 2
+"""Contact bit of finger geoms: they touch the world and objects, never each other."""
+
+
+# Largest opening of one finger from the palm centre [m]: Franka Hand stroke is 80 mm in total.
+MAX_OPENING = 0.06
+"""Largest opening of one finger from the palm centre [m] (the gripper's stroke)."""
+
+
+# Lift servo stiffness [N/m]: 0.05 kg of fingers sag it by 0.02 mm.
+LIFT_KP = 20000.0
+"""Lift servo stiffness [N/m]."""
+
+
+PALM_HALF = np.array([0.015, 0.045, 0.01])
+"""Palm box half-sizes [m]."""
+
+
+class FingerModel(enum.Enum):
+    """Which MuJoCo discretisation of the finger."""
+
+    CHAIN = "chain"
+    """Pseudo-rigid body: one hinge per block at its midpoint, k = E I / l."""
+    FLEX = "flex"
+    """MuJoCo flex with trilinear interpolated dofs."""
+    FLEX_QUADRATIC = "flex-quadratic"
+    """MuJoCo flex with quadratic interpolated dofs (high fidelity, slow)."""
+
+    @property
+    def is_flex(self) -> bool:
+        """True for the flex models."""
+        return self is not FingerModel.CHAIN
+
+
+class TendonMode(enum.Enum):
+    """How the tendon acts on the finger."""
+
+    NATIVE = "native"
+    """A MuJoCo spatial tendon through one site per waypoint, pulled by a force actuator."""
+    POINT_FORCE = "point-force"
+    """The paper's model: forces at the waypoints, applied each step (see :mod:`mjcodesign.tendon`)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimOptions:
+    """Numerical options of a finger or gripper model."""
+
+    timestep: float = 2e-3
+    """Step [s]."""
+    damping_time: float = 5e-3
+    """Stiffness-proportional (Rayleigh) damping time [s]: hinge damping b = β k, flex damping β.
+
+    With implicit damping, β >= dt/2 keeps the explicit hinge springs stable whatever their stiffness.
+    """
+    iterations: int = 200
+    """Constraint-solver iterations (flex models need more, see ``flex_iterations``)."""
+    flex_iterations: int = 2000
+    """Iteration cap of the solver and M+K solve for trilinear flex (they stop on ``flex_tolerance``)."""
+    flex_quadratic_iterations: int = 10000
+    """Iteration cap for quadratic flex: 2000 under-converged (residual 2.5e-6) during a 1-s curl."""
+    tolerance: float = 1e-8
+    """Solver tolerance (chain)."""
+    flex_tolerance: float = 1e-6
+    """Solver and M+K tolerance for flex models: 1e-6 moves a 0.4-s curl's tip by < 1 µm from 1e-12."""
+    gravity: bool = True
+    """Enable gravity."""
+    flex_cells: int | None = None
+    """Interpolation cells along the finger; None aligns cells with blocks where the design allows."""
+    poisson: float = 0.45
+    """Poisson ratio of TPU (paper)."""
+    friction: float = 1.0
+    """Sliding friction coefficient of finger contacts (paper: mu = 1)."""
+    max_tension: float = 50.0
+    """Upper bound of the tendon actuator [N]."""
+
+    def __post_init__(self) -> None:
+        if not (0 < self.timestep <= 0.01):
+            raise DesignError(f"timestep must be in (0, 0.01] s, got {self.timestep}")
+        if self.damping_time < 0.5 * self.timestep:
+            raise DesignError("damping_time must be at least timestep/2 for stable hinge springs")
+        if not (0 <= self.poisson < 0.5):
+            raise DesignError("poisson must be in [0, 0.5)")
+
+
+@dataclass
+class FingerHandle:
+    """Names of one finger's elements in a compiled model."""
+
+    prefix: str
+    model: FingerModel
+    base_body: str
+    waypoint_sites: list[str]
+    tip_site: str
+    tendons: list[str] = field(default_factory=list)
+    actuators: list[str] = field(default_factory=list)
+    """Native mode: tension actuators; the finger's tension is split equally among them."""
+    site_chains: list[list[str]] = field(default_factory=list)
+    """Waypoint site chains, one per native tendon copy."""
+    grid: tuple[int, int, int, int, int] | None = None
+    """Flex: (nx, ny, nz, n_cells, order) of the node grid."""
+    joints: list[str] = field(default_factory=list)
+    """Chain: hinge names, base to tip."""
+    bodies: list[str] = field(default_factory=list)
+    """Chain: block bodies base to tip; flex: node bodies."""
+    flex: str | None = None
+    cell_young: np.ndarray | None = None
+    """Flex: effective modulus written into each cell [Pa]."""
+
+
+@dataclass(frozen=True)
+class GripperPose:
+    """Palm pose in the world and the two finger openings.
+
+    The palm frame: ``-z`` is the approach direction (fingers hang along it), ``y`` is the closing axis.
+    Finger A sits at ``+y`` and finger B at ``-y``; an opening is the distance from the palm's
+    mid-plane to the finger's inner face [m].
+    """
+
+    position: tuple[float, float, float] = (0.0, 0.0, 0.25)
+    quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    openings: tuple[float, float] = (0.04, 0.04)
+
+    def __post_init__(self) -> None:
+        p, q, s = np.asarray(self.position), np.asarray(self.quat), np.asarray(self.openings)
+        if p.shape != (3,) or q.shape != (4,) or s.shape != (2,):
+            raise PoseError("pose needs position (3), quaternion (4) and two openings")
+        if not (np.all(np.isfinite(p)) and np.all(np.isfinite(q)) and np.all(np.isfinite(s))):
+            raise PoseError("pose contains NaN or inf")
+        if abs(np.linalg.norm(q) - 1.0) > 1e-6:
+            raise PoseError("pose quaternion must have unit norm")
+        if np.any(s < 0) or np.any(s > MAX_OPENING):
+            raise PoseError(f"openings must be in [0, {MAX_OPENING}] m, got {tuple(s)}")
+
+    @classmethod
+    def from_matrix(cls, T: np.ndarray, openings=(0.04, 0.04)) -> GripperPose:
+        """From a 4x4 homogeneous palm pose."""
+        T = np.asarray(T, dtype=float)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise PoseError("pose matrix must be a finite 4x4")
+        q = np.zeros(4)
+        mujoco.mju_mat2Quat(q, T[:3, :3].ravel())
+        return cls(tuple(T[:3, 3]), tuple(q), tuple(openings))
+
+
+@dataclass
+class Built:
+    """A compiled model with the handles to its fingers."""
+
+    spec: mujoco.MjSpec
+    model: mujoco.MjModel
+    fingers: list[FingerHandle]
+    design: FingerDesign
+    stiffness: Stiffness
+    finger_model: FingerModel
+    tendon_mode: TendonMode
+    options: SimOptions
+    openings: tuple[float, float] | None = None
