@@ -7,7 +7,7 @@ driver is opened, so ``import hardware`` stays light.
 from .arm import ArmConfig, FrankaArm, Workspace
 from .camera import FileCamera, GripperGeometry, RealSenseCamera, crop_to_gripper, load_point_cloud
 from .dxl_emulator import XL330Emulator
-from .grasp import GraspJob, plan_job, run_job
+from .grasp import RobotGraspJob, plan_job, run_job
 from .pipeline import Candidate, GraspPlan, GraspReport, GraspSettings
 from .tendon import FingerMotor, TendonConfig, TendonMotors
 
@@ -17,7 +17,7 @@ __all__ = [
     "FileCamera",
     "FingerMotor",
     "FrankaArm",
-    "GraspJob",
+    "RobotGraspJob",
     "GraspPlan",
     "GraspReport",
     "GraspSettings",

@@ -111,12 +111,12 @@ def _motors(args: argparse.Namespace) -> tuple:
 
 def _grasp(args: argparse.Namespace) -> int:
     from .arm import Workspace
-    from .grasp import GraspJob, run_job
+    from .grasp import RobotGraspJob, run_job
     from .pipeline import GraspReport, GraspSettings
 
     box = args.workspace
     ws = Workspace() if box is None else Workspace(box[:3], box[3:])
-    job = GraspJob(
+    job = RobotGraspJob(
         robot=args.robot,
         dxl=args.dxl,
         pose=args.pose,

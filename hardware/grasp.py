@@ -1,4 +1,4 @@
-"""``hw grasp`` end to end: build the drivers from a `GraspJob` and run the pipeline.
+"""``hw grasp`` end to end: build the drivers from a `RobotGraspJob` and run the pipeline.
 
 The tendon motors are opened first and closed last, so that torque goes off on every exit path,
 including a failure to reach the arm; SIGTERM and SIGHUP are turned into `SystemExit` for the
@@ -28,13 +28,13 @@ from .pipeline import (
 )
 from .tendon import FingerMotor, TendonConfig, TendonMotors, raise_on_signals
 
-__all__ = ["GraspJob", "plan_job", "run_job"]
+__all__ = ["RobotGraspJob", "plan_job", "run_job"]
 
 AUTO = "auto"
 
 
 @dataclass(frozen=True)
-class GraspJob:
+class RobotGraspJob:
     """One `hw grasp` request.
 
     Args:
@@ -96,15 +96,15 @@ class GraspJob:
         )
 
 
-def _capture(job: GraspJob) -> np.ndarray:
+def _capture(job: RobotGraspJob) -> np.ndarray:
     T = None if job.calibration is None else load_calibration(job.calibration)
     if job.cloud is not None:
         return FileCamera(job.cloud, T).capture()
-    assert T is not None  # checked in GraspJob
+    assert T is not None  # checked in RobotGraspJob
     return RealSenseCamera(T).capture()
 
 
-def plan_job(job: GraspJob) -> tuple[np.ndarray, GraspPlan]:
+def plan_job(job: RobotGraspJob) -> tuple[np.ndarray, GraspPlan]:
     """Steps 1-3 and the plan: cloud, candidates, selection. Moves nothing."""
     tendon = job.tendon_config()
     tendon.check_pull(job.settings.tendon_ticks)  # refuse a bad tick count before anything
@@ -122,7 +122,7 @@ def plan_job(job: GraspJob) -> tuple[np.ndarray, GraspPlan]:
 
 
 def run_job(
-    job: GraspJob,
+    job: RobotGraspJob,
     log: Callable[[str], None] = print,
     after_lift: Callable[[], object] | None = None,
 ) -> GraspReport | GraspPlan:

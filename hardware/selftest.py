@@ -25,7 +25,7 @@ from mjcodesign.errors import HardwareError
 
 from .camera import save_point_cloud, transform_points
 from .dxl_emulator import child_process, emulator_process
-from .grasp import GraspJob, run_job
+from .grasp import RobotGraspJob, run_job
 from .pipeline import GraspReport
 from .tendon import port_handler
 from .xl330 import ADDR
@@ -177,7 +177,7 @@ def run_selftest(log: Callable[[str], None] = lambda line: None) -> dict:
         save_point_cloud(cloud_path, transform_points(cloud_base, np.linalg.inv(_T_BASE_CAMERA)))
         calib_path.write_text(json.dumps({"T_base_camera": _T_BASE_CAMERA.tolist()}))
         with emulator_process(ids=_IDS) as port, franka_sim() as scene:
-            job = GraspJob(
+            job = RobotGraspJob(
                 robot=scene.host,
                 dxl=port,
                 pose="auto",

@@ -79,3 +79,58 @@ def test_bench_finger_writes_json(tmp_path):
     assert r.returncode == 0, r.stderr
     res = json.loads(r.stdout)
     assert res["chain"]["steps_per_s"] > 0 and json.loads(out.read_text()) == res
+
+
+def test_bench_finger_out_unwritable_exits_2_with_one_line(tmp_path):
+    r = _run(
+        "bench", "finger", "--models", "chain", "--seconds", "0.01", "--out", str(tmp_path / "no" / "b.json")
+    )
+    assert r.returncode == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: cannot write"), r.stderr
+
+
+def test_run_benchmark_writes_atomically(tmp_path, monkeypatch):
+    from mjcodesign import bench
+    from mjcodesign.errors import DesignError, OutputError
+
+    monkeypatch.setitem(bench.BENCHMARKS, "toy", "json:loads")
+    out = tmp_path / "toy.json"
+    out.write_text("old")
+    assert bench.run_benchmark("toy", out=out, s='{"a": [1, 2]}') == {"a": [1, 2]}
+    assert json.loads(out.read_text()) == {"a": [1, 2]}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["toy.json"]  # no temporary file left
+    with pytest.raises(OutputError):
+        bench.run_benchmark("toy", out=tmp_path, s="{}")  # a folder: the rename fails, nothing is left
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["toy.json"]
+    with pytest.raises(DesignError):
+        bench.run_benchmark("nope")
+    assert set(bench.BENCHMARKS) >= {"finger", "grasp", "poses", "viz", "fem"}
+
+
+def test_cli_families_import_only_common():
+    # cli/main.py assembles the parser; the families share cli/common.py, never cli.main's names.
+    import ast
+    from pathlib import Path
+
+    cli = Path(__file__).resolve().parents[1] / "mjcodesign" / "cli"
+    for path in cli.glob("*.py"):
+        if path.name in ("main.py", "__init__.py", "__main__.py"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                assert node.module != "mjcodesign.cli.main", path.name
+                if node.module == "mjcodesign.cli":
+                    assert all(a.name != "main" for a in node.names), path.name
+
+
+def test_quiet_warp_keeps_json_clean():
+    pytest.importorskip("warp")
+    code = (
+        "from mjcodesign.cli.common import quiet_warp\n"
+        "from mjcodesign.optional import import_warp\n"
+        "quiet_warp(); import_warp(); print('{}')"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout == "{}\n", r.stdout + r.stderr
+    assert "CUDA driver" not in r.stderr, r.stderr

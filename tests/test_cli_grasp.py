@@ -130,12 +130,12 @@ def test_mjwarp_cuda_without_a_gpu_exits_2_with_one_line(tmp_path):
 def test_several_designs_load_and_pose_the_object_once(tmp_path, monkeypatch, capsys):
     import argparse
 
+    from mjcodesign import jobs
     from mjcodesign.cli import grasp as cg
-    from mjcodesign.objects import mesh as objects
 
     calls = []
-    load = objects.load_object
-    monkeypatch.setattr(objects, "load_object", lambda *a, **k: calls.append(a) or load(*a, **k))
+    load = jobs.load_object
+    monkeypatch.setattr(jobs, "load_object", lambda *a, **k: calls.append(a) or load(*a, **k))
     monkeypatch.setattr(cg, "user_cache_dir", lambda: tmp_path / "cache")
     box = _mesh(tmp_path, "box.stl", trimesh.creation.box(extents=(0.05, 0.05, 0.05)))
     p = argparse.ArgumentParser()

@@ -318,7 +318,7 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, case):
 
 
 def test_cli_module_imports_no_numpy():
-    code = "import sys, mjcodesign.cli_fabrication; print('numpy' in sys.modules)"
+    code = "import sys, mjcodesign.cli.fabrication; print('numpy' in sys.modules)"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert r.stdout.strip() == "False", r.stderr
 

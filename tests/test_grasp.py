@@ -10,9 +10,9 @@ from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import PoseError
 from mjcodesign.models.types import FingerModel, GripperPose
-from mjcodesign.objects.mesh import box_object
+from mjcodesign.objects import box_object
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
-from mjcodesign.sim.protocol import MujocoBackend, with_stiffness
+from mjcodesign.sim import MujocoBackend, with_stiffness
 
 _G = 9.81
 _TOL_HOLD = 0.05  # issue: vertical finger force during the hold equals m g within 5%
@@ -193,7 +193,8 @@ def test_flex_contacts_count_as_finger_contacts():
     # (geom_bodyid[-1] would name the object itself). Step until the closing fingers touch the box.
     import mujoco
 
-    from mjcodesign.scenarios.grasp import STATE_SPEC, _finger_wrench, control_spec, phase_controls
+    from mjcodesign.scenarios.grasp import STATE_SPEC, control_spec, phase_controls
+    from mjcodesign.scenarios.outcome import finger_wrench
     from mjcodesign.sim.mujoco_c import initial_state
 
     obj = box_object((_BOX,) * 3, _RHO)
@@ -214,7 +215,7 @@ def test_flex_contacts_count_as_finger_contacts():
         and scene.object_body in m.geom_bodyid[d.contact.geom[i][d.contact.geom[i] >= 0]]
     ]
     assert flex_on_object, "the flex fingers never touched the box"
-    wrench, finger, _ = _finger_wrench(scene, d)
+    wrench, finger, _ = finger_wrench(scene, d)
     assert finger and np.linalg.norm(wrench[3:]) > 0
 
 
@@ -249,7 +250,7 @@ def test_grasp_scene_is_sparse_and_matches_dense(box_scene):
     dense.opt.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
     scenario = GraspScenario(impulse=0.0)
     a = MujocoBackend().run(box_scene, scenario)
-    b = MujocoBackend().run(scene_with_model(box_scene, dense), scenario, dense)
+    b = MujocoBackend().run(scene_with_model(box_scene, dense), scenario)
     mg = box_scene.obj.mass * _G
     assert a.success and b.success
     np.testing.assert_allclose(a.body_force[3:], b.body_force[3:], rtol=0, atol=_TOL_JACOBIAN * mg)

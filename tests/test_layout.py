@@ -25,6 +25,7 @@ LAYERS = {
     "poses": 5,
     "sim": 6,
     "jobs": 7,
+    "data": 8,
     "crosscheck": 8,
     "bench": 9,
     "cli": 10,

@@ -10,21 +10,31 @@ pytest.importorskip("mujoco_warp")
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
-from mjcodesign.models.types import FingerModel
-from mjcodesign.objects.mesh import box_object
+from mjcodesign.models.types import FingerModel, GripperPose
+from mjcodesign.objects import box_object
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
 from mjcodesign.sim.mjwarp import MjwarpBackend
-from mjcodesign.sim.protocol import MujocoBackend
+from mjcodesign.sim import MujocoBackend
 
 _TOL_PATH = 5e-4  # object COM path [m]: float32 MJWarp vs float64 MuJoCo C, 0.5 mm over ~0.4 s
 _TOL_FORCE = 0.05  # relative, hold force along the palm z
+# The palm height the parity was measured at (141 mm: the fingers' 136 mm plus 5 mm of clearance). The
+# auto pose now uses the finger's exact length (136.35 mm) and sits 0.35 mm higher; there the box is
+# held less firmly and float32 MJWarp parts from MuJoCo C by 9 mm in its final COM (a marginal grasp, as
+# the second test's note says), so the parity tests keep the pose they were measured at.
+_PALM_Z = 0.141
+
+
+def _pose(obj):
+    p = auto_pose(obj)
+    return GripperPose((p.position[0], p.position[1], _PALM_Z), p.quat, p.openings)
 
 
 @pytest.mark.slow
 def test_mjwarp_matches_mujoco_c():
     obj = box_object((0.05,) * 3, 400.0)
     designs = [Stiffness.preset("paper-optimized"), Stiffness.preset("soft")]
-    scene = build_scene(obj, FingerDesign(), designs[0], FingerModel.CHAIN, auto_pose(obj))
+    scene = build_scene(obj, FingerDesign(), designs[0], FingerModel.CHAIN, _pose(obj))
     # A short scenario: close, tighten, lift, hold; the impulse is left out to keep the CPU run short.
     scenario = GraspScenario(
         settle_s=0.05, close_s=0.1, tighten_s=0.1, lift_s=0.1, hold_s=0.06, impulse=0.0, post_hold_s=0.02
@@ -43,10 +53,8 @@ def test_mjwarp_matches_mujoco_c():
 @pytest.mark.slow
 def test_mjwarp_pose_batch_matches_mujoco_c():
     # Two poses of one design as two worlds (batched body_pos/body_quat, per-world state and controls).
-    from mjcodesign.models.types import GripperPose
-
     obj = box_object((0.05,) * 3, 400.0)
-    p0 = auto_pose(obj)
+    p0 = _pose(obj)
     # The second pose sits 3 mm off the object's centre along the palm's x: another contact patch and
     # a path 0.67 mm from the first pose's. (Poses where the grasp is marginal, e.g. 3 mm off along
     # the closing axis or 5 mm higher, differ by 0.65 mm or in success between float32 and float64.)

@@ -5,10 +5,10 @@ import pytest
 import trimesh
 
 from mjcodesign.errors import MeshError
-from mjcodesign.objects import mesh as objects
-from mjcodesign.objects.mesh import (
+from mjcodesign.objects import (
     DENSITY_PRESETS,
     YCB_IN_DOMAIN,
+    CoacdSettings,
     box_object,
     convex_decomposition,
     egad_like,
@@ -101,7 +101,7 @@ def test_decomposition_is_cached(tmp_path, monkeypatch):
         assert np.array_equal(v0, v1) and np.array_equal(f0, f1)
     # Other settings, other key.
     with pytest.raises(AssertionError, match="despite the cache"):
-        convex_decomposition(again, objects.CoacdSettings(threshold=0.2), cache_dir=tmp_path)
+        convex_decomposition(again, CoacdSettings(threshold=0.2), cache_dir=tmp_path)
 
 
 def test_in_domain_names_match_reference(reference_dir):

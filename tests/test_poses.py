@@ -12,19 +12,19 @@ import trimesh
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.errors import PoseError
-from mjcodesign.objects.mesh import box_object
-from mjcodesign.poses.sampler import (
+from mjcodesign.objects import box_object
+from mjcodesign.poses import (
     ANYGRASP_DEPTH,
     MAX_PENETRATION,
     NOISE_TRANSLATION,
     RigidGripper,
     SamplerOptions,
-    _augment,
-    _scene_offset,
     anygrasp_to_world,
+    augment_poses,
     load_external,
     refine,
     sample_poses,
+    scene_offset,
 )
 
 _ROOT = Path(__file__).resolve().parents[1]
@@ -59,9 +59,7 @@ def box_poses(box):
 
 
 def test_import_does_not_load_warp():
-    code = (
-        "import sys, mjcodesign.poses, mjcodesign.cli_poses, mjcodesign.sdf; assert 'warp' not in sys.modules"
-    )
+    code = "import sys, mjcodesign.poses, mjcodesign.cli.poses, mjcodesign.poses.sdf; assert 'warp' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True, cwd=_ROOT)
 
 
@@ -92,7 +90,7 @@ def test_sampled_poses_touch_without_penetration(box, box_poses):
     # Independent check with the exact box distance on a fresh dense point set.
     g = RigidGripper.build(FingerDesign(), 0.002)
     x = g.world(c.matrices[:, :3, :3], c.matrices[:, :3, 3], c.openings)
-    d = _box_sdf(x - _scene_offset(box), 0.5 * np.array(_BOX))
+    d = _box_sdf(x - scene_offset(box), 0.5 * np.array(_BOX))
     assert d.min() >= -MAX_PENETRATION
     assert x[..., 2].min() >= -MAX_PENETRATION  # ground
     for f in (1.0, -1.0):  # each finger touches the box
@@ -103,7 +101,7 @@ def test_closing_axis_across_the_object(box, box_poses):
     # The palm centre lies between the two fingers' contacts: the object spans both sides of the palm
     # along the closing axis, near the palm's mid-plane.
     c = box_poses
-    v = np.asarray(box.mesh.vertices) + _scene_offset(box)
+    v = np.asarray(box.mesh.vertices) + scene_offset(box)
     for T in c.matrices:
         y = T[:3, 1]
         proj = (v - T[:3, 3]) @ y
@@ -128,7 +126,7 @@ def test_top_fraction_controls_the_approach(box):
 
 def test_refinement_pushes_out_and_closes_in(box):
     # A top-down pose at the box's centre, fingers once inside the box and once 15 mm outside.
-    off = _scene_offset(box)
+    off = scene_offset(box)
     T = np.tile(np.eye(4), (2, 1, 1))
     T[:, :3, 3] = off + [0.0, 0.0, 0.03 + FingerDesign().length - 0.04]
     s0 = np.array([[0.01, 0.01], [0.04, 0.04]])
@@ -146,7 +144,7 @@ def test_refinement_pushes_out_and_closes_in(box):
 def test_noise_augmentation_sigma():
     rng = np.random.default_rng(0)
     T = np.tile(np.eye(4), (1, 1, 1))
-    out = _augment(T, 3000, rng)
+    out = augment_poses(T, 3000, rng)
     assert out.shape == (3001, 4, 4)
     np.testing.assert_array_equal(out[0], T[0])
     std = out[1:, :3, 3].std(axis=0)
@@ -163,7 +161,7 @@ def test_too_large_object_raises():
 
 
 def test_no_candidate_is_a_pose_error():
-    from mjcodesign.poses.sampler import Candidates, to_gripper_pose
+    from mjcodesign.poses import Candidates, to_gripper_pose
 
     empty = Candidates(np.zeros((0, 4, 4)), np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0), {"x": 3})
     with pytest.raises(PoseError, match="rejected"):
@@ -210,20 +208,20 @@ def test_anygrasp_mapping_matches_the_authors_frames():
     centre = W[:3, 3] - W[:3, 2] * 0.0  # palm position
     contact = centre + (-W[:3, 2]) * (FingerDesign().length - 0.02)
     np.testing.assert_allclose(contact[:2], [0, 0], atol=1e-12)  # above the COM
-    np.testing.assert_allclose(contact[2], 0.05 + _scene_offset(obj)[2] - 0.03, atol=1e-3)
+    np.testing.assert_allclose(contact[2], 0.05 + scene_offset(obj)[2] - 0.03, atol=1e-3)
 
 
 def test_anygrasp_reference_poses_cross_the_object(reference_dir):
-    from mjcodesign.objects.mesh import load_mesh, load_object
-    from mjcodesign.poses.sampler import _slab_openings
-    from mjcodesign.poses.sdf import MeshSDF
+    from mjcodesign.objects import load_mesh, load_object
+    from mjcodesign.poses import MeshSDF
+    from mjcodesign.poses.candidates import _slab_openings
 
     name = "012_strawberry"
     obj = load_object(name, 100.0)
     T = load_external(reference_dir / "pose_info" / f"{name}.npz")
     W = anygrasp_to_world(T, obj, load_mesh(name).vertices)
     contact = W[:, :3, 3] - W[:, :3, 2] * (FingerDesign().length - ANYGRASP_DEPTH)
-    d, _ = MeshSDF.from_trimesh(obj.mesh).query(contact - _scene_offset(obj))
+    d, _ = MeshSDF.from_trimesh(obj.mesh).query(contact - scene_offset(obj))
     # The authors' camera looks down: every grasp approaches from above, its centre on the object
     # (GraspNet centres sit at most a few mm under the surface; 2 cm covers the strawberry's size).
     assert np.all(-W[:, 2, 2] < 0)
@@ -295,9 +293,9 @@ def test_cli_bad_input_exit_2(tmp_path, case):
 
 
 def test_grasp_pose_best_is_the_top_ranked(box):
-    from mjcodesign.cli.grasp import _read_pose
+    from mjcodesign.jobs import resolve_pose
 
-    pose = _read_pose("best", box, FingerDesign(), 0)
+    pose = resolve_pose("best", box, FingerDesign(), seed=0)
     top = sample_poses(box, 10, seed=0)
     np.testing.assert_allclose(pose.position, top.matrices[0, :3, 3])
     np.testing.assert_allclose(pose.openings, top.openings[0])

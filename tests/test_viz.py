@@ -21,9 +21,9 @@ import trimesh
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.models.types import FingerModel
-from mjcodesign.objects.mesh import box_object
+from mjcodesign.objects import box_object
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
-from mjcodesign.sim.protocol import MujocoBackend
+from mjcodesign.sim import MujocoBackend
 
 ROOT = Path(__file__).resolve().parents[1]
 _KEYS = {"success", "body_force", "displacement", "ground_contact", "reason", "wall_time_s"}
@@ -286,7 +286,7 @@ def test_captured_states_equal_replayed_ones(tmp_path):
 def test_diverged_rollout_is_recorded_up_to_its_failure(tmp_path):
     """A blown-up run is logged up to the step before the failure, with the reason in its outcome."""
     pytest.importorskip("rerun")
-    from mjcodesign.sim.mujoco_c import with_stiffness
+    from mjcodesign.sim import scene_with_model, with_stiffness
     from mjcodesign.sim.observe import load_observer
 
     scene = _scene()
@@ -295,7 +295,7 @@ def test_diverged_rollout_is_recorded_up_to_its_failure(tmp_path):
     bad.dof_damping[:] = 0.0
     path = tmp_path / "diverged.rrd"
     rec = load_observer("rerun", path=path, decimation=1)
-    out = MujocoBackend(nthread=1).run(scene, _SCENARIO, bad, observer=rec, label="paper-optimized")
+    out = MujocoBackend(nthread=1).run(scene_with_model(scene, bad), _SCENARIO, observer=rec, label="paper-optimized")
     rec.close()
     assert out.reason.startswith("diverged: step ")
     failed = int(out.reason.split()[2].rstrip(":"))

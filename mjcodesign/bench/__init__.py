@@ -1,0 +1,68 @@
+"""Benchmarks are data: a registry of named benchmarks and one runner that returns and writes their JSON.
+
+Each benchmark is a function returning a JSON-ready dict, named here as ``"module:function"`` and
+imported only when run, so that importing this package pulls in neither MuJoCo nor Warp::
+
+    from mjcodesign.bench import run_benchmark
+
+    res = run_benchmark("finger", out="bench.json", models=["chain"], seconds=0.05)
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import json
+import os
+import uuid
+from collections.abc import Callable
+from pathlib import Path
+
+from mjcodesign.errors import DesignError, OutputError
+
+__all__ = ["BENCHMARKS", "benchmark", "run_benchmark", "write_json"]
+
+BENCHMARKS: dict[str, str] = {
+    "finger": "mjcodesign.bench.finger:bench_finger",
+    "grasp": "mjcodesign.bench.grasp:bench_grasp",
+    "poses": "mjcodesign.bench.poses:bench_poses",
+    "viz": "mjcodesign.bench.viz:bench_viz",
+    "fem": "mjcodesign.bench.fem:bench_fem",
+}
+"""Benchmark name -> ``"module:function"``; the function takes keyword arguments and returns a dict."""
+
+
+def benchmark(name: str) -> Callable[..., dict]:
+    """The function of the benchmark ``name``, imported now; raises DesignError for an unknown name."""
+    try:
+        target = BENCHMARKS[name]
+    except KeyError:
+        raise DesignError(f"unknown benchmark {name!r}: choose from {', '.join(BENCHMARKS)}") from None
+    module, _, attr = target.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+def write_json(result, out: str | os.PathLike, *, indent: int | None = 2) -> None:
+    """Write ``result`` as JSON to ``out`` atomically (a temporary file beside it, then a rename).
+
+    A reader never sees a half-written file, and a failed write leaves ``out`` as it was. Raises
+    :class:`OutputError` when the file cannot be written.
+    """
+    path = Path(out)
+    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
+    try:
+        with open(tmp, "x", encoding="utf-8") as f:  # "x": a new file, mode from the umask as usual
+            f.write(json.dumps(result, indent=indent))
+        os.replace(tmp, path)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from exc
+
+
+def run_benchmark(name: str, *, out: str | os.PathLike | None = None, **kwargs) -> dict:
+    """Run the benchmark ``name`` with ``kwargs``; write its JSON to ``out`` when given; return it."""
+    result = benchmark(name)(**kwargs)
+    if out:
+        write_json(result, out)
+    return result

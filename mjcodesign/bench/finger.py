@@ -1,22 +1,16 @@
-"""Benchmarks: named cases, one runner, JSON out. Speed goals live here, not in tests."""
+"""`bench finger`: steps/s of a free tendon curl per finger model. Speed goals live here, not in tests."""
 
 from __future__ import annotations
 
-import json
-import os
 import time
-from pathlib import Path
 
 import mujoco
 import numpy as np
 from mujoco import rollout
 
-from mjcodesign.design.finger import FingerDesign
-from mjcodesign.design.stiffness import Stiffness
-from mjcodesign.errors import OutputError, SimulationDiverged
-from mjcodesign.models.builder import build_finger
-from mjcodesign.models.simulate import check_state
-from mjcodesign.models.types import FingerModel, SimOptions
+from mjcodesign.design import FingerDesign, Stiffness
+from mjcodesign.errors import SimulationDiverged
+from mjcodesign.models import FingerModel, SimOptions, build_finger, check_state
 
 __all__ = ["bench_finger"]
 
@@ -28,20 +22,17 @@ _MIN_WALL_S = 1.0
 _MAX_REPS = 200
 
 
-def _one_thread() -> None:
-    # MuJoCo steps single-threaded; cap BLAS too so numpy glue does not steal the second core.
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-
-
 def bench_finger(
     models=("chain", "flex", "flex-quadratic"),
     seconds: float = 1.0,
-    out: str | None = None,
     progress: bool = True,
     flex_cells: int | None = None,
 ) -> dict:
-    """Steps per second of a free tendon curl (native tendon, gravity on) for each model."""
-    _one_thread()
+    """Steps per second of a free tendon curl (native tendon, gravity on) for each model.
+
+    One thread: ``mujoco.rollout`` with one ``MjData`` steps in C on the calling thread. Write the
+    result with :func:`mjcodesign.bench.run_benchmark` (``out=``).
+    """
     design = FingerDesign()
     stiffness = Stiffness.preset(_BENCH_DESIGN)
     results: dict[str, dict] = {}
@@ -52,45 +43,45 @@ def bench_finger(
         for name in models:
             model = FingerModel(name)
             built = build_finger(design, stiffness, model, options=SimOptions(flex_cells=flex_cells))
-            m = built.model
-            n = int(round(seconds / m.opt.timestep))
-            # Native tendon, controls precomputed: mujoco.rollout steps in C on one thread, so the
-            # figure is the simulator's, not Python's per-step overhead.
-            ctrl = np.zeros((n, m.nu))
-            ramp = _BENCH_TENSION * np.minimum(1.0, np.arange(n) * m.opt.timestep / _RAMP)
-            for act in built.fingers[0].actuators:
-                aid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, act)
-                ctrl[:, aid] = ramp / len(built.fingers[0].actuators)
-            d = mujoco.MjData(m)
-            spec_full = mujoco.mjtState.mjSTATE_FULLPHYSICS
-            x0 = np.zeros(mujoco.mj_stateSize(m, spec_full))
-            mujoco.mj_getState(m, d, x0, spec_full)
-            rates, reps, wall_total = [], 0, 0.0
-            # Repeat until 1 s of wall time has accumulated: one 1-s chain curl takes ~20 ms.
-            while reps == 0 or (wall_total < _MIN_WALL_S and reps < _MAX_REPS):
-                t0 = time.perf_counter()
-                state, _ = rollout.rollout(m, d, x0, ctrl[None])
-                wall = time.perf_counter() - t0
-                check_state(d, f"{name}: ")
-                if not np.all(np.isfinite(state)):
-                    raise SimulationDiverged(f"{name}: state is not finite")
-                rates.append(n / wall)
-                wall_total += wall
-                reps += 1
-            results[name] = {
-                "steps_per_s": float(np.median(rates)),
-                "steps": n,
-                "repeats": reps,
-                "wall_s": wall_total,
-                "nv": int(m.nv),
-                "timestep_s": m.opt.timestep,
-                "solver_iterations_cap": int(m.opt.iterations),
-                "cells": built.fingers[0].grid[3] if model.is_flex else None,
-            }
+            results[name] = _curl_rate(built, name, seconds)
+            results[name]["cells"] = built.fingers[0].grid[3] if model.is_flex else None
             bar.advance(task)
-    if out:
-        try:
-            Path(out).write_text(json.dumps(results, indent=2))
-        except OSError as exc:
-            raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from exc
     return results
+
+
+def _curl_rate(built, name: str, seconds: float) -> dict:
+    """Median steps/s of ``seconds`` of the free curl of ``built``, repeated for >= 1 s of wall time."""
+    m = built.model
+    n = int(round(seconds / m.opt.timestep))
+    # Native tendon, controls precomputed: mujoco.rollout steps in C on one thread, so the
+    # figure is the simulator's, not Python's per-step overhead.
+    ctrl = np.zeros((n, m.nu))
+    ramp = _BENCH_TENSION * np.minimum(1.0, np.arange(n) * m.opt.timestep / _RAMP)
+    for act in built.fingers[0].actuators:
+        aid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, act)
+        ctrl[:, aid] = ramp / len(built.fingers[0].actuators)
+    d = mujoco.MjData(m)
+    spec_full = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    x0 = np.zeros(mujoco.mj_stateSize(m, spec_full))
+    mujoco.mj_getState(m, d, x0, spec_full)
+    rates, reps, wall_total = [], 0, 0.0
+    # Repeat until 1 s of wall time has accumulated: one 1-s chain curl takes ~20 ms.
+    while reps == 0 or (wall_total < _MIN_WALL_S and reps < _MAX_REPS):
+        t0 = time.perf_counter()
+        state, _ = rollout.rollout(m, d, x0, ctrl[None])
+        wall = time.perf_counter() - t0
+        check_state(d, f"{name}: ")
+        if not np.all(np.isfinite(state)):
+            raise SimulationDiverged(f"{name}: state is not finite")
+        rates.append(n / wall)
+        wall_total += wall
+        reps += 1
+    return {
+        "steps_per_s": float(np.median(rates)),
+        "steps": n,
+        "repeats": reps,
+        "wall_s": wall_total,
+        "nv": int(m.nv),
+        "timestep_s": m.opt.timestep,
+        "solver_iterations_cap": int(m.opt.iterations),
+    }

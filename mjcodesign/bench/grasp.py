@@ -12,11 +12,11 @@ from mujoco import rollout as mj_rollout
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
+from mjcodesign.jobs import GraspJob, SceneCache, load_grasp_object, run_jobs
 from mjcodesign.models.simulate import check_state, reset_warnings
 from mjcodesign.models.types import FingerModel
-from mjcodesign.objects.mesh import CoacdSettings, convex_decomposition, load_object
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene, control_spec, phase_controls
-from mjcodesign.sim.mujoco_c import MujocoBackend, initial_state, with_stiffness
+from mjcodesign.sim import MujocoBackend, initial_state, with_stiffness
 
 __all__ = ["bench_grasp"]
 
@@ -36,8 +36,9 @@ def bench_grasp(
     """Rollouts/s of the default scenario over random designs on one object and auto pose, all cores.
 
     ``raw_rollouts_per_s`` times one ``mujoco.rollout`` call alone (models, controls and the initial
-    state prepared beforehand). ``rollouts_per_s`` times :meth:`MujocoBackend.run_batch`: per-design
-    models, controls, the rollout, the divergence checks and the outcomes (contact-force replays).
+    state prepared beforehand). ``rollouts_per_s`` times :func:`mjcodesign.jobs.run_jobs` on one job
+    per design (one ``run_batch``): per-design models, controls, the rollout, the divergence checks and
+    the outcomes (contact-force replays); its compiled scene is cached, as in data generation.
     The two alternate ``repeats`` times and the fastest of each is kept, since the machine is shared;
     ``pipeline_overhead_cpu`` compares the process CPU time of the two, which other users of the
     machine disturb less than wall time; ``*_per_cpu_s`` are rollouts per CPU second (one free core).
@@ -45,14 +46,16 @@ def bench_grasp(
     """
     n = rollouts or _DEFAULT_ROLLOUTS[model]
     repeats = repeats or _DEFAULT_REPEATS[model]
-    obj = load_object(source, _BENCH_DENSITY, seed=seed)
-    settings = CoacdSettings(seed=seed)
-    convex_decomposition(obj, settings, cache_dir=cache_dir)
+    obj = load_grasp_object(source, _BENCH_DENSITY, seed=seed, cache_dir=cache_dir)
     rng = np.random.default_rng(seed)
     designs = [Stiffness(rng.uniform(LOG_E_MIN, LOG_E_MAX, 22)) for _ in range(n)]
     design = FingerDesign()
-    scene = build_scene(obj, design, designs[0], FingerModel(model), auto_pose(obj, design))
+    pose = auto_pose(obj, design)
+    scene = build_scene(obj, design, designs[0], FingerModel(model), pose)
     scenario = GraspScenario()
+    jobs = [GraspJob(obj=obj, pose=pose, design=s, finger_model=model, scenario=scenario) for s in designs]
+    scenes = SceneCache()
+    scenes.scene(jobs[0])  # compiled once, outside the timings (as a long data-generation run)
     nthread = len(os.sched_getaffinity(0))
     ctrl, _ = phase_controls(scene, scenario)
     x0 = initial_state(scene)
@@ -70,7 +73,7 @@ def bench_grasp(
         for d in datas:
             check_state(d, "bench raw rollout: ")
         t0, c0 = time.perf_counter(), time.process_time()
-        outs = backend.run_batch(scene, scenario, designs)
+        outs = run_jobs(jobs, backend, scenes=scenes)
         pipe_walls.append(time.perf_counter() - t0)
         pipe_cpu.append(time.process_time() - c0)
     raw = n / min(raw_walls)

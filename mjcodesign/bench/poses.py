@@ -23,7 +23,7 @@ def _simulate(obj, cands, scenario, sim) -> list[dict]:
     from mjcodesign.design.finger import FingerDesign
     from mjcodesign.design.stiffness import Stiffness
     from mjcodesign.models.types import FingerModel
-    from mjcodesign.poses.sampler import to_gripper_pose
+    from mjcodesign.poses import to_gripper_pose
     from mjcodesign.scenarios.grasp import build_scene
 
     rows = []
@@ -40,7 +40,7 @@ def _simulate(obj, cands, scenario, sim) -> list[dict]:
 
 
 def _summary(cands, seconds: float, sims: list[dict]) -> dict:
-    from mjcodesign.poses.sampler import approach_spread_deg
+    from mjcodesign.poses import approach_spread_deg
 
     n = len(cands)
     return {
@@ -87,8 +87,8 @@ def bench_poses(
     cache_dir: str | Path | None = None,
 ) -> dict:
     """Per-object rows and totals (JSON-ready). Objects that cannot be loaded are listed with the reason."""
-    from mjcodesign.objects.mesh import CoacdSettings, convex_decomposition, load_mesh, load_object
-    from mjcodesign.poses.sampler import SamplerOptions, import_anygrasp, load_external, sample_poses
+    from mjcodesign.objects import CoacdSettings, convex_decomposition, load_mesh, load_object
+    from mjcodesign.poses import SamplerOptions, import_anygrasp, load_external, sample_poses
     from mjcodesign.scenarios.grasp import GraspScenario
     from mjcodesign.sim.protocol import get_backend
 

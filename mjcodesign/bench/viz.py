@@ -54,17 +54,20 @@ def _time(fn) -> tuple[float, float]:
     return time.perf_counter() - w, time.process_time() - c
 
 
-def _measure(sim, scene, scenario, observer: str, path: Path, dec, repeats: int) -> dict:
+def _measure(sim, job, scenes, observer: str, path: Path, dec, repeats: int) -> dict:
     """Medians [s] of (wall, CPU) of the rollout three ways, alternated; and the files' sizes [B].
 
     Plain; into a recording of its own; into one recording shared by the repeats (its close shared out).
     """
+    import dataclasses
+
+    from mjcodesign.jobs import run_jobs
     from mjcodesign.sim.observe import observer_class
 
     cls = observer_class(observer)  # finding the entry point (~20 ms) is start-up, not per rollout
 
     def plain():
-        sim.run(scene, scenario)
+        run_jobs([job], sim, scenes=scenes)
 
     files = [path.with_name(f"{path.stem}_{i}{path.suffix}") for i in range(repeats)]
     paths = iter(files)
@@ -72,15 +75,15 @@ def _measure(sim, scene, scenario, observer: str, path: Path, dec, repeats: int)
     def own():
         # A new file each time, as a run writes (the recorder replaces an older file, see its close).
         rec = cls(path=next(paths), decimation=dec)
-        sim.run(scene, scenario, observer=rec)
+        run_jobs([job], sim, rec, scenes=scenes)
         rec.close()
 
     shared_path = path.with_name(f"{path.stem}_shared{path.suffix}")
     shared = cls(path=shared_path, decimation=dec)
-    labels = iter(f"run{i}" for i in range(repeats))
+    labelled = iter(dataclasses.replace(job, label=f"run{i}") for i in range(repeats))
 
     def into_shared():
-        sim.run(scene, scenario, observer=shared, label=next(labels))
+        run_jobs([next(labelled)], sim, shared, scenes=scenes)
 
     times = np.array([(_time(plain), _time(own), _time(into_shared)) for _ in range(repeats)])
     close = np.array(_time(shared.close))
@@ -118,13 +121,12 @@ def bench_viz(
     ``repeats`` rollouts into one file, its close shared out. ``names`` picks cases by name (default:
     all of ``cases``).
     """
-    from mjcodesign.design.finger import FingerDesign
     from mjcodesign.design.stiffness import Stiffness
-    from mjcodesign.models.types import FingerModel
-    from mjcodesign.objects.mesh import CoacdSettings, box_object, convex_decomposition, load_object
-    from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
+    from mjcodesign.jobs import GraspJob, SceneCache, load_grasp_object, run_jobs
+    from mjcodesign.objects import box_object
+    from mjcodesign.scenarios.grasp import GraspScenario, auto_pose
+    from mjcodesign.sim import MujocoBackend
     from mjcodesign.sim.observe import load_observer
-    from mjcodesign.sim.protocol import MujocoBackend
 
     sim = MujocoBackend(nthread=1)
     scenario = GraspScenario()
@@ -144,14 +146,20 @@ def bench_viz(
             if case.object == "box":
                 obj = box_object((case.box_m,) * 3, _RHO)
             else:
-                obj = load_object(case.object, _RHO)
-                convex_decomposition(obj, CoacdSettings(), cache_dir=cache_dir)
-            scene = build_scene(
-                obj, FingerDesign(), Stiffness.parse(case.design), FingerModel(case.model), auto_pose(obj)
+                obj = load_grasp_object(case.object, _RHO, cache_dir=cache_dir)
+            design = Stiffness.parse(case.design)
+            job = GraspJob(
+                obj=obj,
+                pose=auto_pose(obj),
+                design=design,
+                finger_model=case.model,
+                scenario=scenario,
+                label=case.design,
             )
-            sim.run(scene, scenario)  # warm up
+            scenes = SceneCache()
+            run_jobs([job], sim, scenes=scenes)  # warm up; the scene is compiled once, outside the timings
             for dec in decimations:
-                m = _measure(sim, scene, scenario, observer, path, dec, repeats)
+                m = _measure(sim, job, scenes, observer, path, dec, repeats)
                 p, r, sh = m["plain"], m["own"], m["shared"]
                 ex, sx = m["own_extra"], m["shared_extra"]
                 out["cases"].append(

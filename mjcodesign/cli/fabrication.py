@@ -1,7 +1,7 @@
 """``mjcodesign export-print``: slicer-ready files and a print sheet for a stiffness design.
 
-Wire it into the main CLI with ``cli_fabrication.add_parser(subparsers)``; the parser's ``func`` is
-:func:`run`. ``python -m mjcodesign.cli_fabrication ARGS`` runs the same command on its own.
+``add_parser(subparsers)`` registers it on the main CLI; the parser's ``func`` is :func:`run`, which calls
+:func:`mjcodesign.fabrication.export_print` and prints.
 """
 
 from __future__ import annotations
@@ -10,13 +10,7 @@ import argparse
 import json
 from pathlib import Path
 
-__all__ = ["add_parser", "run", "export_print"]
-
-PRUSA_3MF = "gripper_prusaslicer.3mf"
-BAMBU_3MF = "gripper_bambu_orca.3mf"
-SHEET_JSON = "print_sheet.json"
-SHEET_MD = "print_sheet.md"
-STL_DIR = "stl"
+__all__ = ["add_parser", "run"]
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -50,42 +44,10 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print the per-block mapping as JSON on stdout")
 
 
-def export_print(design: str, calibration: Path | None, out: Path) -> dict:
-    """Write every output file and return the JSON-ready report (moduli in Pa)."""
-    from mjcodesign.design.stiffness import Stiffness
-    from mjcodesign.errors import OutputError
-    from mjcodesign.fabrication.plan import Calibration, plan_print
-    from mjcodesign.fabrication.print3mf import write_bambu_3mf, write_prusa_3mf, write_stls
-
-    stiffness = Stiffness.parse(design)
-    cal = Calibration.default() if calibration is None else Calibration.load(calibration)
-    plan = plan_print(stiffness, cal)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"cannot create output directory {out}: {exc.strerror or exc}") from exc
-    files = {
-        "prusaslicer_3mf": write_prusa_3mf(plan, out / PRUSA_3MF),
-        "bambu_orca_3mf": write_bambu_3mf(plan, out / BAMBU_3MF),
-    }
-    stls = write_stls(plan, out / STL_DIR)
-    report = {"design": design, **plan.as_dict()}
-    report["files"] = {
-        **{k: str(v) for k, v in files.items()},
-        "print_sheet_json": str(out / SHEET_JSON),
-        "print_sheet_md": str(out / SHEET_MD),
-        "stl": [str(p) for p in stls],
-    }
-    try:
-        (out / SHEET_JSON).write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
-        (out / SHEET_MD).write_text(plan.markdown(), encoding="utf-8")
-    except OSError as exc:
-        raise OutputError(f"cannot write the print sheet to {out}: {exc.strerror or exc}") from exc
-    return report
-
-
 def run(args: argparse.Namespace) -> int:
     """Run ``export-print``; returns the exit code. Library errors propagate to the caller."""
+    from mjcodesign.fabrication import export_print
+
     report = export_print(args.design, args.calibration, args.out)
     if args.json:
         print(json.dumps(report, indent=2))

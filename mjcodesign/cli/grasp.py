@@ -1,8 +1,4 @@
-"""``mjcodesign grasp`` and ``mjcodesign bench grasp``.
-
-Wire them into the main CLI with ``cli_grasp.add_parser(subparsers)`` and
-``cli_grasp.add_bench_parser(bench_subparsers)``. ``python -m mjcodesign.cli_grasp ARGS`` runs
-``grasp`` on its own with the same error mapping (exit 2 and one line).
+"""``mjcodesign grasp`` and ``mjcodesign bench grasp``: parsing and printing around :mod:`mjcodesign.jobs`.
 
 ``--design`` takes one design (a preset, or 11/22 comma-separated ln E) or several presets separated by
 commas (``soft,semi-rigid,paper-optimized``): each is run on the same object and pose, ``--json`` then
@@ -14,9 +10,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from pathlib import Path
+
+from mjcodesign.cli.common import user_cache_dir
 
 __all__ = [
     "add_parser",
@@ -27,17 +24,10 @@ __all__ = [
     "grasp",
     "split_designs",
     "object_sources",
-    "user_cache_dir",
 ]
 
 _MODELS = ("chain", "flex")
 _BACKENDS = ("mujoco", "mjwarp")
-
-
-def user_cache_dir() -> Path:
-    """``$XDG_CACHE_HOME/mjcodesign`` or ``~/.cache/mjcodesign`` (flags and environment live here)."""
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "mjcodesign"
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
@@ -122,31 +112,6 @@ def add_bench_parser(bench_subparsers) -> argparse.ArgumentParser:
     return p
 
 
-def _read_pose(text: str, obj, design, seed: int = 0):
-    from mjcodesign.errors import PoseError
-    from mjcodesign.models.types import GripperPose
-    from mjcodesign.scenarios.grasp import auto_pose
-
-    if text == "auto":
-        return auto_pose(obj, design)
-    if text == "best":
-        from mjcodesign.poses.sampler import sample_poses, to_gripper_pose
-
-        return to_gripper_pose(sample_poses(obj, 10, seed=seed, design=design))
-    path = Path(text)
-    if not path.is_file():
-        raise PoseError(f"pose file not found: {path}")
-    if path.suffix == ".npz":
-        from mjcodesign.poses.sampler import read_candidates, to_gripper_pose
-
-        return to_gripper_pose(read_candidates(path))
-    try:
-        raw = json.loads(path.read_text(encoding="utf-8"))
-        return GripperPose.from_matrix(raw["pose"], tuple(raw["openings"]))
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise PoseError(f"{path}: not a pose file ({type(exc).__name__}: {exc})") from exc
-
-
 def grasp(
     source: str,
     design: str = "paper-optimized",
@@ -166,17 +131,17 @@ def grasp(
     label: str | None = None,
     prepared: tuple | None = None,
 ) -> dict:
-    """One grasp rollout; returns the JSON-ready outcome plus the object's facts.
+    """One grasp rollout (a :class:`~mjcodesign.jobs.GraspJob`); the JSON-ready outcome plus the object's facts.
 
-    ``observer`` (:mod:`mjcodesign.observe`) receives the rollout as ``label``. ``prepared``: the
+    ``observer`` (:mod:`mjcodesign.sim.observe`) receives the rollout as ``label``. ``prepared``: the
     result of :func:`prepare_object` for these ``source``, ``density`` and ``pose`` arguments, so that
     several designs or backends on one object load, decompose and pose it once.
     """
-    from mjcodesign.design.finger import FingerDesign
     from mjcodesign.design.stiffness import Stiffness
     from mjcodesign.errors import DesignError
+    from mjcodesign.jobs import GraspJob, run_jobs
     from mjcodesign.models.types import FingerModel
-    from mjcodesign.scenarios.grasp import GraspScenario, build_scene
+    from mjcodesign.scenarios.grasp import GraspScenario
     from mjcodesign.sim.protocol import get_backend
 
     stiffness = Stiffness.parse(design)
@@ -191,12 +156,17 @@ def grasp(
             source, density, pose, seed=seed, allow_open=allow_open, cache_dir=cache_dir
         )
     obj, rho, gripper_pose = prepared
-    finger_design = FingerDesign()
     kwargs = {k: v for k, v in (("tension", tension), ("lift", lift), ("impulse", impulse)) if v is not None}
-    scenario = GraspScenario(**kwargs)
-    scene = build_scene(obj, finger_design, stiffness, FingerModel(model), gripper_pose)
-    recording = {} if observer is None else {"observer": observer, "label": label or design}
-    out = sim.run(scene, scenario, **recording).as_dict()
+    job = GraspJob(
+        obj=obj,
+        pose=gripper_pose,
+        design=stiffness,
+        finger_model=FingerModel(model),
+        scenario=GraspScenario(**kwargs),
+        seed=seed,
+        label=label or design,
+    )
+    out = run_jobs([job], sim, observer, strict=True)[0].as_dict()
     out.update(
         object=obj.name,
         mass_kg=obj.mass,
@@ -253,16 +223,10 @@ def prepare_object(
     cache_dir: Path | None = None,
 ) -> tuple:
     """(object with its convex decomposition, density [kg/m³], gripper pose) for :func:`grasp`."""
-    from mjcodesign.design.finger import FingerDesign
-    from mjcodesign.errors import MeshError
-    from mjcodesign.objects.mesh import CoacdSettings, convex_decomposition, load_object, parse_density
+    from mjcodesign.jobs import load_grasp_object, resolve_pose
 
-    rho = parse_density(density)
-    if Path(source).is_dir():
-        raise MeshError(f"{source} is a folder: grasp() takes one object (see object_sources)")
-    obj = load_object(source, rho, allow_open=allow_open, seed=seed)
-    convex_decomposition(obj, CoacdSettings(seed=seed), cache_dir=cache_dir)
-    return obj, rho, _read_pose(pose, obj, FingerDesign(), seed)
+    obj = load_grasp_object(source, density, seed=seed, allow_open=allow_open, cache_dir=cache_dir)
+    return obj, obj.density, resolve_pose(pose, obj, seed=seed)
 
 
 def split_designs(text: str) -> list[str]:
@@ -279,7 +243,7 @@ def object_sources(text: str) -> list[str] | None:
     Raises :class:`MeshError` for a folder without OBJ/STL/PLY files.
     """
     from mjcodesign.errors import MeshError
-    from mjcodesign.objects.mesh import MESH_SUFFIXES, OBJECT_SETS, named_set
+    from mjcodesign.objects import MESH_SUFFIXES, OBJECT_SETS, named_set
 
     if text in OBJECT_SETS:
         return list(named_set(text))
@@ -305,15 +269,9 @@ def _failed_object(source: str, exc: Exception) -> dict:
     }
 
 
-def run(args: argparse.Namespace) -> int:
-    """Run ``grasp``; library errors propagate to the caller (exit 2 there).
-
-    Several designs run on the same object side by side. A named set or a folder runs every object
-    (for every design) and prints a JSON list (one object per line); an object that fails to load,
-    decompose or pose is a failed entry with ``reason`` "error: ...".
-    """
-    from mjcodesign.cli.viz import open_recorder
-    from mjcodesign.errors import DesignError, MjcodesignError, StiffnessError
+def _variants(args: argparse.Namespace) -> list[tuple[str, str, str, dict]]:
+    """(design, backend, label, keys) of every design on every backend; keys tell runs apart in JSON."""
+    from mjcodesign.errors import DesignError, StiffnessError
 
     designs = split_designs(args.design)
     if len(set(designs)) != len(designs):
@@ -324,7 +282,6 @@ def run(args: argparse.Namespace) -> int:
             raise DesignError(f"unknown backend {b!r}: choose from {', '.join(_BACKENDS)}")
     if len(set(backends)) != len(backends):
         raise DesignError(f"--backend lists a backend twice: {args.backend}")
-    # Every design on every backend; the keys that tell the runs apart are added to their records.
     variants = []
     for design in designs:
         for backend in backends:
@@ -332,65 +289,60 @@ def run(args: argparse.Namespace) -> int:
             keys.update({"backend": backend} if len(backends) > 1 else {})
             label = "/".join([design] + ([backend] if len(backends) > 1 else []))
             variants.append((design, backend, label, keys))
-    sources = object_sources(args.object)
-    recorder = open_recorder(args)
+    return variants
 
-    def one(source: str, variant: tuple, prefix: str = "", prepared=None) -> dict:
+
+class _Runner:
+    """One ``grasp`` invocation: its arguments, recorder and cache, for every object and variant."""
+
+    def __init__(self, args: argparse.Namespace, recorder):
+        self.args = args
+        self.recorder = recorder
+        self.cache = user_cache_dir()
+
+    def prepare(self, source: str) -> tuple:
+        a = self.args
+        return prepare_object(
+            source, a.density, a.pose, seed=a.seed, allow_open=a.allow_open, cache_dir=self.cache
+        )
+
+    def one(self, source: str, variant: tuple, prepared: tuple, prefix: str = "") -> dict:
         design, backend, label, keys = variant
+        a = self.args
         out = grasp(
             source,
             design,
-            args.model,
-            args.density,
-            args.pose,
-            impulse=args.impulse,
-            tension=args.tension,
-            lift=args.lift,
+            a.model,
+            a.density,
+            a.pose,
+            impulse=a.impulse,
+            tension=a.tension,
+            lift=a.lift,
             backend=backend,
-            device=args.device,
-            seed=args.seed,
-            allow_open=args.allow_open,
-            cache_dir=user_cache_dir(),
-            observer=recorder,
+            device=a.device,
+            seed=a.seed,
+            allow_open=a.allow_open,
+            cache_dir=self.cache,
+            observer=self.recorder,
             label=prefix + label,
             prepared=prepared,
         )
         return {**keys, **out}
 
-    def prepare(source: str):
-        return prepare_object(
-            source,
-            args.density,
-            args.pose,
-            seed=args.seed,
-            allow_open=args.allow_open,
-            cache_dir=user_cache_dir(),
-        )
-
-    try:
-        if sources is None:
-            prepared = prepare(args.object)
-            outs = [one(args.object, v, prepared=prepared) for v in variants]
-            if len(outs) == 1:
-                _print(outs[0], args.json)
-            elif args.json:
-                print(json.dumps(outs))
-            else:
-                for out in outs:
-                    _print(out, False)
-                    print()
-            return 0
+    def many(self, sources: list[str], variants: list[tuple], results: list[dict]) -> None:
+        """Every object of a set or folder; an object that fails is a failed record, never a stop."""
         from rich.console import Console
         from rich.progress import Progress
 
-        results = []
+        from mjcodesign.errors import MjcodesignError
+
         with Progress(console=Console(stderr=True), transient=True) as bar:
-            task = bar.add_task(f"grasp {args.object}", total=len(sources) * len(variants))
+            task = bar.add_task(f"grasp {self.args.object}", total=len(sources) * len(variants))
             for source in sources:
                 name = Path(source).stem if Path(source).suffix else source
                 bar.update(task, description=f"grasp {name} (loading)")
                 try:
-                    prepared = prepare(source)
+                    prepared = self.prepare(source)
                 except MjcodesignError as exc:  # every variant fails alike on an object that does not load
                     results += [{**v[3], **_failed_object(source, exc)} for v in variants]
                     bar.advance(task, len(variants))
@@ -398,27 +350,61 @@ def run(args: argparse.Namespace) -> int:
                 for variant in variants:
                     bar.update(task, description=f"grasp {name} ({variant[2]})")
                     try:
-                        results.append(one(source, variant, f"{name}/", prepared))
+                        results.append(self.one(source, variant, prepared, f"{name}/"))
                     except MjcodesignError as exc:
                         results.append({**variant[3], **_failed_object(source, exc)})
                     bar.advance(task)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``grasp``; library errors propagate to the caller (exit 2 there).
+
+    Several designs run on the same object side by side. A named set or a folder runs every object
+    (for every design) and prints a JSON list (one object per line); an object that fails to load,
+    decompose or pose is a failed entry with ``reason`` "error: ...".
+    """
+    from mjcodesign.cli.viz import open_recorder
+
+    variants = _variants(args)
+    sources = object_sources(args.object)
+    recorder = open_recorder(args)
+    runner = _Runner(args, recorder)
+    results: list[dict] = []
+    try:
+        if sources is None:
+            prepared = runner.prepare(args.object)
+            outs = [runner.one(args.object, v, prepared) for v in variants]
+            _print_runs(outs, args.json, listed=len(outs) > 1)
+            return 0
+        runner.many(sources, variants, results)
     finally:
         if recorder is not None:
             recorder.close()
     if args.json:
         print("[\n" + ",\n".join(json.dumps(r) for r in results) + "\n]")
     else:
-        for r in results:
-            _print(r, False)
-            print()
+        _print_runs(results, False, listed=True)
     return 0
+
+
+def _print_runs(outs: list[dict], as_json: bool, *, listed: bool) -> None:
+    """One record as a JSON object (or key/value lines), several as a JSON list (or blocks)."""
+    if not listed:
+        _print(outs[0], as_json)
+    elif as_json:
+        print(json.dumps(outs))
+    else:
+        for out in outs:
+            _print(out, False)
+            print()
 
 
 def run_bench(args: argparse.Namespace) -> int:
     """Run ``bench grasp``."""
-    from mjcodesign.bench.grasp import bench_grasp
+    from mjcodesign.bench import run_benchmark
 
-    res = bench_grasp(
+    res = run_benchmark(
+        "grasp",
         model=args.model,
         source=args.object,
         rollouts=args.rollouts,

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
 import sys
 
+from mjcodesign.cli.common import Parser, emit, parse_design, quiet_warp
 from mjcodesign.errors import MjcodesignError
 
 __all__ = ["main", "build_parser"]
@@ -13,103 +15,55 @@ __all__ = ["main", "build_parser"]
 _MODELS = ("chain", "flex", "flex-quadratic")
 
 
-class _Parser(argparse.ArgumentParser):
-    """argparse that reports a usage error as one line and exit code 2."""
-
-    def error(self, message: str):  # noqa: D102
-        sys.stderr.write(f"error: {message}\n")
-        raise SystemExit(2)
-
-
-def _design(text: str):
-    from mjcodesign.design.stiffness import Stiffness
-
-    return Stiffness.parse(text)
-
-
-def _emit(obj, as_json: bool) -> None:
-    if as_json:
-        print(json.dumps(obj, indent=None))
-        return
-    from rich.console import Console
-    from rich.table import Table
-
-    if isinstance(obj, dict):
-        table = Table("key", "value")
-        for k, v in obj.items():
-            table.add_row(str(k), _fmt(v))
-        Console().print(table)
-        return
-    rows = obj
-    table = Table()
-    keys = list(rows[0].keys())
-    for k in keys:
-        table.add_column(k)
-    for r in rows:
-        table.add_row(*[_fmt(r[k]) for k in keys])
-    Console().print(table)
-
-
-def _fmt(v) -> str:
-    from rich.markup import escape
-
-    return escape(_plain(v))
-
-
-def _plain(v) -> str:
-    if isinstance(v, float):
-        return f"{v:.4g}"
-    if isinstance(v, list):
-        return "[" + ", ".join(_plain(x) for x in v[:6]) + (", …]" if len(v) > 6 else "]")
-    return str(v)
-
-
 def _cmd_validate_beam(args) -> int:
-    from mjcodesign.design.finger import FingerDesign
+    from mjcodesign.design import FingerDesign
     from mjcodesign.scenarios.static import validate_beam
 
-    stiffness = _design(args.design)
+    stiffness = parse_design(args.design)
     res = validate_beam(FingerDesign(), stiffness, args.model, force=args.force, dynamic=args.dynamic or None)
     res["design"] = args.design
-    _emit(res, args.json)
+    emit(res, args.json)
     return 0
 
 
 def _cmd_finger_export(args) -> int:
-    from mjcodesign.design.finger import FingerDesign
-    from mjcodesign.models.builder import build_finger, build_gripper
-    from mjcodesign.models.export import export_model
+    from mjcodesign.design import FingerDesign
+    from mjcodesign.models import build_finger, build_gripper, export_model
 
-    stiffness = _design(args.design)
+    stiffness = parse_design(args.design)
     build = build_gripper if args.gripper else build_finger
     kwargs = {} if args.gripper else {"scene": True}
     built = build(FingerDesign(), stiffness, args.model, **kwargs)
     manifest = export_model(built, args.out)
     manifest["out"] = str(args.out)
-    _emit({k: v for k, v in manifest.items() if k != "flex_cell_young_pa"}, args.json)
+    emit({k: v for k, v in manifest.items() if k != "flex_cell_young_pa"}, args.json)
     return 0
 
 
 def _cmd_bench_finger(args) -> int:
-    from mjcodesign.bench.finger import bench_finger
+    from mjcodesign.bench import run_benchmark
 
-    res = bench_finger(
-        models=args.models.split(","), seconds=args.seconds, out=args.out, flex_cells=args.flex_cells
+    res = run_benchmark(
+        "finger",
+        out=args.out,
+        models=args.models.split(","),
+        seconds=args.seconds,
+        flex_cells=args.flex_cells,
     )
     if args.json:
         print(json.dumps(res))
     else:
-        _emit([{"model": k, **v} for k, v in res.items()], False)
+        emit([{"model": k, **v} for k, v in res.items()], False)
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser."""
-    p = _Parser(prog="mjcodesign", description="Co-design tendon-driven soft grippers on MuJoCo.")
-    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    p = Parser(prog="mjcodesign", description="Co-design tendon-driven soft grippers on MuJoCo.")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=Parser)
 
     val = sub.add_parser("validate", help="check the finger models against references")
-    vsub = val.add_subparsers(dest="what", required=True, parser_class=_Parser)
+    vsub = val.add_subparsers(dest="what", required=True, parser_class=Parser)
     beam = vsub.add_parser("beam", help="cantilever tip load against Euler–Bernoulli")
     beam.add_argument("--model", choices=_MODELS, default="chain")
     beam.add_argument(
@@ -125,7 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
     beam.set_defaults(func=_cmd_validate_beam)
 
     finger = sub.add_parser("finger", help="finger models")
-    fsub = finger.add_subparsers(dest="what", required=True, parser_class=_Parser)
+    fsub = finger.add_subparsers(dest="what", required=True, parser_class=Parser)
     exp = fsub.add_parser("export", help="write a self-contained MJCF, MJB and block STLs")
     exp.add_argument("--design", default="paper-optimized")
     exp.add_argument("--model", choices=_MODELS, default="chain")
@@ -135,7 +89,7 @@ def build_parser() -> argparse.ArgumentParser:
     exp.set_defaults(func=_cmd_finger_export)
 
     bench = sub.add_parser("bench", help="benchmarks (write JSON)")
-    bsub = bench.add_subparsers(dest="what", required=True, parser_class=_Parser)
+    bsub = bench.add_subparsers(dest="what", required=True, parser_class=Parser)
     bf = bsub.add_parser("finger", help="steps/s of a 1-s free tendon curl per model, one thread")
     bf.add_argument("--models", default=",".join(_MODELS))
     bf.add_argument("--seconds", type=float, default=1.0, help="simulated seconds per model")
@@ -168,10 +122,29 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _reaches_warp(args: argparse.Namespace) -> bool:
+    """Whether this command can initialise Warp: the FEM, the mjwarp backend, or the poses' SDF (Warp).
+
+    ``grasp`` on MuJoCo C with an ``auto`` or file pose, ``bench grasp`` and ``bench viz`` never reach
+    Warp, and importing it costs ~1.3 s, so they skip it; ``hw`` plans no poses.
+    """
+    command, what = args.command, getattr(args, "what", None)
+    if command == "bench":
+        return what in ("fem", "poses")
+    if command == "grasp":
+        return "mjwarp" in getattr(args, "backend", "") or getattr(args, "pose", None) == "best"
+    return command in ("crosscheck", "poses")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point: typed library errors become exit code 2 and one line on stderr."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if _reaches_warp(args) and importlib.util.find_spec("warp") is not None:
+        try:
+            quiet_warp()  # once, before the library's wp.init(), which is then silent
+        except (ImportError, OSError, RuntimeError):
+            pass  # the library call that needs Warp reports it
     try:
         return int(args.func(args) or 0)
     except MjcodesignError as exc:

@@ -10,6 +10,8 @@ import argparse
 import json
 from pathlib import Path
 
+from mjcodesign.cli.common import user_cache_dir
+
 __all__ = ["add_parser", "add_bench_parser", "run", "run_bench", "poses"]
 
 _DEFAULT_BENCH_OBJECTS = "012_strawberry,013_apple,005_tomato_soup_can,010_potted_meat_can"
@@ -94,8 +96,8 @@ def poses(
     import numpy as np
 
     from mjcodesign.errors import PoseError
-    from mjcodesign.objects.mesh import load_mesh, load_object
-    from mjcodesign.poses.sampler import SamplerOptions, import_anygrasp, load_external, sample_poses
+    from mjcodesign.objects import load_mesh, load_object
+    from mjcodesign.poses import SamplerOptions, import_anygrasp, load_external, sample_poses
 
     obj = load_object(source, 100.0, allow_open=allow_open, seed=seed)
     if import_file is not None:
@@ -159,14 +161,14 @@ def run(args: argparse.Namespace) -> int:
 
 def run_bench(args: argparse.Namespace) -> int:
     """Run ``bench poses``."""
-    from mjcodesign.bench.poses import bench_poses
-    from mjcodesign.cli.grasp import user_cache_dir
-    from mjcodesign.objects.mesh import named_set, parse_density
+    from mjcodesign.bench import run_benchmark
+    from mjcodesign.objects import named_set, parse_density
 
     names = list(named_set(args.objects)) if args.objects == "ycb-in-domain" else args.objects.split(",")
-    res = bench_poses(
-        names,
-        args.per_object,
+    res = run_benchmark(
+        "poses",
+        objects=names,
+        per_object=args.per_object,
         seed=args.seed,
         density=parse_density(args.density),
         impulse=args.impulse,

@@ -13,6 +13,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from mjcodesign.cli.common import emit, user_cache_dir
+
 __all__ = [
     "add_parser",
     "add_bench_parser",
@@ -53,7 +55,7 @@ def open_recorder(args: argparse.Namespace):
     spawn = getattr(args, "spawn", False)
     if not args.rrd and not spawn:
         return None
-    from mjcodesign.sim.observe import load_observer
+    from mjcodesign.sim import load_observer
 
     return load_observer(
         "rerun",
@@ -125,8 +127,8 @@ def _cmd_view(args) -> int:
 
 
 def _cmd_bench_viz(args) -> int:
-    from mjcodesign.bench.viz import CASES, bench_viz
-    from mjcodesign.cli.grasp import user_cache_dir
+    from mjcodesign.bench import run_benchmark
+    from mjcodesign.bench.viz import CASES
     from mjcodesign.errors import DesignError
 
     try:
@@ -140,25 +142,18 @@ def _cmd_bench_viz(args) -> int:
         raise DesignError(
             f"unknown bench viz case(s) {sorted(unknown)}; choose from {[c.name for c in CASES]}"
         )
-    res = bench_viz(
+    res = run_benchmark(
+        "viz",
+        out=args.out,
         names=args.cases.split(","),
         decimations=decimations,
         repeats=args.repeats,
         cache_dir=user_cache_dir(),
     )
-    if args.out:
-        from mjcodesign.errors import OutputError
-
-        try:
-            Path(args.out).write_text(json.dumps(res, indent=1))
-        except OSError as exc:
-            raise OutputError(f"cannot write {args.out}: {exc.strerror or exc}") from exc
     if args.json:
         print(json.dumps(res))
     else:
-        from mjcodesign.cli.main import _emit
-
-        _emit(res["cases"], False)
+        emit(res["cases"], False)
     return 0
 
 

@@ -175,37 +175,7 @@ def write_bambu_3mf(plan: PrintPlan, path: str | Path) -> Path:
         _bmeta(cobj, "extruder", "1")
         _bmeta(cobj, "layer_height", f"{plan.calibration.layer_height * _MM_PER_M:g}")
         for bp in finger:
-            bid = str(place.finger * len(finger) + bp.block.index + 1)
-            v, f = block_mesh(bp.block)
-            mobj = ET.SubElement(
-                sub_res, _q("object"), {"id": bid, _p("UUID"): _uuid(bp.name), "type": "model"}
-            )
-            _mesh(mobj, [(v, f)])
-            ET.SubElement(
-                comps,
-                _q("component"),
-                {
-                    _p("path"): "/" + _BAMBU_SUBMODEL,
-                    "objectid": bid,
-                    _p("UUID"): _uuid(bp.name + "/component"),
-                    "transform": _transform((0.0, 0.0, 0.0)),
-                },
-            )
-            part = ET.SubElement(cobj, "part", id=bid, subtype="normal_part")
-            _bmeta(part, "name", bp.name)
-            _bmeta(part, "matrix", _IDENTITY_4X4)
-            for key, value in _bambu_settings(bp).items():
-                _bmeta(part, key, value)
-            ET.SubElement(
-                part,
-                "mesh_stat",
-                face_count=str(len(f)),
-                edges_fixed="0",
-                degenerate_facets="0",
-                facets_removed="0",
-                facets_reversed="0",
-                backwards_edges="0",
-            )
+            _bambu_block(bp, str(place.finger * len(finger) + bp.block.index + 1), sub_res, comps, cobj)
         ET.SubElement(
             build,
             _q("item"),
@@ -255,6 +225,38 @@ def write_stls(plan: PrintPlan, directory: str | Path) -> list[Path]:
 
 
 # -- helpers ------------------------------------------------------------------------------------
+
+
+def _bambu_block(bp: BlockPrint, bid: str, sub_res: ET.Element, comps: ET.Element, cobj: ET.Element) -> None:
+    """One block of the Bambu 3MF: its mesh object, its finger's component and its settings part."""
+    v, f = block_mesh(bp.block)
+    mobj = ET.SubElement(sub_res, _q("object"), {"id": bid, _p("UUID"): _uuid(bp.name), "type": "model"})
+    _mesh(mobj, [(v, f)])
+    ET.SubElement(
+        comps,
+        _q("component"),
+        {
+            _p("path"): "/" + _BAMBU_SUBMODEL,
+            "objectid": bid,
+            _p("UUID"): _uuid(bp.name + "/component"),
+            "transform": _transform((0.0, 0.0, 0.0)),
+        },
+    )
+    part = ET.SubElement(cobj, "part", id=bid, subtype="normal_part")
+    _bmeta(part, "name", bp.name)
+    _bmeta(part, "matrix", _IDENTITY_4X4)
+    for key, value in _bambu_settings(bp).items():
+        _bmeta(part, key, value)
+    ET.SubElement(
+        part,
+        "mesh_stat",
+        face_count=str(len(f)),
+        edges_fixed="0",
+        degenerate_facets="0",
+        facets_removed="0",
+        facets_reversed="0",
+        backwards_edges="0",
+    )
 
 
 def _bambu_settings(bp: BlockPrint) -> dict[str, str]:

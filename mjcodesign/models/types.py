@@ -159,6 +159,10 @@ class GripperPose:
 
     def __post_init__(self) -> None:
         p, q, s = np.asarray(self.position), np.asarray(self.quat), np.asarray(self.openings)
+        if p.shape == (3,) and q.shape == (4,) and s.shape == (2,):  # tuples of floats: hashable, exact
+            object.__setattr__(self, "position", tuple(float(x) for x in p))
+            object.__setattr__(self, "quat", tuple(float(x) for x in q))
+            object.__setattr__(self, "openings", tuple(float(x) for x in s))
         if p.shape != (3,) or q.shape != (4,) or s.shape != (2,):
             raise PoseError("pose needs position (3), quaternion (4) and two openings")
         if not (np.all(np.isfinite(p)) and np.all(np.isfinite(q)) and np.all(np.isfinite(s))):

@@ -1,0 +1,64 @@
+"""Grasp candidates: an antipodal sampler, AnyGrasp/GraspNet import, and the rigid-counterpart refinement.
+
+Import from here (``from mjcodesign.poses import sample_poses``): each name has this one public path.
+
+- :mod:`~mjcodesign.poses.gripper`: the palm frame and the fingers' rigid counterpart as points;
+- :mod:`~mjcodesign.poses.sdf`: signed distance to the object mesh (Warp, imported lazily);
+- :mod:`~mjcodesign.poses.refine`: the paper's L_init refinement of a pose's offset and openings;
+- :mod:`~mjcodesign.poses.candidates`: :class:`Candidates`, their file, and the accept-and-rank checks;
+- :mod:`~mjcodesign.poses.sampler`: the antipodal sampler;
+- :mod:`~mjcodesign.poses.external`: AnyGrasp/GraspNet files in the authors' camera frame.
+"""
+
+from mjcodesign.poses.candidates import (
+    MAX_PENETRATION,
+    NOISE_ROTATION,
+    NOISE_TRANSLATION,
+    OPEN_CLEARANCE,
+    Candidates,
+    approach_spread_deg,
+    augment_poses,
+    read_candidates,
+    refine_and_rank,
+    to_gripper_pose,
+)
+from mjcodesign.poses.external import ANYGRASP_DEPTH, anygrasp_to_world, import_anygrasp, load_external
+from mjcodesign.poses.gripper import COARSE_EDGE, DENSE_EDGE, RigidGripper, palm_frame, rotvec, scene_offset
+from mjcodesign.poses.refine import LOSS_THRESHOLD, MAX_FINGER_GAP, T_RANGE, W_D, W_P, Refined, refine
+from mjcodesign.poses.sampler import FRICTION, SamplerOptions, antipodal_pairs, sample_poses
+from mjcodesign.poses.sdf import MeshSDF
+
+__all__ = [
+    "ANYGRASP_DEPTH",
+    "COARSE_EDGE",
+    "DENSE_EDGE",
+    "FRICTION",
+    "LOSS_THRESHOLD",
+    "MAX_FINGER_GAP",
+    "MAX_PENETRATION",
+    "NOISE_ROTATION",
+    "NOISE_TRANSLATION",
+    "OPEN_CLEARANCE",
+    "T_RANGE",
+    "W_D",
+    "W_P",
+    "Candidates",
+    "MeshSDF",
+    "Refined",
+    "RigidGripper",
+    "SamplerOptions",
+    "antipodal_pairs",
+    "anygrasp_to_world",
+    "approach_spread_deg",
+    "augment_poses",
+    "import_anygrasp",
+    "load_external",
+    "palm_frame",
+    "read_candidates",
+    "refine",
+    "refine_and_rank",
+    "rotvec",
+    "sample_poses",
+    "scene_offset",
+    "to_gripper_pose",
+]

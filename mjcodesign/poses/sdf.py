@@ -8,6 +8,8 @@ construction (repaired, or replaced by their convex hull).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from mjcodesign.errors import MeshError
@@ -19,50 +21,52 @@ _NEAR = 0.03  # [m]: first query radius; a BVH query with 1 m is 5x slower on a 
 _FAR = 1.0  # [m]: second query, only for points inside the mesh's bounding box beyond _NEAR
 _EPSILON = 1e-3  # warp's default tie tolerance, as a fraction of the mean edge length
 
-_KERNEL = None
 
-
+@functools.cache
 def _kernel():
-    """The query kernel, defined on first use so that warp stays a lazy import."""
-    global _KERNEL
-    if _KERNEL is None:
-        import warp as wp
+    """The query kernel, defined on first use so that warp stays a lazy import.
 
-        @wp.kernel(enable_backward=False)
-        def _sdf(
-            mesh_in: wp.uint64,
-            points_in: wp.array(dtype=wp.vec3),
-            lower_in: wp.vec3,
-            upper_in: wp.vec3,
-            near_in: float,
-            far_in: float,
-            dist_out: wp.array(dtype=float),
-            normal_out: wp.array(dtype=wp.vec3),
-        ):
-            tid = wp.tid()
-            p = points_in[tid]
-            q = wp.mesh_query_point_sign_normal(mesh_in, p, near_in, _EPSILON)
-            if not q.result:
-                inside_box = p[0] > lower_in[0] and p[1] > lower_in[1] and p[2] > lower_in[2]
-                inside_box = inside_box and p[0] < upper_in[0] and p[1] < upper_in[1] and p[2] < upper_in[2]
-                if inside_box:
-                    q = wp.mesh_query_point_sign_normal(mesh_in, p, far_in, _EPSILON)
-            if q.result:
-                c = wp.mesh_eval_position(mesh_in, q.face, q.u, q.v)
-                delta = p - c
-                dist = wp.length(delta)
-                dist_out[tid] = q.sign * dist
-                if dist > 1.0e-9:
-                    normal_out[tid] = q.sign * delta / dist
-                else:
-                    normal_out[tid] = wp.mesh_eval_face_normal(mesh_in, q.face)
+    ``functools.cache`` keeps the one ``wp.Kernel`` this builds, in place of a module-level variable
+    that the first call would reassign: the module holds no mutable state of its own, and
+    ``_kernel.cache_clear()`` drops it. Defining it once matters: each definition is a new kernel in
+    Warp's module registry, which Warp would hash and load again.
+    """
+    import warp as wp
+
+    @wp.kernel(enable_backward=False)
+    def _sdf(
+        mesh_in: wp.uint64,
+        points_in: wp.array(dtype=wp.vec3),
+        lower_in: wp.vec3,
+        upper_in: wp.vec3,
+        near_in: float,
+        far_in: float,
+        dist_out: wp.array(dtype=float),
+        normal_out: wp.array(dtype=wp.vec3),
+    ):
+        tid = wp.tid()
+        p = points_in[tid]
+        q = wp.mesh_query_point_sign_normal(mesh_in, p, near_in, _EPSILON)
+        if not q.result:
+            inside_box = p[0] > lower_in[0] and p[1] > lower_in[1] and p[2] > lower_in[2]
+            inside_box = inside_box and p[0] < upper_in[0] and p[1] < upper_in[1] and p[2] < upper_in[2]
+            if inside_box:
+                q = wp.mesh_query_point_sign_normal(mesh_in, p, far_in, _EPSILON)
+        if q.result:
+            c = wp.mesh_eval_position(mesh_in, q.face, q.u, q.v)
+            delta = p - c
+            dist = wp.length(delta)
+            dist_out[tid] = q.sign * dist
+            if dist > 1.0e-9:
+                normal_out[tid] = q.sign * delta / dist
             else:
-                # Outside the bounding box and beyond _NEAR: outside, at least _NEAR away (a bound).
-                dist_out[tid] = near_in
-                normal_out[tid] = wp.vec3(0.0, 0.0, 0.0)
+                normal_out[tid] = wp.mesh_eval_face_normal(mesh_in, q.face)
+        else:
+            # Outside the bounding box and beyond _NEAR: outside, at least _NEAR away (a bound).
+            dist_out[tid] = near_in
+            normal_out[tid] = wp.vec3(0.0, 0.0, 0.0)
 
-        _KERNEL = _sdf
-    return _KERNEL
+    return _sdf
 
 
 class MeshSDF:

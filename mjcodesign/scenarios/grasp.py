@@ -45,7 +45,7 @@ from mjcodesign.models.types import (
     SimOptions,
     TendonMode,
 )
-from mjcodesign.objects.mesh import GraspObject
+from mjcodesign.objects import GraspObject
 
 __all__ = [
     "DEFAULT_IMPULSE",
@@ -55,6 +55,8 @@ __all__ = [
     "GraspScene",
     "auto_pose",
     "build_scene",
+    "compile_scene",
+    "REFERENCE_POSE",
     "phase_controls",
     "scene_at_pose",
     "control_spec",
@@ -256,6 +258,10 @@ def start_openings(obj: GraspObject, pose: GripperPose) -> tuple[float, float]:
     )
 
 
+REFERENCE_POSE = GripperPose((0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0), (MAX_OPENING, MAX_OPENING))
+"""Where :func:`compile_scene` parks the gripper: 1 m up, level, open (clear of any object)."""
+
+
 def build_scene(
     obj: GraspObject,
     design: FingerDesign,
@@ -269,11 +275,30 @@ def build_scene(
 
     The object's COM starts at world (0, 0, z) with its lowest point 0.5 mm above the ground. Raises
     :class:`PoseError` if a fingertip or the palm starts below the ground or the object is too wide.
+    The scene is :func:`compile_scene` placed by :func:`scene_at_pose`, so a scene built at a pose is
+    bitwise the same as one moved there from any other pose.
+    """
+    return scene_at_pose(compile_scene(obj, design, stiffness, model, options=options), pose)
+
+
+def compile_scene(
+    obj: GraspObject,
+    design: FingerDesign,
+    stiffness: Stiffness,
+    model: FingerModel,
+    *,
+    options: SimOptions | None = None,
+) -> GraspScene:
+    """The grasp scene compiled with the gripper at :data:`REFERENCE_POSE`; place it with :func:`scene_at_pose`.
+
+    A pose only moves the mount and turns the palm, so compiling once per object and design and
+    writing each pose into a model copy gives the same numbers whatever pose came first (a compile
+    at the pose itself differs from a moved copy in derived constants at round-off, 1e-14).
     """
     if not obj.hulls:
         raise DesignError(f"object {obj.name} has no collision hulls: run convex_decomposition first")
-    start = start_openings(obj, pose)
-    start_pose = GripperPose(pose.position, pose.quat, start)
+    pose = start_pose = REFERENCE_POSE
+    start = start_pose.openings
     built = build_gripper(
         design, stiffness, model, pose=start_pose, tendon_mode=TendonMode.NATIVE, options=options
     )
@@ -313,17 +338,18 @@ def build_scene(
             apply_cell_young(m, h)
     built.model = m
     built.openings = start
-    scene = GraspScene(built, obj, pose, start)
-    _check_above_ground(scene)
-    return scene
+    return GraspScene(built, obj, pose, start)
 
 
 def scene_at_pose(scene: GraspScene, pose: GripperPose) -> GraspScene:
     """The scene with the gripper at another ``pose``, without recompiling.
 
     A pose only moves the mount (``body_pos``) and turns the palm (``body_quat``); the start openings go
-    into the initial state (:func:`mjcodesign.mjcf.make_data`). The test checks that the model equals a
-    recompiled :func:`build_scene` at that pose. Raises :class:`PoseError` like :func:`build_scene`.
+    into the initial state (:func:`mjcodesign.models.make_data`). ``mj_setConst`` then recomputes the
+    constants the compiler derives from the rest configuration (``*_invweight0``, which set the contact
+    regularisation, ``actuator_acc0``, lengths at rest), as a compile at ``pose`` would; what the
+    compiler alone converts (position servos' damping ratio to a gain) stays, 1e-13 off. Raises
+    :class:`PoseError` like :func:`build_scene`.
     """
     start = start_openings(scene.obj, pose)
     m = copy.copy(scene.model)
@@ -331,6 +357,7 @@ def scene_at_pose(scene: GraspScene, pose: GripperPose) -> GraspScene:
     if m.body_mass[scene.mount_body] == 0.0:
         m.body_ipos[scene.mount_body] = pose.position  # the compiler's value for a massless body
     m.body_quat[scene.palm_body] = pose.quat
+    mujoco.mj_setConst(m, mujoco.MjData(m))
     built = dataclasses.replace(scene.built, model=m, openings=start)
     moved = GraspScene(built, scene.obj, pose, start)
     _check_above_ground(moved)

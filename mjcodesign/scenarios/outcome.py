@@ -15,7 +15,7 @@ import numpy as np
 
 from mjcodesign.scenarios.grasp import STATE_SPEC, GraspScenario, GraspScene, control_spec
 
-__all__ = ["Failure", "Outcome", "failed_outcome", "outcome_from_states", "outcome_steps"]
+__all__ = ["Failure", "Outcome", "failed_outcome", "finger_wrench", "outcome_from_states", "outcome_steps"]
 
 _FORCE_EPS = 1e-6  # a finger wrench below this is "no force" [N]
 # Body force: mean over this many states in the second half of the first hold (each costs an
@@ -115,7 +115,7 @@ def failed_outcome(kind: Failure, reason: str, wall_time_s: float = 0.0) -> Outc
     return Outcome(False, (0.0,) * 6, (0.0,) * 3, False, reason, (Failure(kind),), wall_time_s)
 
 
-def _finger_wrench(
+def finger_wrench(
     scene: GraspScene, d: mujoco.MjData, *, forces: bool = True
 ) -> tuple[np.ndarray, bool, bool]:
     """(wrench on the object by the fingers [torque about COM, force] in world, finger contact, ground).
@@ -221,7 +221,7 @@ def outcome_from_states(
     for t in idx:
         load(states[t], t, "forward")
         path[int(t)] = d.xipos[ob].copy()
-        w, _, _ = _finger_wrench(scene, d)
+        w, _, _ = finger_wrench(scene, d)
         _, R = _palm_frame(scene, d)
         acc[:3] += R.T @ w[:3]
         acc[3:] += R.T @ w[3:]
@@ -234,7 +234,7 @@ def outcome_from_states(
         p, R = _palm_frame(scene, d)
         rel.append(R.T @ (d.xipos[ob] - p))
     displacement = rel[1] - rel[0]
-    _, finger, ground = _finger_wrench(scene, d, forces=False)  # d holds the final contacts
+    _, finger, ground = finger_wrench(scene, d, forces=False)  # d holds the final contacts
     rise = float(d.xipos[ob][2]) - z0
     lifted = rise >= scenario.lifted_fraction * scenario.lift
     force_ok = float(np.linalg.norm(body_force[3:])) > _FORCE_EPS

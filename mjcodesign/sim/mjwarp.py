@@ -26,9 +26,16 @@ from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError, UnsupportedError
 from mjcodesign.models.types import GripperPose
 from mjcodesign.optional import import_warp
-from mjcodesign.scenarios.grasp import STATE_SPEC, GraspScenario, GraspScene, phase_controls, scene_at_pose
-from mjcodesign.scenarios.outcome import Outcome, failed_outcome, outcome_from_states, outcome_steps
-from mjcodesign.sim.mujoco_c import initial_state, with_stiffness
+from mjcodesign.scenarios.grasp import (
+    STATE_SPEC,
+    GraspScenario,
+    GraspScene,
+    build_scene,
+    phase_controls,
+    scene_at_pose,
+)
+from mjcodesign.scenarios.outcome import Failure, Outcome, failed_outcome, outcome_from_states, outcome_steps
+from mjcodesign.sim.mujoco_c import initial_state, scene_with_design
 from mjcodesign.sim.observe import Observer, Rollout
 
 __all__ = ["MjwarpBackend"]
@@ -40,7 +47,9 @@ _NJMAX_PER_WORLD = 1024  # constraint rows per world
 
 
 class MjwarpBackend:
-    """MuJoCo Warp on ``device`` (``"cpu"`` for parity tests; built for GPUs)."""
+    """MuJoCo Warp on ``device`` (``"cpu"`` for parity tests; built for GPUs): a ``Simulator``."""
+
+    name = "mjwarp"
 
     def __init__(self, device: str | None = "cpu"):
         try:
@@ -65,22 +74,45 @@ class MjwarpBackend:
         return self.run_scenes([scene], scenario, observer=observer, labels=[label])[0]
 
     def run_batch(
-        self, scene: GraspScene, scenario: GraspScenario, stiffnesses: list[Stiffness]
+        self,
+        scene: GraspScene,
+        scenario: GraspScenario,
+        stiffnesses: list[Stiffness],
+        *,
+        observer: Observer | None = None,
+        labels: list[str] | None = None,
     ) -> list[Outcome]:
         """One world per design; a world whose state turns non-finite is a failed outcome.
 
         Flex: MJWarp shares ``flex_stiffness`` across worlds, so every design is a model of its own, run
         one after the other (each one world); batch a flex design over poses with :meth:`run_poses`.
+        ``observer`` receives every rollout, labelled ``labels[i]`` (default ``design{i}``).
         """
+        labels = labels or [f"design{i}" for i in range(len(stiffnesses))]
         if scene.built.finger_model.is_flex:
-            return [self.run_scenes([_flex_design(scene, s)], scenario)[0] for s in stiffnesses]
-        return self.run_scenes([_with_model(scene, with_stiffness(scene, s)) for s in stiffnesses], scenario)
+            return [
+                self.run_scenes([_flex_design(scene, s)], scenario, observer=observer, labels=[lab])[0]
+                for s, lab in zip(stiffnesses, labels, strict=True)
+            ]
+        scenes = [scene_with_design(scene, s) for s in stiffnesses]
+        return self.run_scenes(scenes, scenario, observer=observer, labels=labels)
 
     def run_poses(
-        self, scene: GraspScene, scenario: GraspScenario, poses: list[GripperPose]
+        self,
+        scene: GraspScene,
+        scenario: GraspScenario,
+        poses: list[GripperPose],
+        *,
+        observer: Observer | None = None,
+        labels: list[str] | None = None,
     ) -> list[Outcome]:
-        """One world per pose of the scene's design (batched ``body_pos``/``body_quat``, chain only)."""
-        return self.run_scenes([scene_at_pose(scene, p) for p in poses], scenario)
+        """One world per pose of the scene's design (batched ``body_pos``/``body_quat``).
+
+        ``observer`` receives every rollout, labelled ``labels[i]`` (default ``pose{i}``).
+        """
+        labels = labels or [f"pose{i}" for i in range(len(poses))]
+        scenes = [scene_at_pose(scene, p) for p in poses]
+        return self.run_scenes(scenes, scenario, observer=observer, labels=labels)
 
     def run_scenes(
         self,
@@ -147,12 +179,11 @@ class MjwarpBackend:
         outs = []
         for w, sc in enumerate(scenes):
             if not np.all(np.isfinite(states[w][sorted(keep)])):
-                outs.append(failed_outcome("diverged: mjwarp state is not finite"))
+                outs.append(failed_outcome(Failure.DIVERGED, "diverged: mjwarp state is not finite"))
                 continue
             outs.append(outcome_from_states(sc, scenario, x0[w], states[w], ctrl[w], starts))
         wall = (time.perf_counter() - t0) / n
-        for o in outs:
-            o.wall_time_s = wall
+        outs = [o.with_wall_time(wall) for o in outs]
         labels = labels or [f"world{w}" for w in range(n)]
         for w, sc in enumerate(scenes if observer is not None else ()):
             finite = np.all(np.isfinite(states[w]), axis=1)
@@ -165,13 +196,5 @@ class MjwarpBackend:
 
 def _flex_design(scene: GraspScene, stiffness: Stiffness) -> GraspScene:
     """The scene rebuilt with a flex design of its own (the flex stiffness is compiled into the model)."""
-    from mjcodesign.scenarios.grasp import build_scene
-
     b = scene.built
     return build_scene(scene.obj, b.design, stiffness, b.finger_model, scene.pose, options=b.options)
-
-
-def _with_model(scene: GraspScene, m: mujoco.MjModel) -> GraspScene:
-    from mjcodesign.sim.mujoco_c import scene_with_model
-
-    return scene_with_model(scene, m)

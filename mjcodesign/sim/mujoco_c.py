@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import os
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from typing import NamedTuple, Protocol
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -30,42 +31,12 @@ from mjcodesign.scenarios.grasp import (
     phase_controls,
     scene_at_pose,
 )
-from mjcodesign.scenarios.outcome import Outcome, failed_outcome, outcome_from_states
+from mjcodesign.scenarios.outcome import Failure, Outcome, failed_outcome, outcome_from_states
 from mjcodesign.sim.observe import Capture, Observer, Rollout
 
-__all__ = ["GraspBackend", "MujocoBackend", "with_stiffness"]
+__all__ = ["MujocoBackend", "initial_state", "scene_with_design", "scene_with_model", "with_stiffness"]
 
 _CLOCK_TOL = 0.5  # [steps]: a rollout's time off by half a step means MuJoCo reset it
-
-
-class GraspBackend(Protocol):
-    """What every grasp simulator offers."""
-
-    def run(
-        self,
-        scene: GraspScene,
-        scenario: GraspScenario,
-        *,
-        observer: Observer | None = None,
-        label: str = "grasp",
-    ) -> Outcome:
-        """One rollout of the scenario; a divergence is a failed outcome, never an exception.
-
-        ``observer`` receives the whole rollout (:class:`mjcodesign.observe.Rollout`) as ``label``.
-        """
-        ...
-
-    def run_batch(
-        self, scene: GraspScene, scenario: GraspScenario, stiffnesses: list[Stiffness]
-    ) -> list[Outcome]:
-        """One rollout per design on the same object and pose."""
-        ...
-
-    def run_poses(
-        self, scene: GraspScene, scenario: GraspScenario, poses: list[GripperPose]
-    ) -> list[Outcome]:
-        """One rollout per pose of the scene's design."""
-        ...
 
 
 class _BlockFacts(NamedTuple):
@@ -134,6 +105,7 @@ def _chain_ids(scene: GraspScene) -> list[list[tuple[int, list[int]]]]:
 
 
 def initial_state(scene: GraspScene) -> np.ndarray:
+    """The scene's state at t=0 (``mjSTATE_FULLPHYSICS``): fingers at the start openings, object at rest."""
     d = make_data(scene.built)
     x0 = np.empty(mujoco.mj_stateSize(scene.model, STATE_SPEC))
     mujoco.mj_getState(scene.model, d, x0, STATE_SPEC)
@@ -177,7 +149,9 @@ def _step_all(
 
 
 class MujocoBackend:
-    """MuJoCo C. ``nthread`` defaults to every core the process may use."""
+    """MuJoCo C, a ``Simulator``; ``nthread`` defaults to every core the process may use."""
+
+    name = "mujoco"
 
     def __init__(self, nthread: int | None = None):
         self.nthread = nthread or len(os.sched_getaffinity(0))
@@ -186,7 +160,6 @@ class MujocoBackend:
         self,
         scene: GraspScene,
         scenario: GraspScenario,
-        model: mujoco.MjModel | None = None,
         *,
         observer: Observer | None = None,
         label: str = "grasp",
@@ -199,7 +172,7 @@ class MujocoBackend:
         divergence) under ``label``.
         """
         t0 = time.perf_counter()
-        m = model or scene.model
+        m = scene.model
         ctrl, starts = phase_controls(scene, scenario)
         x0 = initial_state(scene)
         d = mujoco.MjData(m)
@@ -216,14 +189,14 @@ class MujocoBackend:
             bad = _step_all(m, d, x0, ctrl, states, checked=True)
         if bad is not None:
             t, exc = bad
-            out = failed_outcome(f"diverged: {exc}", time.perf_counter() - t0)
+            out = failed_outcome(Failure.DIVERGED, f"diverged: {exc}", time.perf_counter() - t0)
             captured = {k: v for k, v in captured.items() if k < t}
             _observe(
                 observer, label, scene, scenario, m, x0, states[:t], ctrl, starts, out, captured=captured
             )
             return out
-        out = outcome_from_states(scene_with_model(scene, m), scenario, x0, states, ctrl, starts)
-        out.wall_time_s = time.perf_counter() - t0
+        out = outcome_from_states(scene, scenario, x0, states, ctrl, starts)
+        out = out.with_wall_time(time.perf_counter() - t0)
         _observe(
             observer, label, scene, scenario, m, x0, states, ctrl, starts, out, scratch=d, captured=captured
         )
@@ -243,11 +216,9 @@ class MujocoBackend:
         ``wall_time_s`` is the batch's wall time shared evenly (see :meth:`run_scenes`). ``observer``
         receives every rollout, labelled ``labels[i]`` (default ``design{i}``).
         """
-        models = [with_stiffness(scene, s) for s in stiffnesses]
         labels = labels or [f"design{i}" for i in range(len(stiffnesses))]
-        return self.run_scenes(
-            [scene_with_model(scene, m) for m in models], scenario, observer=observer, labels=labels
-        )
+        scenes = [scene_with_design(scene, s) for s in stiffnesses]
+        return self.run_scenes(scenes, scenario, observer=observer, labels=labels)
 
     def run_poses(
         self,
@@ -327,8 +298,7 @@ class MujocoBackend:
             for i, out in zip(good, pool.map(evaluate, good), strict=True):
                 outs[i] = out
         wall = (time.perf_counter() - t0) / len(scenes)
-        for o in outs:
-            o.wall_time_s = wall
+        outs = [o.with_wall_time(wall) for o in outs]
         for i in good if observer is not None else ():
             sc = scenes[i]
             observer.rollout(
@@ -373,5 +343,17 @@ def scene_with_model(scene: GraspScene, m: mujoco.MjModel) -> GraspScene:
     if m is scene.model:
         return scene
     other = copy.copy(scene)
+    other.model = m
+    return other
+
+
+def scene_with_design(scene: GraspScene, stiffness: Stiffness) -> GraspScene:
+    """The scene with another design: a model copy (:func:`with_stiffness`) and a ``built`` naming it.
+
+    The ``built`` names that model and design, so an observer colours the rollout by the design that ran.
+    """
+    m = with_stiffness(scene, stiffness)
+    other = copy.copy(scene)
+    other.built = dataclasses.replace(scene.built, model=m, stiffness=stiffness)
     other.model = m
     return other

@@ -15,7 +15,7 @@ from mjcodesign.hardware.camera import (
     load_point_cloud,
     save_point_cloud,
 )
-from mjcodesign.hardware.grasp import GraspJob, run_job
+from mjcodesign.hardware.grasp import RobotGraspJob, run_job
 from mjcodesign.hardware.pipeline import (
     Candidate,
     GraspPlan,
@@ -150,7 +150,7 @@ def test_pose_file_errors(tmp_path):
 def test_dry_run_plans_without_connecting(tmp_path):
     np.save(tmp_path / "c.npy", box_cloud())
     lines: list[str] = []
-    job = GraspJob(robot=None, dxl=None, cloud=tmp_path / "c.npy", dry_run=True)
+    job = RobotGraspJob(robot=None, dxl=None, cloud=tmp_path / "c.npy", dry_run=True)
     plan = run_job(job, lines.append)
     assert isinstance(plan, GraspPlan)
     assert len(lines) == 8 and all(line.startswith("[dry run]") for line in lines)

@@ -15,7 +15,7 @@ pytest.importorskip("dynamixel_sdk")
 
 from mjcodesign.hardware.camera import save_point_cloud
 from mjcodesign.hardware.dxl_emulator import emulator_process
-from mjcodesign.hardware.grasp import GraspJob, run_job
+from mjcodesign.hardware.grasp import RobotGraspJob, run_job
 from mjcodesign.hardware.pipeline import GraspReport
 from mjcodesign.hardware.selftest import (
     BOX_CENTRE,
@@ -53,7 +53,7 @@ def cloud_files(tmp_path):
 def test_pick_and_lift(scene, cloud_files):
     cloud, calib = cloud_files
     with emulator_process(IDS) as port:
-        job = GraspJob(
+        job = RobotGraspJob(
             robot=scene.host, dxl=port, pose="auto", cloud=cloud, calibration=calib,
             speed_factor=0.5, tendon_retries=10, realtime=False, latency_ms=100.0,
         )  # fmt: skip
@@ -78,7 +78,7 @@ def test_pick_and_lift(scene, cloud_files):
 def test_lost_link_mid_grasp_no_lift_torque_off(scene, cloud_files):
     cloud, calib = cloud_files
     with emulator_process(IDS, cut_link_on_goal_s=1.0) as port:
-        job = GraspJob(
+        job = RobotGraspJob(
             robot=scene.host, dxl=port, pose="auto", cloud=cloud, calibration=calib,
             speed_factor=0.5, tendon_retries=5, realtime=False,
         )  # fmt: skip

@@ -1,0 +1,105 @@
+"""Helpers shared by every CLI family: parser, printing, design parsing, cache folder, Warp's quieting.
+
+No ``cli.*`` module imports another's private names or ``cli.main``; what they share lives here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+__all__ = ["Parser", "emit", "parse_design", "user_cache_dir", "quiet_warp"]
+
+_NO_DRIVER = b"Could not find or load the NVIDIA CUDA driver"  # expected on CPU-only machines
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse that reports a usage error as one line and exit code 2."""
+
+    def error(self, message: str):  # noqa: D102
+        sys.stderr.write(f"error: {message}\n")
+        raise SystemExit(2)
+
+
+def parse_design(text: str):
+    """The :class:`~mjcodesign.design.stiffness.Stiffness` for ``--design`` (preset, random:SEED, log E)."""
+    from mjcodesign.design import Stiffness
+
+    return Stiffness.parse(text)
+
+
+def emit(result, as_json: bool) -> None:
+    """Print a dict or a list of row dicts: one JSON line, or a rich table."""
+    if as_json:
+        print(json.dumps(result, indent=None))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    if isinstance(result, dict):
+        table = Table("key", "value")
+        for k, v in result.items():
+            table.add_row(str(k), _fmt(v))
+        Console().print(table)
+        return
+    rows = result
+    table = Table()
+    keys = list(rows[0].keys())
+    for k in keys:
+        table.add_column(k)
+    for r in rows:
+        table.add_row(*[_fmt(r[k]) for k in keys])
+    Console().print(table)
+
+
+def _fmt(v) -> str:
+    from rich.markup import escape
+
+    return escape(_plain(v))
+
+
+def _plain(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    if isinstance(v, list):
+        return "[" + ", ".join(_plain(x) for x in v[:6]) + (", …]" if len(v) > 6 else "]")
+    return str(v)
+
+
+def user_cache_dir() -> Path:
+    """``$XDG_CACHE_HOME/mjcodesign`` or ``~/.cache/mjcodesign`` (flags and environment live here)."""
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "mjcodesign"
+
+
+def quiet_warp() -> None:
+    """Initialise Warp quietly, once, before a command that can reach it; later ``wp.init()`` is silent.
+
+    Warp logs its banner and every module load at INFO level on stdout, which would break ``--json``;
+    and on a machine without the NVIDIA driver its native library prints a one-line CUDA warning on
+    stderr during ``wp.init()``, which would make a refused command print two lines. The first is
+    silenced by the log level, the second is filtered out of the captured file descriptor 2; anything
+    else Warp writes there is kept. Raises ImportError if warp-lang is missing.
+    """
+    import warp as wp
+
+    wp.config.log_level = logging.WARNING
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as captured:
+        os.dup2(captured.fileno(), 2)
+        try:
+            wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        captured.seek(0)
+        kept = [ln for ln in captured.read().splitlines(keepends=True) if _NO_DRIVER not in ln]
+    if kept:
+        sys.stderr.buffer.write(b"".join(kept))
+        sys.stderr.flush()

@@ -1,0 +1,115 @@
+"""GraspJob / run_jobs: grouping into batches, job order, and bitwise equality with single runs."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+from numpy.testing import assert_array_equal
+
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.errors import DesignError, PoseError
+from mjcodesign.jobs import GraspJob, run_jobs
+from mjcodesign.models.types import FingerModel, GripperPose
+from mjcodesign.objects import box_object
+from mjcodesign.scenarios.grasp import GraspScenario, auto_pose
+from mjcodesign.scenarios.outcome import Failure
+from mjcodesign.sim import MujocoBackend
+
+_SCENARIO = GraspScenario(impulse=0.0, hold_s=0.06, post_hold_s=0.02, lift_s=0.1)  # short: a test
+
+
+class _Spy:
+    """A simulator that forwards to MuJoCo C and records which batch call each group went to."""
+
+    name = "spy"
+
+    def __init__(self):
+        self.inner = MujocoBackend(nthread=2)
+        self.calls = []
+
+    def run(self, scene, scenario, *, observer=None, label="grasp"):
+        self.calls.append(("run", 1))
+        return self.inner.run(scene, scenario, observer=observer, label=label)
+
+    def run_batch(self, scene, scenario, stiffnesses, *, observer=None, labels=None):
+        self.calls.append(("run_batch", len(stiffnesses)))
+        return self.inner.run_batch(scene, scenario, stiffnesses, observer=observer, labels=labels)
+
+    def run_poses(self, scene, scenario, poses, *, observer=None, labels=None):
+        self.calls.append(("run_poses", len(poses)))
+        return self.inner.run_poses(scene, scenario, poses, observer=observer, labels=labels)
+
+
+@pytest.fixture(scope="module")
+def box():
+    return box_object((0.05, 0.05, 0.05), 400.0)
+
+
+def _pose(box, dz=0.0, dx=0.0):
+    p = auto_pose(box)
+    return GripperPose((p.position[0] + dx, p.position[1], p.position[2] + dz), p.quat, p.openings)
+
+
+def _assert_same(a, b):
+    assert a.success == b.success and a.reason == b.reason and a.failures == b.failures
+    assert_array_equal(a.body_force, b.body_force)
+    assert_array_equal(a.displacement, b.displacement)
+    assert a.lift_height == b.lift_height and a.ground_contact == b.ground_contact
+    assert_array_equal(a.object_path, b.object_path)
+
+
+def test_run_jobs_groups_batches_and_keeps_order_bitwise(box):
+    soft, semi, paper = (Stiffness.preset(n) for n in ("soft", "semi-rigid", "paper-optimized"))
+    rnd = Stiffness.random(3)
+    p0, p1, p2, p3 = _pose(box), _pose(box, dz=0.004), _pose(box, dx=0.003), _pose(box, dx=-0.003)
+    # p0: three designs -> one run_batch; rnd alone at p1 and p3 -> one run_poses; paper alone at p2 -> run
+    spec = [(p0, soft), (p1, rnd), (p0, semi), (p2, paper), (p0, paper), (p3, rnd)]
+    jobs = [GraspJob(obj=box, pose=p, design=d, scenario=_SCENARIO) for p, d in spec]
+    spy = _Spy()
+    outs = run_jobs(jobs, spy)
+    assert spy.calls == [("run_batch", 3), ("run_poses", 2), ("run", 1)]
+    assert len(outs) == len(jobs)
+    for job, out in zip(jobs, outs, strict=True):
+        alone = run_jobs([job], MujocoBackend(nthread=1))[0]
+        _assert_same(out, alone)
+    assert np.all([np.isfinite(o.body_force).all() for o in outs])
+    assert any(o.success for o in outs)  # the short scenario still holds the box for some design
+
+
+def test_density_override_scales_mass_only(box):
+    light = dataclasses.replace(box, hulls=list(box.hulls))
+    job = GraspJob(obj=light, pose=_pose(box), design=Stiffness.preset("paper-optimized"), scenario=_SCENARIO)
+    heavy = dataclasses.replace(job, density=2 * box.density)
+    assert heavy.rho == 2 * box.density and job.rho == box.density
+    a, b = run_jobs([job, heavy], MujocoBackend(nthread=2))
+    # A held object: the vertical finger force is m g, so doubling the density doubles it (within the
+    # hold-force tolerance of tests/test_grasp.py, 5%).
+    if a.success and b.success:
+        assert b.body_force[5] == pytest.approx(2 * a.body_force[5], rel=0.05)
+    assert a.body_force != b.body_force
+
+
+def test_bad_pose_is_an_outcome_or_raises_when_strict(box):
+    good = _pose(box)
+    below = GripperPose((0.0, 0.0, 0.05), good.quat, good.openings)  # fingertips under the ground
+    jobs = [GraspJob(obj=box, pose=p, design=Stiffness.preset("soft"), scenario=_SCENARIO) for p in (below, good)]
+    outs = run_jobs(jobs, MujocoBackend(nthread=1))
+    assert outs[0].failures == (Failure.BAD_POSE,) and not outs[0].success
+    assert outs[0].failure.is_sample_error and "below the ground" in outs[0].reason
+    assert outs[1].failure is not Failure.BAD_POSE
+    with pytest.raises(PoseError, match="below the ground"):
+        run_jobs(jobs, MujocoBackend(nthread=1), strict=True)
+
+
+def test_job_validation(box):
+    p = _pose(box)
+    with pytest.raises(DesignError):
+        GraspJob(obj=box, pose=p, design=Stiffness.preset("soft"), density=float("nan"))
+    with pytest.raises(DesignError):
+        GraspJob(obj=box, pose=p, design=Stiffness.preset("soft"), seed=-1)
+    with pytest.raises(DesignError):
+        GraspJob(obj=box, pose=p, design="soft")
+    job = GraspJob(obj=box, pose=p, design=Stiffness.preset("soft"), finger_model="chain")
+    assert job.finger_model is FingerModel.CHAIN
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        job.seed = 3
