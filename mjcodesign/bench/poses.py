@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from mjcodesign.errors import MjcodesignError
+from mjcodesign.scenarios.outcome import Failure
 
 __all__ = ["bench_poses"]
 
@@ -20,23 +21,31 @@ _DESIGN = "semi-rigid"  # the issue's reference design: log E 16.5 everywhere
 
 
 def _simulate(obj, cands, scenario, sim) -> list[dict]:
-    from mjcodesign.design.finger import FingerDesign
+    """One rollout per candidate on the semi-rigid chain gripper (one ``run_poses`` batch)."""
     from mjcodesign.design.stiffness import Stiffness
-    from mjcodesign.models.types import FingerModel
+    from mjcodesign.jobs import GraspJob, run_jobs
     from mjcodesign.poses import to_gripper_pose
-    from mjcodesign.scenarios.grasp import build_scene
 
-    rows = []
+    design = Stiffness.preset(_DESIGN)
+    jobs, rows = [], []
     for i in range(len(cands)):
         try:
-            scene = build_scene(
-                obj, FingerDesign(), Stiffness.preset(_DESIGN), FingerModel.CHAIN, to_gripper_pose(cands, i)
-            )
-            out = sim.run(scene, scenario)
-            rows.append({"success": bool(out.success), "reason": out.reason})
+            pose = to_gripper_pose(cands, i)
         except MjcodesignError as exc:
             rows.append({"success": False, "reason": f"{type(exc).__name__}: {exc}"})
-    return rows
+            continue
+        rows.append(None)
+        jobs.append(GraspJob(obj=obj, pose=pose, design=design, scenario=scenario))
+    outs = iter(run_jobs(jobs, sim))
+    return [r if r is not None else _row(next(outs)) for r in rows]
+
+
+def _row(out) -> dict:
+    # A bad pose keeps the message the scene raised (PoseError: ...), as when it was raised here.
+    reason = (
+        out.reason.replace("bad pose: ", "PoseError: ", 1) if out.failure is Failure.BAD_POSE else out.reason
+    )
+    return {"success": bool(out.success), "reason": reason}
 
 
 def _summary(cands, seconds: float, sims: list[dict]) -> dict:
