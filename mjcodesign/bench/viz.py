@@ -106,6 +106,34 @@ def _measure(sim, job, scenes, observer: str, path: Path, dec, repeats: int) -> 
     }
 
 
+def _case_row(case: VizCase, object_name: str, dec, m: dict, repeats: int) -> dict:
+    """The JSON row of one case and decimation from :func:`_measure`'s medians."""
+    p, r, sh = m["plain"], m["own"], m["shared"]
+    ex, sx = m["own_extra"], m["shared_extra"]
+    return {
+        "case": case.name,
+        "model": case.model,
+        "object": object_name,
+        "decimation": "default" if dec is None else dec,
+        "rollout_wall_s": float(p[0]),
+        "recorded_wall_s": float(r[0]),
+        "overhead_wall": float(ex[0] / p[0]),
+        "rollout_cpu_s": float(p[1]),
+        "recorded_cpu_s": float(r[1]),
+        "overhead_cpu": float(ex[1] / p[1]),
+        "rrd_bytes": m["own_bytes"],
+        "shared_recording": {
+            "rollouts": repeats,
+            "recorded_wall_s": float(sh[0]),
+            "overhead_wall": float(sx[0] / p[0]),
+            "recorded_cpu_s": float(sh[1]),
+            "overhead_cpu": float(sx[1] / p[1]),
+            "close_cpu_s": float(m["close"][1]),
+            "rrd_bytes": m["shared_bytes"],
+        },
+    }
+
+
 def bench_viz(
     *,
     cases: tuple[VizCase, ...] = CASES,
@@ -160,30 +188,5 @@ def bench_viz(
             run_jobs([job], sim, scenes=scenes)  # warm up; the scene is compiled once, outside the timings
             for dec in decimations:
                 m = _measure(sim, job, scenes, observer, path, dec, repeats)
-                p, r, sh = m["plain"], m["own"], m["shared"]
-                ex, sx = m["own_extra"], m["shared_extra"]
-                out["cases"].append(
-                    {
-                        "case": case.name,
-                        "model": case.model,
-                        "object": obj.name,
-                        "decimation": "default" if dec is None else dec,
-                        "rollout_wall_s": float(p[0]),
-                        "recorded_wall_s": float(r[0]),
-                        "overhead_wall": float(ex[0] / p[0]),
-                        "rollout_cpu_s": float(p[1]),
-                        "recorded_cpu_s": float(r[1]),
-                        "overhead_cpu": float(ex[1] / p[1]),
-                        "rrd_bytes": m["own_bytes"],
-                        "shared_recording": {
-                            "rollouts": repeats,
-                            "recorded_wall_s": float(sh[0]),
-                            "overhead_wall": float(sx[0] / p[0]),
-                            "recorded_cpu_s": float(sh[1]),
-                            "overhead_cpu": float(sx[1] / p[1]),
-                            "close_cpu_s": float(m["close"][1]),
-                            "rrd_bytes": m["shared_bytes"],
-                        },
-                    }
-                )
+                out["cases"].append(_case_row(case, obj.name, dec, m, repeats))
     return out

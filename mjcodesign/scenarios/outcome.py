@@ -176,6 +176,64 @@ def outcome_steps(starts: dict[str, int]) -> set[int]:
     return {int(t) for t in _hold_steps(starts)} | {starts["lift"] - 1, starts["end"] - 1}
 
 
+class _Replay:
+    """Loads a rollout's states into scratch data, under the control of the step that follows each."""
+
+    def __init__(self, scene: GraspScene, ctrl: np.ndarray, data: mujoco.MjData | None):
+        self.m = scene.model
+        self.d = data if data is not None else mujoco.MjData(self.m)
+        self.ctrl = ctrl
+        self.spec = control_spec()
+        self.d.qacc_warmstart[:] = 0.0  # as in a fresh MjData, so reused scratch data gives equal forces
+
+    def load(self, x: np.ndarray, t: int, stage: str) -> mujoco.MjData:
+        """State ``x`` of step ``t`` in the data, computed to ``stage``; returns the data.
+
+        ``forward``: contact forces (mj_forward, warm-started by the previous replay); ``collide``:
+        contacts only (mj_fwdPosition, which also places flex vertices); ``kinematics``: poses only.
+        """
+        m, d = self.m, self.d
+        mujoco.mj_setState(m, d, x, STATE_SPEC)
+        mujoco.mj_setState(m, d, self.ctrl[min(t + 1, len(self.ctrl) - 1)], self.spec)
+        if stage == "forward":
+            mujoco.mj_forward(m, d)
+            d.qacc_warmstart[:] = d.qacc  # the hold samples are a few steps apart
+        elif stage == "collide":
+            mujoco.mj_fwdPosition(m, d)
+        else:
+            mujoco.mj_kinematics(m, d)
+        return d
+
+
+def _hold_force(scene: GraspScene, replay: _Replay, states, starts, path: dict) -> np.ndarray:
+    """Mean wrench of the fingers on the object over the second half of the first hold, palm frame."""
+    acc = np.zeros(6)
+    idx = _hold_steps(starts)
+    for t in idx:
+        d = replay.load(states[t], t, "forward")
+        path[int(t)] = d.xipos[scene.object_body].copy()
+        w, _, _ = finger_wrench(scene, d)
+        _, R = _palm_frame(scene, d)
+        acc[:3] += R.T @ w[:3]
+        acc[3:] += R.T @ w[3:]
+    return acc / len(idx)
+
+
+def _displacement(scene: GraspScene, replay: _Replay, states, starts, path: dict) -> np.ndarray:
+    """Object COM relative to the palm, from the grasp (end of tightening) to the end [m], palm frame.
+
+    Leaves the final state's contacts in the replay's data.
+    """
+    ob = scene.object_body
+    rel = []
+    for t, stage in ((starts["lift"] - 1, "kinematics"), (starts["end"] - 1, "collide")):
+        d = replay.load(states[t], t, stage)
+        path[int(t)] = d.xipos[ob].copy()
+        p, R = _palm_frame(scene, d)
+        rel.append(R.T @ (d.xipos[ob] - p))
+    return rel[1] - rel[0]
+
+
 def outcome_from_states(
     scene: GraspScene,
     scenario: GraspScenario,
@@ -193,47 +251,14 @@ def outcome_from_states(
     ``data`` is scratch space of the same model structure (allocated when None).
     """
     m = scene.model
-    d = data if data is not None else mujoco.MjData(m)
-    spec = control_spec()
-    d.qacc_warmstart[:] = 0.0  # as in a fresh MjData, so reused scratch data gives equal forces
-
-    def load(x: np.ndarray, t: int, stage: str) -> None:
-        # "forward": contact forces (mj_forward, warm-started by the previous replay); "collide":
-        # contacts only (mj_fwdPosition, which also places flex vertices); "kinematics": poses only.
-        mujoco.mj_setState(m, d, x, STATE_SPEC)
-        mujoco.mj_setState(m, d, ctrl[min(t + 1, len(ctrl) - 1)], spec)
-        if stage == "forward":
-            mujoco.mj_forward(m, d)
-            d.qacc_warmstart[:] = d.qacc  # the hold samples are a few steps apart
-            return
-        if stage == "collide":
-            mujoco.mj_fwdPosition(m, d)
-        else:
-            mujoco.mj_kinematics(m, d)
-
     ob = scene.object_body
+    replay = _Replay(scene, ctrl, data)
     # The object's body frame is at its COM (build_scene), so the free joint's position is the COM.
     z0 = float(x0[1 + m.jnt_qposadr[m.body_jntadr[ob]] + 2])  # state = (time, qpos, ...)
-    # Body force: mean over the second half of the first hold (before the impulse).
-    idx = _hold_steps(starts)
-    acc = np.zeros(6)
     path: dict[int, np.ndarray] = {}
-    for t in idx:
-        load(states[t], t, "forward")
-        path[int(t)] = d.xipos[ob].copy()
-        w, _, _ = finger_wrench(scene, d)
-        _, R = _palm_frame(scene, d)
-        acc[:3] += R.T @ w[:3]
-        acc[3:] += R.T @ w[3:]
-    body_force = acc / len(idx)
-    # Displacement relative to the palm, from the grasp (end of tightening) to the end.
-    rel = []
-    for t, stage in ((starts["lift"] - 1, "kinematics"), (starts["end"] - 1, "collide")):
-        load(states[t], t, stage)
-        path[int(t)] = d.xipos[ob].copy()
-        p, R = _palm_frame(scene, d)
-        rel.append(R.T @ (d.xipos[ob] - p))
-    displacement = rel[1] - rel[0]
+    body_force = _hold_force(scene, replay, states, starts, path)
+    displacement = _displacement(scene, replay, states, starts, path)
+    d = replay.d
     _, finger, ground = finger_wrench(scene, d, forces=False)  # d holds the final contacts
     rise = float(d.xipos[ob][2]) - z0
     lifted = rise >= scenario.lifted_fraction * scenario.lift
