@@ -256,7 +256,8 @@ def test_captured_states_equal_replayed_ones(tmp_path):
     import dataclasses
 
     import mujoco
-    from mjcodesign.viz.recorder import RerunRecorder, _parts_of, _Replay, logged_steps
+    from mjcodesign.viz.recorder import RerunRecorder, logged_steps
+    from mjcodesign.viz.replay import Replay, parts_of
 
     scene = _scene()
     got = []
@@ -266,9 +267,9 @@ def test_captured_states_equal_replayed_ones(tmp_path):
     (r,) = got
     steps = logged_steps(len(r.states), scene.model.opt.timestep, r.starts, _DECIMATION)
     assert set(r.captured) == {-1, *steps[:-1].tolist()}  # the last state has no next step to take it
-    g = _parts_of(r.model, scene)
+    g = parts_of(r.model, scene)
     frames = [
-        _Replay(x, g, mujoco.MjData(r.model)).frames(steps) for x in (r, dataclasses.replace(r, captured={}))
+        Replay(x, g, mujoco.MjData(r.model)).frames(steps) for x in (r, dataclasses.replace(r, captured={}))
     ]
     for name in ("fingers", "gripper"):
         np.testing.assert_array_equal(frames[0].surfaces[name], frames[1].surfaces[name])
@@ -295,7 +296,9 @@ def test_diverged_rollout_is_recorded_up_to_its_failure(tmp_path):
     bad.dof_damping[:] = 0.0
     path = tmp_path / "diverged.rrd"
     rec = load_observer("rerun", path=path, decimation=1)
-    out = MujocoBackend(nthread=1).run(scene_with_model(scene, bad), _SCENARIO, observer=rec, label="paper-optimized")
+    out = MujocoBackend(nthread=1).run(
+        scene_with_model(scene, bad), _SCENARIO, observer=rec, label="paper-optimized"
+    )
     rec.close()
     assert out.reason.startswith("diverged: step ")
     failed = int(out.reason.split()[2].rstrip(":"))

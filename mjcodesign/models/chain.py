@@ -12,6 +12,8 @@ finger's geoms share one contact bit and never collide with each other.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import mujoco
 import numpy as np
 
@@ -96,11 +98,86 @@ def _add_piece(
     )
 
 
+@dataclass
+class _ChainBuilder:
+    """Adds one chain finger's bodies, hinges, pieces and sites to a spec, base to tip."""
+
+    spec: mujoco.MjSpec
+    design: FingerDesign
+    young: np.ndarray
+    prefix: str
+    options: SimOptions
+    handle: FingerHandle
+    blocks: list[Block] = field(init=False)
+    solrefs: list[tuple[float, float]] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.blocks = self.design.blocks()
+        self.solrefs = [
+            contact_solref(b, e, self.design.density, self.options.timestep)
+            for b, e in zip(self.blocks, self.young, strict=True)
+        ]
+
+    def piece(self, body, i: int, a: float, b: float, origin: float, end: str) -> None:
+        """Block ``i``'s piece between x=a and x=b on ``body`` (frame at x=origin); ``end`` is p or d."""
+        _add_piece(
+            self.spec,
+            body,
+            self.blocks[i],
+            a,
+            b,
+            origin,
+            f"{self.prefix}b{i}_{end}",
+            self.solrefs[i],
+            self.options.friction,
+            self.design.density,
+        )
+
+    def link(self, parent, i: int, origin_prev: float, k: float, waypoint: np.ndarray):
+        """Block ``i``'s body under ``parent`` (frame at x=origin_prev): hinge, pieces, waypoint site."""
+        blk = self.blocks[i]
+        p = self.prefix
+        body = parent.add_body(name=f"{p}block{i}", pos=[blk.mid - origin_prev, 0, 0])
+        body.add_joint(
+            name=f"{p}hinge{i}",
+            type=mujoco.mjtJoint.mjJNT_HINGE,
+            axis=[0, -1, 0],
+            pos=[0, 0, _neutral_axis(blk)],
+            stiffness=float(k),
+            damping=float(self.options.damping_time * k),
+            armature=1e-7,
+        )
+        self.piece(body, i, blk.mid, blk.x1, blk.mid, "d")
+        if i + 1 < len(self.blocks):
+            nxt = self.blocks[i + 1]
+            self.piece(body, i + 1, nxt.x0, nxt.mid, blk.mid, "p")
+        site = body.add_site(
+            name=f"{p}wp{i}",
+            pos=waypoint - [blk.mid, 0, 0],
+            size=[0.0008, 0, 0],
+            rgba=[0.9, 0.1, 0.1, 1],
+            group=3,
+        )
+        self.handle.waypoint_sites.append(site.name)
+        self.handle.joints.append(f"{p}hinge{i}")
+        self.handle.bodies.append(body.name)
+        return body
+
+    def tip(self, body) -> None:
+        """The tip site on the last block's body."""
+        last = self.blocks[-1]
+        body.add_site(
+            name=self.handle.tip_site,
+            pos=[last.x1 - last.mid, 0, 0.5 * self.design.flexure_thickness],
+            size=[0.0008, 0, 0],
+            group=3,
+        )
+
+
 def add_chain_finger(
     spec: mujoco.MjSpec, parent, design: FingerDesign, young: np.ndarray, prefix: str, options: SimOptions
 ) -> FingerHandle:
     """Add a chain finger under ``parent`` (whose frame is the finger frame) and return its handle."""
-    blocks = design.blocks()
     k = hinge_stiffness(design, young)
     wps = design.waypoints()
     handle = FingerHandle(
@@ -110,76 +187,13 @@ def add_chain_finger(
         waypoint_sites=[],
         tip_site=f"{prefix}tip",
     )
-    solrefs = [
-        contact_solref(b, e, design.density, options.timestep) for b, e in zip(blocks, young, strict=True)
-    ]
-    _add_piece(
-        spec,
-        parent,
-        blocks[0],
-        0.0,
-        blocks[0].mid,
-        0.0,
-        f"{prefix}b0_p",
-        solrefs[0],
-        options.friction,
-        design.density,
-    )
+    builder = _ChainBuilder(spec, design, young, prefix, options, handle)
+    blocks = builder.blocks
+    builder.piece(parent, 0, 0.0, blocks[0].mid, 0.0, "p")
     body = parent
     origin_prev = 0.0
     for i, blk in enumerate(blocks):
-        body = body.add_body(name=f"{prefix}block{i}", pos=[blk.mid - origin_prev, 0, 0])
+        body = builder.link(body, i, origin_prev, k[i], wps[i])
         origin_prev = blk.mid
-        body.add_joint(
-            name=f"{prefix}hinge{i}",
-            type=mujoco.mjtJoint.mjJNT_HINGE,
-            axis=[0, -1, 0],
-            pos=[0, 0, _neutral_axis(blk)],
-            stiffness=float(k[i]),
-            damping=float(options.damping_time * k[i]),
-            armature=1e-7,
-        )
-        _add_piece(
-            spec,
-            body,
-            blk,
-            blk.mid,
-            blk.x1,
-            blk.mid,
-            f"{prefix}b{i}_d",
-            solrefs[i],
-            options.friction,
-            design.density,
-        )
-        if i + 1 < len(blocks):
-            nxt = blocks[i + 1]
-            _add_piece(
-                spec,
-                body,
-                nxt,
-                nxt.x0,
-                nxt.mid,
-                blk.mid,
-                f"{prefix}b{i + 1}_p",
-                solrefs[i + 1],
-                options.friction,
-                design.density,
-            )
-        site = body.add_site(
-            name=f"{prefix}wp{i}",
-            pos=wps[i] - [blk.mid, 0, 0],
-            size=[0.0008, 0, 0],
-            rgba=[0.9, 0.1, 0.1, 1],
-            group=3,
-        )
-        handle.waypoint_sites.append(site.name)
-        handle.joints.append(f"{prefix}hinge{i}")
-        handle.bodies.append(body.name)
-    last = blocks[-1]
-    body.add_site(
-        name=handle.tip_site,
-        pos=[last.x1 - last.mid, 0, 0.5 * design.flexure_thickness],
-        size=[0.0008, 0, 0],
-        group=3,
-    )
+    builder.tip(body)
     return handle

@@ -136,11 +136,17 @@ def lagrange_weights(xi: np.ndarray, order: int) -> np.ndarray:
     return np.stack([2 * (xi - 0.5) * (xi - 1), -4 * xi * (xi - 1), 2 * xi * (xi - 0.5)], axis=-1)
 
 
+def _grid_box(design: FingerDesign) -> tuple[np.ndarray, np.ndarray]:
+    """Lower corner and extent [m] of the flex's bounding box in the finger frame."""
+    lo = np.array([0.0, -0.5 * design.width, 0.0])
+    ext = np.array([design.length, design.width, design.height_base])
+    return lo, ext
+
+
 def grid_weights(design: FingerDesign, n_cells: int, order: int, points: np.ndarray) -> np.ndarray:
     """Interpolation weights of finger-frame points onto the node grid, shape (n_points, n_nodes)."""
     nx, ny, nz = n_cells * order + 1, order + 1, order + 1
-    lo = np.array([0.0, -0.5 * design.width, 0.0])
-    ext = np.array([design.length, design.width, design.height_base])
+    lo, ext = _grid_box(design)
     u = (points - lo) / ext
     W = np.zeros((len(points), nx * ny * nz))
     cx = np.clip(np.floor(u[:, 0] * n_cells).astype(int), 0, n_cells - 1)
@@ -159,41 +165,30 @@ def grid_weights(design: FingerDesign, n_cells: int, order: int, points: np.ndar
     return W
 
 
-def add_flex_finger(
-    spec: mujoco.MjSpec,
-    parent,
-    design: FingerDesign,
-    young: np.ndarray,
-    prefix: str,
-    options: SimOptions,
-    *,
-    quadratic: bool,
-    locking: float | None = None,
-) -> FingerHandle:
-    """Add a flex finger under ``parent`` (whose frame is the finger frame); base face pinned."""
-    order = 2 if quadratic else 1
-    n_cells = flex_cells(design, options, quadratic=quadratic)
-    nx, ny, nz = n_cells * order + 1, order + 1, order + 1
-    lo = np.array([0.0, -0.5 * design.width, 0.0])
-    ext = np.array([design.length, design.width, design.height_base])
-    verts, faces = finger_mesh(design)
-    model = FingerModel.FLEX_QUADRATIC if quadratic else FingerModel.FLEX
-    handle = FingerHandle(
-        prefix=prefix,
-        model=model,
-        base_body=parent.name,
-        waypoint_sites=[],
-        tip_site=f"{prefix}tip",
-        flex=f"{prefix}flex",
-    )
-    # Lumped nodal mass: each cell's real mass split by Simpson (quadratic) or equal (trilinear) weights.
+def _node_masses(design: FingerDesign, n_cells: int, order: int, shape: tuple[int, int, int]) -> np.ndarray:
+    """Lumped nodal mass [kg], shape ``shape``.
+
+    Each cell's real mass is split by Simpson (quadratic) or equal (trilinear) weights.
+    """
     edges = np.linspace(0.0, design.length, n_cells + 1)
     w1 = node_weights(order)
-    node_mass = np.zeros((nx, ny, nz))
+    node_mass = np.zeros(shape)
     for c in range(n_cells):
         vol = sum(_overlap_volume(b, edges[c], edges[c + 1]) for b in design.blocks())
         cell_m = vol * design.density
         node_mass[c * order : c * order + order + 1] += cell_m * np.einsum("i,j,k->ijk", w1, w1, w1)
+    return node_mass
+
+
+def _add_nodes(
+    parent, design: FingerDesign, shape: tuple[int, int, int], node_mass: np.ndarray, handle: FingerHandle
+) -> tuple[list[str], list[np.ndarray]]:
+    """Node bodies (three slide joints each) under ``parent``; the base face is clamped to it.
+
+    Returns the flex's ``nodebody`` names and ``node`` positions (in each node body's frame).
+    """
+    nx, ny, nz = shape
+    lo, ext = _grid_box(design)
     nodebody, node = [], []
     for gi in range(nx):
         for gj in range(ny):
@@ -203,7 +198,7 @@ def add_flex_finger(
                     nodebody.append(parent.name)
                     node.append(p)
                     continue
-                b = parent.add_body(name=f"{prefix}n{gi}_{gj}_{gk}", pos=p)
+                b = parent.add_body(name=f"{handle.prefix}n{gi}_{gj}_{gk}", pos=p)
                 b.explicitinertial = True
                 b.ipos = [0.0, 0.0, 0.0]  # without it, MjSpec.to_xml drops the inertial element
                 b.mass = float(node_mass[gi, gj, gk])
@@ -215,6 +210,22 @@ def add_flex_finger(
                 nodebody.append(b.name)
                 node.append(np.zeros(3))
                 handle.bodies.append(b.name)
+    return nodebody, node
+
+
+def _add_flex_element(
+    spec: mujoco.MjSpec,
+    parent,
+    design: FingerDesign,
+    handle: FingerHandle,
+    options: SimOptions,
+    cells: tuple[int, int],
+    nodes: tuple[list[str], list[np.ndarray]],
+) -> None:
+    """The flex itself: the finger mesh as surface, carried by ``nodes`` on a (n_cells, order) grid."""
+    n_cells, order = cells
+    nodebody, node = nodes
+    verts, faces = finger_mesh(design)
     f = spec.add_flex()
     f.name = handle.flex
     f.dim = 2
@@ -234,12 +245,18 @@ def add_flex_finger(
     f.conaffinity = CONTYPE_WORLD
     f.friction = [options.friction, 0.005, 0.0001]
     f.rgba = [0.2, 0.6, 0.85, 1]
-    e_cell = cell_young(design, young, n_cells)
-    r = locking if locking is not None else locking_factor(design, n_cells, options.poisson, order)
-    e_cell = e_cell * r
-    handle.cell_young = e_cell
-    # Tendon waypoints ride on the node nearest in (x, z); trilinear grids have no mid-width node, so
-    # the tendon is split into two half-tension copies on the left and right nodes (symmetric).
+
+
+def _add_waypoint_sites(
+    spec: mujoco.MjSpec, design: FingerDesign, prefix: str, shape: tuple[int, int, int], order: int
+) -> list[list[str]]:
+    """Tendon waypoint sites on the node nearest in (x, z), one site chain per tendon copy.
+
+    Trilinear grids have no mid-width node, so the tendon is split into two half-tension copies on
+    the left and right nodes (symmetric).
+    """
+    nx, ny, nz = shape
+    lo, ext = _grid_box(design)
     wps = design.waypoints()
     sides = [order // 2] if order == 2 else [0, 1]
     chains = []
@@ -254,16 +271,50 @@ def add_flex_finger(
             s = body.add_site(name=f"{prefix}wp{i}_{gj}", pos=w - p_node, size=[0.0008, 0, 0], group=3)
             chain.append(s.name)
         chains.append(chain)
+    return chains
+
+
+def add_flex_finger(
+    spec: mujoco.MjSpec,
+    parent,
+    design: FingerDesign,
+    young: np.ndarray,
+    prefix: str,
+    options: SimOptions,
+    *,
+    quadratic: bool,
+    locking: float | None = None,
+) -> FingerHandle:
+    """Add a flex finger under ``parent`` (whose frame is the finger frame); base face pinned."""
+    order = 2 if quadratic else 1
+    n_cells = flex_cells(design, options, quadratic=quadratic)
+    shape = (n_cells * order + 1, order + 1, order + 1)
+    model = FingerModel.FLEX_QUADRATIC if quadratic else FingerModel.FLEX
+    handle = FingerHandle(
+        prefix=prefix,
+        model=model,
+        base_body=parent.name,
+        waypoint_sites=[],
+        tip_site=f"{prefix}tip",
+        flex=f"{prefix}flex",
+    )
+    node_mass = _node_masses(design, n_cells, order, shape)
+    nodes = _add_nodes(parent, design, shape, node_mass, handle)
+    _add_flex_element(spec, parent, design, handle, options, (n_cells, order), nodes)
+    e_cell = cell_young(design, young, n_cells)
+    r = locking if locking is not None else locking_factor(design, n_cells, options.poisson, order)
+    handle.cell_young = e_cell * r
+    chains = _add_waypoint_sites(spec, design, prefix, shape, order)
     handle.waypoint_sites = chains[0]
     handle.site_chains = chains
-    tip_body = spec.body(f"{prefix}n{nx - 1}_0_0")
+    tip_body = spec.body(f"{prefix}n{shape[0] - 1}_0_0")
     tip_body.add_site(
         name=handle.tip_site,
         pos=[0, 0.5 * design.width, 0.5 * design.flexure_thickness],
         size=[0.0008, 0, 0],
         group=3,
     )
-    handle.grid = (nx, ny, nz, n_cells, order)
+    handle.grid = (*shape, n_cells, order)
     return handle
 
 
@@ -386,8 +437,7 @@ def load_nodes(m: mujoco.MjModel, handle: FingerHandle, displacement: np.ndarray
 def grid_rest(design: FingerDesign, handle: FingerHandle) -> np.ndarray:
     """Rest positions [m] of a flex finger's node grid in the finger frame, shape (n_nodes, 3)."""
     nx, ny, nz, _, _ = handle.grid
-    lo = np.array([0.0, -0.5 * design.width, 0.0])
-    ext = np.array([design.length, design.width, design.height_base])
+    lo, ext = _grid_box(design)
     g = np.stack(np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij"), axis=-1)
     return lo + ext * g.reshape(-1, 3) / np.array([nx - 1, ny - 1, nz - 1])
 
