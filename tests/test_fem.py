@@ -9,7 +9,7 @@ import pytest
 from mjcodesign.design.finger import FingerDesign, Routing
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.scenarios.press import PRESS_METRICS
-from mjcodesign.sim.fem.mesh import mesh_finger
+from mjcodesign.sim.fem import mesh_finger
 
 _TOL_BEAM = 0.05  # FEM vs Euler–Bernoulli tip deflection (issue 4)
 _TOL_CURL = 0.10  # chain vs FEM bend angle and tip displacement (issue 4)
@@ -19,8 +19,11 @@ _TOL_GRAD = 1e-4  # adjoint gradient vs central differences (FD step 1e-4 in ln 
 
 
 def test_import_does_not_import_warp():
-    code = "import sys, mjcodesign, mjcodesign.fem, mjcodesign.femmesh, mjcodesign.cli_crosscheck, "
-    code += "mjcodesign.fem_grasp, mjcodesign.press; "
+    code = "import sys, mjcodesign, mjcodesign.sim.fem, mjcodesign.sim.fem.mesh, mjcodesign.cli.crosscheck, "
+    code += (
+        "mjcodesign.crosscheck, mjcodesign.bench.fem, mjcodesign.sim.fem.grasp, mjcodesign.sim.fem.press, "
+    )
+    code += "mjcodesign.sim.fem.backend, mjcodesign.scenarios.press; "
     code += "assert 'warp' not in sys.modules"
     subprocess.run([sys.executable, "-c", code], check=True)
 
@@ -50,7 +53,7 @@ def wp():
 
 @pytest.fixture(scope="module")
 def coarse(wp):
-    from mjcodesign.sim.fem.finger import FemFinger, FemOptions
+    from mjcodesign.sim.fem import FemFinger, FemOptions
 
     return FemFinger(
         FingerDesign(), Stiffness.preset("paper-optimized"), options=FemOptions(h=4e-3, spine_layers=2)
@@ -74,14 +77,14 @@ def test_rest_state_and_forces_are_energy_gradient(coarse):
 
 @pytest.mark.parametrize("preset", ["soft", "paper-optimized"])
 def test_quadratic_fem_cantilever_matches_beam_theory(wp, preset):
-    from mjcodesign.sim.fem.finger import FemFinger, FemOptions
+    from mjcodesign.sim.fem import FemFinger, FemOptions
 
     fem = FemFinger(
         FingerDesign(), Stiffness.preset(preset), options=FemOptions(h=4e-3, spine_layers=2, order=2)
     )
     r = fem.cantilever()
-    # δ_EB = F ∫ (L − x)² / (E(x) I(x)) dx over the real sections (mjcodesign.beam).
-    assert r["tip_deflection_m"] == pytest.approx(r["analytic_m"], rel=_TOL_BEAM)
+    # δ_EB = F ∫ (L − x)² / (E(x) I(x)) dx over the real sections (mjcodesign.design.beam).
+    assert r.tip_deflection_m == pytest.approx(r.analytic_m, rel=_TOL_BEAM)
 
 
 def test_static_gradient_matches_central_differences(coarse):
@@ -108,7 +111,7 @@ def test_static_gradient_matches_central_differences(coarse):
 
 
 def test_explicit_dynamics_free_fall_start(coarse):
-    from mjcodesign.sim.fem.finger import FemDynamics
+    from mjcodesign.sim.fem import FemDynamics
 
     dyn = FemDynamics(dt=0.5 * coarse.stable_dt(), mass_damping=0.0)
     t = 5e-4
@@ -121,7 +124,7 @@ _TOL_GROUND = 1e-4  # [m]: a soft finger's weight on ke = 1e7 Pa/m presses verti
 
 
 def test_explicit_dynamics_rests_on_the_ground(coarse):
-    from mjcodesign.sim.fem.finger import FemDynamics
+    from mjcodesign.sim.fem import FemDynamics
 
     # Clamped 0.5 mm above the ground: the finger sags onto it and stays there (bounded friction).
     dyn = FemDynamics(dt=min(FemDynamics().dt, coarse.stable_dt()))
@@ -136,7 +139,7 @@ def test_explicit_dynamics_rests_on_the_ground(coarse):
 def soft_curl(wp):
     from mjcodesign.models.types import TendonMode
     from mjcodesign.scenarios.static import curl
-    from mjcodesign.sim.fem.finger import FemFinger, FemOptions
+    from mjcodesign.sim.fem import FemFinger, FemOptions
 
     stiffness = Stiffness.preset("soft")
     # Linear tets keep this under 20 s; the quadratic FEM curl takes minutes here (numbers in the xfail).
@@ -148,8 +151,8 @@ def soft_curl(wp):
 
 def test_fem_curl_bends_inwards(soft_curl):
     r, c = soft_curl
-    assert r["bend_angle_rad"] > 0.3 and c["bend_angle_rad"] > 0.3
-    assert np.all(np.array(r["block_angles_rad"])[1::2] > 0)  # every flexure closes
+    assert r.bend_angle_rad > 0.3 and c["bend_angle_rad"] > 0.3
+    assert np.all(np.array(r.block_angles_rad)[1::2] > 0)  # every flexure closes
 
 
 @pytest.mark.xfail(
@@ -159,9 +162,9 @@ def test_fem_curl_bends_inwards(soft_curl):
 )
 def test_chain_curl_within_tolerance_of_fem(soft_curl):
     r, c = soft_curl
-    assert c["bend_angle_rad"] == pytest.approx(r["bend_angle_rad"], rel=_TOL_CURL)
+    assert c["bend_angle_rad"] == pytest.approx(r.bend_angle_rad, rel=_TOL_CURL)
     assert np.linalg.norm(c["tip_displacement_m"]) == pytest.approx(
-        np.linalg.norm(r["tip_displacement_m"]), rel=_TOL_CURL
+        np.linalg.norm(r.tip_displacement_m), rel=_TOL_CURL
     )
 
 
@@ -170,7 +173,9 @@ def test_crosscheck_cli_json(wp, capsys):
     import json
 
     from mjcodesign.cli import crosscheck as cli_crosscheck
+    from mjcodesign.cli.common import quiet_warp
 
+    quiet_warp()  # as `mjcodesign.cli.main.main` does before a command that reaches Warp
     p = argparse.ArgumentParser()
     sub = p.add_subparsers(dest="command")
     cli_crosscheck.add_parser(sub)
@@ -188,7 +193,7 @@ def test_crosscheck_cli_json(wp, capsys):
     assert rows[0]["rel_diff"] < _TOL_BEAM  # the chain is built from beam theory
 
 
-# -- rigid-object contact and the dynamic gradient (mjcodesign.fem_grasp) ----------------------------
+# -- rigid-object contact and the dynamic gradient (mjcodesign.sim.fem.contact) -----------------------
 _TOL_REST = 0.02  # Σ contact force vs m·g after 25 ms of damped settling
 _MAX_PENETRATION = 2e-4  # [m]; pressure m·g/A ≈ 80 Pa over ke = 1e7 Pa/m is 8 µm on average
 _TOL_DYN_GRAD = 1e-3  # adjoint vs central FD of a 0.5 ms contact rollout (measured ≤ 2e-4)
@@ -196,15 +201,14 @@ _TOL_DYN_GRAD = 1e-3  # adjoint vs central FD of a 0.5 ms contact rollout (measu
 
 @pytest.fixture(scope="module")
 def dyn_finger(wp):
-    from mjcodesign.sim.fem.finger import FemFinger, FemOptions
+    from mjcodesign.sim.fem import FemFinger, FemOptions
 
     opts = FemOptions(h=4e-3, spine_layers=2, waypoint_layers=False)
     return FemFinger(FingerDesign(), Stiffness.preset("paper-optimized"), options=opts)
 
 
 def test_free_finger_resting_on_box_carries_its_weight(dyn_finger):
-    from mjcodesign.sim.fem.finger import FemDynamics
-    from mjcodesign.sim.fem.grasp import FemContact, RigidObject
+    from mjcodesign.sim.fem import FemContact, FemDynamics, RigidObject
 
     top = 0.01
     box = RigidObject.box((0.068, 0.0, 0.5 * top), (0.08, 0.02, 0.5 * top))
@@ -213,16 +217,16 @@ def test_free_finger_resting_on_box_carries_its_weight(dyn_finger):
     )
     r = sim.run(0.025, frames=3)
     mg = dyn_finger.mass.sum() * 9.81
-    f = r["object_force"]
+    f = r.object_force
     # Statics of the free finger on the box: Σ F_contact = −m·g (the ground is never reached).
     assert f[:, 2].sum() == pytest.approx(mg, rel=_TOL_REST)
     assert np.abs(f[:, :2].sum(axis=0)).max() < _TOL_REST * mg  # no net friction on a level box
-    assert 0.0 < r["max_penetration"] < _MAX_PENETRATION
-    assert r["x"][:, 2].min() > top - _MAX_PENETRATION
+    assert 0.0 < r.max_penetration < _MAX_PENETRATION
+    assert r.x[:, 2].min() > top - _MAX_PENETRATION
 
 
 def test_contact_gradient_matches_central_differences(dyn_finger):
-    from mjcodesign.sim.fem.grasp import FemContact, RigidObject
+    from mjcodesign.sim.fem import FemContact, RigidObject
 
     # A box pressed 0.2 mm into the tip segment's top, the tendon pulling the finger into it.
     box = RigidObject.box((0.135, 0.0, 0.0162), (0.015, 0.015, 0.01))
@@ -240,7 +244,7 @@ def test_contact_gradient_matches_central_differences(dyn_finger):
                 le = base.copy()
                 le[i] += s * eps
                 dyn_finger.set_log_e(le)
-                vals.append(sim.run(horizon, frames=1)["mean_normal_force"])
+                vals.append(sim.run(horizon, frames=1).mean_normal_force)
             fd = (vals[0] - vals[1]) / (2 * eps)
             assert grad[i] == pytest.approx(fd, rel=_TOL_DYN_GRAD)
     finally:
@@ -249,9 +253,11 @@ def test_contact_gradient_matches_central_differences(dyn_finger):
 
 @pytest.fixture(scope="module")
 def press_results(wp):
-    from mjcodesign.cli.crosscheck import press_tension
-    from mjcodesign.scenarios.press import press_fem, press_linear, press_mujoco
-    from mjcodesign.sim.fem.finger import FemFinger, FemOptions
+    from dataclasses import asdict
+
+    from mjcodesign.crosscheck import press_tension
+    from mjcodesign.scenarios.press import press_linear, press_mujoco
+    from mjcodesign.sim.fem import FemFinger, FemOptions, press_fem
 
     stiffness = Stiffness.preset("paper-optimized")
     tension = press_tension(stiffness)
@@ -260,7 +266,7 @@ def press_results(wp):
         design = FingerDesign(routing=routing)
         fem = FemFinger(design, stiffness, options=FemOptions(h=4e-3, spine_layers=2))
         out[routing] = (
-            press_fem(fem, tension),
+            asdict(press_fem(fem, tension)),
             press_mujoco(design, stiffness, "chain", tension),
             press_mujoco(design, stiffness, "flex", tension),  # ~5-20 s per routing
             press_linear(design, stiffness, "flex", tension),
@@ -311,21 +317,21 @@ def test_linear_press_matches_flex_dynamics(press_results):
 
 
 def test_press_settling_tells_drift_from_jitter():
-    from mjcodesign.scenarios.press import _settled
+    from mjcodesign.scenarios.press import settled
 
     rng = np.random.default_rng(0)
     t = np.arange(10) * 0.1
     base = np.array([0.02, 0.5, 0.6])
     jitter = base * (1 + 0.01 * rng.standard_normal((10, 3)))  # the flex: ~1% scatter, no trend
     creep = base * (1 + 0.013 * t[:, None])  # the chain at 2 s: +1.3% per second, smooth
-    assert _settled(jitter)
-    assert not _settled(creep)
-    assert _settled(np.tile(base, (10, 1)))
+    assert settled(jitter)
+    assert not settled(creep)
+    assert settled(np.tile(base, (10, 1)))
 
 
 def test_plot_curves_writes_png(tmp_path):
     pytest.importorskip("matplotlib")
-    from mjcodesign.cli.crosscheck import plot_curves
+    from mjcodesign.crosscheck import plot_curves
     from mjcodesign.models.types import TendonMode
     from mjcodesign.scenarios.static import curl
 
@@ -383,10 +389,10 @@ _FEM_CURL = {
 @pytest.mark.parametrize("model", ["chain", "flex", "flex-quadratic"])
 @pytest.mark.parametrize("design", sorted(_FEM_CURL))
 def test_curl_within_tolerance_of_recorded_fem(design, model):
-    from mjcodesign.cli.crosscheck import _curl
+    from mjcodesign.crosscheck import model_curl
 
     tension, bend, tip = _FEM_CURL[design]
-    r = _curl(FingerDesign(), Stiffness.parse(design), model, tension)
+    r = model_curl(FingerDesign(), Stiffness.parse(design), model, tension)
     assert r["bend_angle_rad"] == pytest.approx(bend, rel=_TOL_CURL)
     assert np.linalg.norm(r["tip_displacement_m"]) == pytest.approx(tip, rel=_TOL_CURL)
 
@@ -403,9 +409,9 @@ _FEM_CURL_LARGE = ("random:0", 0.17333, 1.3023, 0.1229)
 )
 @pytest.mark.parametrize("model", ["chain", "flex"])
 def test_large_curl_within_tolerance_of_recorded_fem(model):
-    from mjcodesign.cli.crosscheck import _curl
+    from mjcodesign.crosscheck import model_curl
 
     design, tension, bend, tip = _FEM_CURL_LARGE
-    r = _curl(FingerDesign(), Stiffness.parse(design), model, tension)
+    r = model_curl(FingerDesign(), Stiffness.parse(design), model, tension)
     assert r["bend_angle_rad"] == pytest.approx(bend, rel=_TOL_CURL)
     assert np.linalg.norm(r["tip_displacement_m"]) == pytest.approx(tip, rel=_TOL_CURL)

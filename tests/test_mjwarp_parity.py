@@ -13,8 +13,8 @@ from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.models.types import FingerModel, GripperPose
 from mjcodesign.objects import box_object
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
-from mjcodesign.sim.mjwarp import MjwarpBackend
 from mjcodesign.sim import MujocoBackend
+from mjcodesign.sim.mjwarp import MjwarpBackend
 
 _TOL_PATH = 5e-4  # object COM path [m]: float32 MJWarp vs float64 MuJoCo C, 0.5 mm over ~0.4 s
 _TOL_FORCE = 0.05  # relative, hold force along the palm z

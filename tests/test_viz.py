@@ -463,8 +463,8 @@ def test_flex_fingers_deform_and_are_coloured(tmp_path):
 
 
 def _crosscheck_recorded(tmp_path, scenario, models, design, **kw):
-    from mjcodesign.cli.crosscheck import crosscheck
-    from mjcodesign.sim.fem.finger import FemOptions
+    from mjcodesign.crosscheck import crosscheck
+    from mjcodesign.sim.fem import FemOptions
     from mjcodesign.sim.observe import load_observer
 
     path = tmp_path / f"{scenario}.rrd"
@@ -546,7 +546,7 @@ def test_tet_snapshot_is_a_closed_coloured_surface(tmp_path):
     pytest.importorskip("rerun")
     from mjcodesign.viz.colormap import stiffness_rgb
 
-    from mjcodesign.sim.fem.mesh import mesh_finger
+    from mjcodesign.sim.fem import mesh_finger
     from mjcodesign.sim.observe import Snapshot, load_observer
 
     mesh = mesh_finger(FingerDesign(), h=6e-3, spine_layers=2)

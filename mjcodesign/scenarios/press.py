@@ -12,7 +12,8 @@ The paper's claim (Fig. 2): uniform-pressure routing (tendon moment ∝ (L − x
 uniform pressure) spreads the force along the finger; uniform-height routing (constant moment) loads
 the tip. Models: the MuJoCo chain and flex run their dynamics to rest (point-force tendon, gravity off);
 the Warp FEM (linear tets; contact at vertices) solves the static equilibrium with frictionless penalty
-contact against the plate's signed distance (`mjcodesign.fem_grasp.FemContact.contact_static`).
+contact against the plate's signed distance (`mjcodesign.sim.fem.press.press_fem`, which uses
+:func:`plate_pose` and :func:`force_distribution` from here).
 """
 
 from __future__ import annotations
@@ -21,7 +22,6 @@ from dataclasses import replace
 
 import mujoco
 import numpy as np
-import scipy.sparse as sp
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
@@ -35,7 +35,7 @@ __all__ = [
     "plate_contacts",
     "force_distribution",
     "press_mujoco",
-    "press_fem",
+    "settled",
     "PLATE_GAP",
 ]
 
@@ -177,7 +177,7 @@ def _settle_on_plate(m, d, apply, length: float, max_time: float) -> dict:
         if (
             d.time >= _MIN_TIME
             and len(means) >= _TREND_WINDOWS
-            and _settled(np.array(means[-_TREND_WINDOWS:]))
+            and settled(np.array(means[-_TREND_WINDOWS:]))
         ):
             out = dict(
                 zip(PRESS_METRICS, (float(v) for v in np.mean(means[-_TREND_WINDOWS:], axis=0)), strict=True)
@@ -190,7 +190,7 @@ def _settle_on_plate(m, d, apply, length: float, max_time: float) -> dict:
     )
 
 
-def _settled(y: np.ndarray) -> bool:
+def settled(y: np.ndarray) -> bool:
     """No drift beyond the tolerances in window means ``y`` (n, 3): slope over the span, less 2 s.e."""
     n = len(y)
     t = np.arange(n) - 0.5 * (n - 1)
@@ -304,33 +304,4 @@ def press_linear(
         observe(built, d, (pts, np.outer(lam[on], normal)), (centre, R, half))
     out = force_distribution(verts[cand, 0], lam, design.length)
     out["n_contacts"] = int(np.count_nonzero(lam > 0))
-    return out
-
-
-def press_fem(fem, tension: float, *, steps: int = 4, observe=None) -> dict:
-    """FEM finger (linear tets) pressed onto the plate: static equilibrium, frictionless contact.
-
-    ``observe(positions, contact_forces)``, if given, is called with the rest positions [m] (n, 3) and the
-    plate's force on every vertex [N] (n, 3).
-    """
-    from mjcodesign.sim.fem.grasp import FemContact, RigidObject
-
-    centre, R, half = plate_pose(fem.design)
-    contact = FemContact(fem, RigidObject.box(centre, half, R))
-    tendon = fem.tendon_load(tension)
-
-    def load(x):
-        f_t, J_t = tendon(x)
-        f_c, k_c = contact.contact_static(x)
-        J_c = sp.block_diag(list(-k_c), format="csr")
-        return f_t + f_c, J_t + J_c
-
-    x = fem.solve_static(load, steps=steps)
-    f_c, _ = contact.contact_static(x)
-    if observe is not None:
-        observe(x, f_c)
-    fn = f_c @ (R @ np.array([0.0, 0.0, -1.0]))  # along the outward normal of the plate's lower face
-    out = force_distribution(fem.mesh.vertices[:, 0], fn, fem.design.length)
-    out["n_contacts"] = int(np.count_nonzero(fn > 0))
-    out["max_penetration_m"] = contact.max_penetration(x)
     return out

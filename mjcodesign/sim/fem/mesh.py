@@ -1,4 +1,4 @@
-"""Structured tetrahedral mesh of one finger, for the Warp FEM reference (`mjcodesign.fem`).
+"""Structured tetrahedral mesh of one finger, for the Warp FEM reference (`mjcodesign.sim.fem`).
 
 The finger's side profile (x, z) is meshed column by column and extruded over the width (y):
 
@@ -15,7 +15,7 @@ Every hexahedron is split into 6 tetrahedra around its main diagonal (Freudentha
 conforming on a structured grid. Hex-to-tet is chosen over an unstructured mesher because it puts a vertex
 exactly on each segment waypoint and on the tip point ``(L, 0, t/2)``, follows the block faces (one
 Young's modulus per tet) and makes mesh refinement a single parameter, which the convergence study in
-`mjcodesign.fem` uses.
+`mjcodesign.sim.fem.finger` records.
 
 Waypoints of segment blocks are mesh vertices. A flexure's waypoint lies above the 2 mm spine, in the
 air gap between two segments (the tendon spans the gap), so it is carried by the flexure's mid-section:
@@ -135,14 +135,32 @@ def mesh_finger(
         raise DesignError(f"mesh size h must be in (0, 10 mm], got {h}")
     if spine_layers < 2 or spine_layers % 2 or ny < 2 or ny % 2:
         raise DesignError("spine_layers and ny must be even and at least 2")
+    if h_flexure is None:
+        h_flexure = design.flexure_thickness / spine_layers
+    ys = np.linspace(-0.5 * design.width, 0.5 * design.width, ny + 1)
+    grid = _Grid(design, _x_grid(design, h, h_flexure), ys)
+    k_tip = grid.mesh_spine(spine_layers, waypoint_layers)
+    for b in grid.blocks:
+        if b.kind is BlockKind.SEGMENT:
+            grid.mesh_segment(b, h)
+    vertices, tets, tet_block, remap = grid.tetrahedra(h)
+    W = grid.waypoint_matrix(len(vertices), remap)
+    base = np.flatnonzero(np.abs(vertices[:, 0]) <= _COINCIDENT)
+    tip_face = np.flatnonzero(np.abs(vertices[:, 0] - design.length) <= _COINCIDENT)
+    tip = int(remap[grid.grid_s[grid.nx - 1, grid.ny // 2, k_tip]])
+    weight = _face_weights(vertices, tets, tip_face, design.length)
+    return FingerMesh(vertices, tets, tet_block, base, tip_face, weight, tip, W, float(min(h, h_flexure)))
+
+
+def _x_grid(design: FingerDesign, h: float, h_flexure: float) -> np.ndarray:
+    """Grid lines along x: every block face, cut corner and block midpoint.
+
+    Cells are at most ``h`` [m], or ``h_flexure`` where the finger bends (flexures and trapezoid cuts).
+    """
     blocks = design.blocks()
-    t = design.flexure_thickness
-    wps = design.waypoints()
     breaks = _unique(
         [0.0, design.length] + [v for b in blocks for v in (b.x0, b.x1, b.mid, b.x0 + b.cut0, b.x1 - b.cut1)]
     )
-    if h_flexure is None:
-        h_flexure = t / spine_layers
 
     def size(a: float, b: float) -> float:
         xm = 0.5 * (a + b)
@@ -152,119 +170,161 @@ def mesh_finger(
                 return min(h, h_flexure) if bent else h
         return h
 
-    xs = _subdivide(breaks, h, size)
-    ys = np.linspace(-0.5 * design.width, 0.5 * design.width, ny + 1)
-    nx = len(xs)
+    return _subdivide(breaks, h, size)
 
-    def top(x: float) -> float:
-        for b in blocks:
+
+class _Grid:
+    """The structured grid of one finger as :func:`mesh_finger` builds it.
+
+    Nodes are created once per key (``("s", i, j, k)`` in the spine, ``("b", block, i, j, k)`` above
+    it); ``cells`` lists hexahedra as (node grid, i, j, k) of their lowest corner; waypoints are a node
+    (``wp_vertex``) or, inside the spine without a layer through them, a point on a vertical edge
+    (``wp_edge``: lower node, upper node, weight of the upper).
+    """
+
+    def __init__(self, design: FingerDesign, xs: np.ndarray, ys: np.ndarray):
+        self.blocks = design.blocks()
+        self.width = design.width
+        self.t = design.flexure_thickness
+        self.wps = design.waypoints()
+        self.xs, self.ys = xs, ys
+        self.nx, self.ny = len(xs), len(ys) - 1
+        self.index: dict[tuple, int] = {}
+        self.verts: list[tuple[float, float, float]] = []
+        self.cells: list[tuple] = []
+        self.wp_vertex: dict[int, int] = {}
+        self.wp_edge: dict[int, tuple[int, int, float]] = {}
+
+    def node(self, key: tuple, p: tuple[float, float, float]) -> int:
+        """Index of the node ``key`` at ``p`` [m], created on first use."""
+        if key not in self.index:
+            self.index[key] = len(self.verts)
+            self.verts.append(p)
+        return self.index[key]
+
+    def top(self, x: float) -> float:
+        """Height of the finger's top at ``x`` [m]: the segment's profile, or the spine's top."""
+        for b in self.blocks:
             if b.x0 - _COINCIDENT <= x <= b.x1 + _COINCIDENT and b.kind is BlockKind.SEGMENT:
                 return float(b.height(x))
-        return t
+        return self.t
 
-    index: dict[tuple, int] = {}
-    verts: list[tuple[float, float, float]] = []
+    def mesh_spine(self, spine_layers: int, waypoint_layers: bool) -> int:
+        """The spine zone ``0 <= z <= t`` under the whole finger; returns the layer through z = t/2."""
+        t, xs, ys = self.t, self.xs, self.ys
+        in_spine = (
+            [float(z) for z in self.wps[:, 2] if _COINCIDENT < z < t - _COINCIDENT] if waypoint_layers else []
+        )
+        zs = self.zs = _subdivide(_unique([0.0, 0.5 * t, t] + in_spine), t / spine_layers)
+        nz = self.spine_layers = len(zs) - 1
+        grid_s = self.grid_s = np.empty((self.nx, self.ny + 1, nz + 1), dtype=int)
+        for i, j, k in itertools.product(range(self.nx), range(self.ny + 1), range(nz + 1)):
+            grid_s[i, j, k] = self.node(("s", i, j, k), (xs[i], ys[j], zs[k]))
+        self.cells += [
+            (grid_s, i, j, k) for i in range(self.nx - 1) for j in range(self.ny) for k in range(nz)
+        ]
+        return int(np.argmin(np.abs(zs - 0.5 * t)))
 
-    def node(key: tuple, p: tuple[float, float, float]) -> int:
-        if key not in index:
-            index[key] = len(verts)
-            verts.append(p)
-        return index[key]
-
-    # Spine zone: keys ("s", i, j, k).
-    in_spine = [float(z) for z in wps[:, 2] if _COINCIDENT < z < t - _COINCIDENT] if waypoint_layers else []
-    zs = _subdivide(_unique([0.0, 0.5 * t, t] + in_spine), t / spine_layers)
-    spine_layers = len(zs) - 1
-    k_tip = int(np.argmin(np.abs(zs - 0.5 * t)))
-    grid_s = np.empty((nx, ny + 1, spine_layers + 1), dtype=int)
-    for i, j, k in itertools.product(range(nx), range(ny + 1), range(spine_layers + 1)):
-        grid_s[i, j, k] = node(("s", i, j, k), (xs[i], ys[j], zs[k]))
-    cell_list = [(grid_s, i, j, k) for i in range(nx - 1) for j in range(ny) for k in range(spine_layers)]
-
-    # Segment zones above the spine, each with a layer boundary through its waypoint.
-    wp_vertex: dict[int, int] = {}
-    wp_edge: dict[int, tuple[int, int, float]] = {}  # block -> (lower vertex, upper vertex, weight of upper)
-    for b in blocks:
-        if b.kind is not BlockKind.SEGMENT:
-            continue
-        cols = [i for i in range(nx) if b.x0 - _COINCIDENT <= xs[i] <= b.x1 + _COINCIDENT]
-        hmax = max(top(xs[i]) for i in cols) - t
-        eta_wp = (wps[b.index, 2] - t) / (float(b.height(b.mid)) - t)
+    def mesh_segment(self, b, h: float) -> None:
+        """Segment ``b``'s zone above the spine, with a layer boundary through its waypoint."""
+        xs, t, ny = self.xs, self.t, self.ny
+        cols = [i for i in range(self.nx) if b.x0 - _COINCIDENT <= xs[i] <= b.x1 + _COINCIDENT]
+        hmax = max(self.top(xs[i]) for i in cols) - t
+        eta_wp = (self.wps[b.index, 2] - t) / (float(b.height(b.mid)) - t)
         etas = _subdivide(_unique([0.0, max(eta_wp, 0.0), 1.0]), h / hmax)
-        grid = np.empty((len(cols), ny + 1, len(etas)), dtype=int)
-        for ci, i in enumerate(cols):
-            dz = top(xs[i]) - t
-            for j in range(ny + 1):
-                grid[ci, j, 0] = grid_s[i, j, spine_layers]
-                for k in range(1, len(etas)):
-                    if dz <= _COINCIDENT:
-                        grid[ci, j, k] = grid_s[i, j, spine_layers]
-                    else:
-                        grid[ci, j, k] = node(("b", b.index, i, j, k), (xs[i], ys[j], t + etas[k] * dz))
-        cell_list += [
+        grid = self._segment_nodes(b, cols, etas)
+        self.cells += [
             (grid, i, j, k) for i in range(len(cols) - 1) for j in range(ny) for k in range(len(etas) - 1)
         ]
         i_mid = cols.index(int(np.argmin(np.abs(xs - b.mid))))
         if eta_wp > 0:
             k_wp = int(np.argmin(np.abs(etas - eta_wp)))
-            wp_vertex[b.index] = int(grid[i_mid, ny // 2, k_wp])
+            self.wp_vertex[b.index] = int(grid[i_mid, ny // 2, k_wp])
         else:  # a waypoint inside the spine (near the tip of the uniform-pressure routing)
-            z_wp = float(wps[b.index, 2])
-            k_wp = int(np.argmin(np.abs(zs - z_wp)))
-            if abs(zs[k_wp] - z_wp) <= _COINCIDENT:
-                wp_vertex[b.index] = int(grid_s[cols[i_mid], ny // 2, k_wp])
-            else:
-                k_lo = int(np.searchsorted(zs, z_wp)) - 1
-                a = (z_wp - zs[k_lo]) / (zs[k_lo + 1] - zs[k_lo])
-                col = grid_s[cols[i_mid], ny // 2]
-                wp_edge[b.index] = (int(col[k_lo]), int(col[k_lo + 1]), float(a))
+            self._spine_waypoint(b, cols[i_mid])
 
-    vertices = np.array(verts)
-    tets = []
-    for grid, i, j, k in cell_list:
-        for path in _KUHN:
-            tets.append([grid[i + a, j + c, k + d] for a, c, d in path])
-    tets = np.array(tets, dtype=np.int64)
-    x = vertices[tets]
-    vol = np.einsum("ij,ij->i", np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), x[:, 3] - x[:, 0]) / 6.0
-    cell_vol = h * h * design.width / ny
-    keep = np.abs(vol) > _DEGENERATE * cell_vol
-    tets, vol = tets[keep], vol[keep]
-    flip = vol < 0
-    tets[flip] = tets[flip][:, [0, 2, 1, 3]]
-    centroid_x = vertices[tets][:, :, 0].mean(axis=1)
-    edges = np.array([b.x1 for b in blocks[:-1]])
-    tet_block = np.searchsorted(edges, centroid_x)
+    def _segment_nodes(self, b, cols: list[int], etas: np.ndarray) -> np.ndarray:
+        """Nodes of a segment zone, shape (len(cols), ny + 1, len(etas)).
 
-    used = np.unique(tets)
-    remap = np.full(len(vertices), -1)
-    remap[used] = np.arange(len(used))
-    vertices = vertices[used]
-    tets = remap[tets]
-    wp_vertex = {bi: int(remap[v]) for bi, v in wp_vertex.items()}
-    wp_edge = {bi: (int(remap[lo]), int(remap[hi]), a) for bi, (lo, hi, a) in wp_edge.items()}
+        ``t .. top(x)`` is mapped column by column; where the top comes down to the spine the zone
+        collapses onto the spine's top nodes.
+        """
+        xs, ys, t, top_k = self.xs, self.ys, self.t, self.spine_layers
+        grid = np.empty((len(cols), self.ny + 1, len(etas)), dtype=int)
+        for ci, i in enumerate(cols):
+            dz = self.top(xs[i]) - t
+            for j in range(self.ny + 1):
+                grid[ci, j, 0] = self.grid_s[i, j, top_k]
+                for k in range(1, len(etas)):
+                    if dz <= _COINCIDENT:
+                        grid[ci, j, k] = self.grid_s[i, j, top_k]
+                    else:
+                        grid[ci, j, k] = self.node(("b", b.index, i, j, k), (xs[i], ys[j], t + etas[k] * dz))
+        return grid
 
-    W = np.zeros((len(blocks), len(vertices)))
-    for b in blocks:
-        if b.index in wp_vertex:
-            W[b.index, wp_vertex[b.index]] = 1.0
-            continue
-        if b.index in wp_edge:
-            lo, hi, a = wp_edge[b.index]
-            W[b.index, lo], W[b.index, hi] = 1.0 - a, a
-            continue
-        i = int(np.argmin(np.abs(xs - b.mid)))
-        a = (wps[b.index, 2] - t) / t
-        tops = remap[grid_s[i, :, spine_layers]]
-        bots = remap[grid_s[i, :, 0]]
-        W[b.index, tops] = (1.0 + a) / (ny + 1)
-        W[b.index, bots] = -a / (ny + 1)
+    def _spine_waypoint(self, b, i: int) -> None:
+        """Waypoint of ``b`` inside the spine at column ``i``: a node, or a point on a vertical edge."""
+        zs = self.zs
+        z_wp = float(self.wps[b.index, 2])
+        k_wp = int(np.argmin(np.abs(zs - z_wp)))
+        if abs(zs[k_wp] - z_wp) <= _COINCIDENT:
+            self.wp_vertex[b.index] = int(self.grid_s[i, self.ny // 2, k_wp])
+        else:
+            k_lo = int(np.searchsorted(zs, z_wp)) - 1
+            a = (z_wp - zs[k_lo]) / (zs[k_lo + 1] - zs[k_lo])
+            col = self.grid_s[i, self.ny // 2]
+            self.wp_edge[b.index] = (int(col[k_lo]), int(col[k_lo + 1]), float(a))
 
-    base = np.flatnonzero(np.abs(vertices[:, 0]) <= _COINCIDENT)
-    tip_face = np.flatnonzero(np.abs(vertices[:, 0] - design.length) <= _COINCIDENT)
-    tip = int(remap[grid_s[nx - 1, ny // 2, k_tip]])
-    weight = _face_weights(vertices, tets, tip_face, design.length)
-    return FingerMesh(vertices, tets, tet_block, base, tip_face, weight, tip, W, float(min(h, h_flexure)))
+    def tetrahedra(self, h: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Kuhn tets of every cell, collapsed wedges dropped, positively oriented, unused nodes removed.
+
+        Returns vertices [m] (n, 3), tets (n_tets, 4), their blocks (n_tets,) and the node index map
+        (old node -> vertex, −1 if unused).
+        """
+        vertices = np.array(self.verts)
+        tets = []
+        for grid, i, j, k in self.cells:
+            for path in _KUHN:
+                tets.append([grid[i + a, j + c, k + d] for a, c, d in path])
+        tets = np.array(tets, dtype=np.int64)
+        x = vertices[tets]
+        vol = np.einsum("ij,ij->i", np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), x[:, 3] - x[:, 0]) / 6.0
+        cell_vol = h * h * self.width / self.ny
+        keep = np.abs(vol) > _DEGENERATE * cell_vol
+        tets, vol = tets[keep], vol[keep]
+        flip = vol < 0
+        tets[flip] = tets[flip][:, [0, 2, 1, 3]]
+        centroid_x = vertices[tets][:, :, 0].mean(axis=1)
+        edges = np.array([b.x1 for b in self.blocks[:-1]])
+        tet_block = np.searchsorted(edges, centroid_x)
+        used = np.unique(tets)
+        remap = np.full(len(vertices), -1)
+        remap[used] = np.arange(len(used))
+        return vertices[used], remap[tets], tet_block, remap
+
+    def waypoint_matrix(self, n_vertices: int, remap: np.ndarray) -> np.ndarray:
+        """Tendon waypoints as combinations of the vertices, (n_blocks, n_vertices): P = W @ x.
+
+        A flexure's waypoint is carried by its mid-section: ``(1 + a) p_top − a p_bottom`` averaged over
+        the section's top and bottom node lines, ``a = (z_wp − t) / t``.
+        """
+        t, ny = self.t, self.ny
+        W = np.zeros((len(self.blocks), n_vertices))
+        for b in self.blocks:
+            if b.index in self.wp_vertex:
+                W[b.index, remap[self.wp_vertex[b.index]]] = 1.0
+                continue
+            if b.index in self.wp_edge:
+                lo, hi, a = self.wp_edge[b.index]
+                W[b.index, remap[lo]], W[b.index, remap[hi]] = 1.0 - a, a
+                continue
+            i = int(np.argmin(np.abs(self.xs - b.mid)))
+            a = (self.wps[b.index, 2] - t) / t
+            tops = remap[self.grid_s[i, :, self.spine_layers]]
+            bots = remap[self.grid_s[i, :, 0]]
+            W[b.index, tops] = (1.0 + a) / (ny + 1)
+            W[b.index, bots] = -a / (ny + 1)
+        return W
 
 
 def _face_weights(vertices: np.ndarray, tets: np.ndarray, face: np.ndarray, x_face: float) -> np.ndarray:

@@ -1,0 +1,90 @@
+"""What the Warp FEM's scenarios return: frozen records with their units, one per scenario.
+
+`FemCantilever` (:meth:`~mjcodesign.sim.fem.finger.FemFinger.cantilever`), `FemCurl`
+(:meth:`~mjcodesign.sim.fem.finger.FemFinger.curl`), `FemPress` (:func:`~mjcodesign.sim.fem.press.press_fem`)
+and `FemContactRun` (:meth:`~mjcodesign.sim.fem.contact.FemContact.run`). A JSON row builder can call
+:func:`dataclasses.asdict` on them (arrays stay arrays).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["FemCantilever", "FemCurl", "FemPress", "FemContactRun"]
+
+
+@dataclass(frozen=True, eq=False)
+class FemCantilever:
+    """A tip load along +z spread over the tip face, against Euler–Bernoulli."""
+
+    force_n: float
+    """The tip load [N]."""
+    tip_deflection_m: float
+    """Mean tip-face deflection along z [m] (tip-face area weights)."""
+    analytic_m: float
+    """Euler–Bernoulli tip deflection of the same load [m] (`mjcodesign.design.beam`)."""
+    rel_error: float
+    """``|tip_deflection_m − analytic_m| / analytic_m``."""
+    n_vertices: int
+    """Mesh vertices (nodes, for quadratic tets)."""
+    n_tets: int
+    """Mesh tetrahedra."""
+    positions: np.ndarray
+    """Deformed vertices [m], shape (n_vertices, 3), finger frame."""
+
+
+@dataclass(frozen=True, eq=False)
+class FemCurl:
+    """A free tendon curl at equilibrium (gravity off)."""
+
+    tension_n: float
+    """Tendon tension [N]."""
+    tip_displacement_m: tuple[float, float, float]
+    """Displacement of the tip vertex [m], finger frame."""
+    bend_angle_rad: float
+    """Rotation of the tip block's distal section [rad]; + curls inwards."""
+    block_angles_rad: tuple[float, ...]
+    """Rotation of each block's distal section relative to the previous block's [rad], (n_blocks,)."""
+    positions: np.ndarray
+    """Deformed vertices [m], shape (n_vertices, 3), finger frame."""
+
+
+@dataclass(frozen=True, eq=False)
+class FemPress:
+    """The finger pressed onto the press scenario's plate by its tendon (static, frictionless contact).
+
+    The first three fields are :data:`mjcodesign.scenarios.press.PRESS_METRICS`.
+    """
+
+    total_force_n: float
+    """Total normal force of the plate on the finger [N]."""
+    distal_third_fraction: float
+    """Share of that force at x > 2L/3 (rest positions along the finger)."""
+    centroid_over_length: float
+    """Force-weighted mean rest x of the contacts over the finger length L."""
+    n_contacts: int
+    """Vertices pushed by the plate."""
+    max_penetration_m: float
+    """Deepest vertex inside the plate [m]."""
+
+
+@dataclass(frozen=True, eq=False)
+class FemContactRun:
+    """An explicit-dynamics rollout of a finger next to a static rigid object (world frame)."""
+
+    times: np.ndarray
+    """Frame times [s], shape (k,): 0, every ``steps // frames`` steps, and the end (k ≈ frames + 1)."""
+    tip: np.ndarray
+    """Tip vertex position at ``times`` [m], shape (k, 3)."""
+    x: np.ndarray
+    """Final vertex positions [m], shape (n_vertices, 3)."""
+    object_force: np.ndarray
+    """Final contact force of the object on each vertex [N], shape (n_vertices, 3)."""
+    mean_normal_force: float
+    """Time-averaged normal force on the object over the rollout [N]."""
+    max_penetration: float
+    """Deepest final vertex inside the object [m]."""
+    steps: int
+    """Explicit steps taken."""

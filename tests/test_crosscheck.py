@@ -1,0 +1,81 @@
+"""The FEM behind the simulator interface, and the cross-simulator comparison as a library call."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.errors import DesignError, UnsupportedError
+
+
+def test_fem_backend_is_a_simulator_that_refuses_grasps():
+    from mjcodesign.sim.fem import FemBackend
+    from mjcodesign.sim.protocol import Simulator, get_backend
+
+    backend = get_backend("fem")
+    assert isinstance(backend, FemBackend)
+    assert isinstance(backend, Simulator)
+    assert backend.name == "fem"
+    for method, args in [("run", ()), ("run_batch", ([],)), ("run_poses", ([],))]:
+        with pytest.raises(UnsupportedError, match="cantilever, curl and press") as info:
+            getattr(backend, method)(None, None, *args, observer=None)
+        assert "\n" not in str(info.value)
+
+
+def test_fem_results_are_frozen_records():
+    from mjcodesign.sim.fem import FemCantilever, FemContactRun, FemCurl, FemPress
+
+    for cls in (FemCantilever, FemCurl, FemPress, FemContactRun):
+        assert dataclasses.is_dataclass(cls)
+        assert cls.__dataclass_params__.frozen
+    press = FemPress(0.02, 0.7, 0.75, 12, 1e-5)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        press.total_force_n = 1.0
+    assert dataclasses.asdict(press)["n_contacts"] == 12
+
+
+def test_fem_backend_cantilever_matches_the_finger():
+    pytest.importorskip("warp")
+    from mjcodesign.sim.fem import FemBackend, FemCantilever, FemFinger, FemOptions
+
+    options = FemOptions(h=4e-3, spine_layers=2)
+    design, stiffness = FingerDesign(), Stiffness.preset("paper-optimized")
+    r = FemBackend(options).cantilever(design, stiffness)
+    assert isinstance(r, FemCantilever)
+    direct = FemFinger(design, stiffness, options=options).cantilever()
+    assert r.tip_deflection_m == direct.tip_deflection_m  # same mesh, same solve: bit for bit
+    np.testing.assert_array_equal(r.positions, direct.positions)
+    assert r.rel_error == pytest.approx(abs(r.tip_deflection_m - r.analytic_m) / r.analytic_m)
+
+
+def test_crosscheck_rejects_unknown_names_before_simulating():
+    from mjcodesign.crosscheck import crosscheck
+
+    with pytest.raises(DesignError, match="unknown scenario"):
+        crosscheck("twist", ["chain"], "paper-optimized")
+    with pytest.raises(DesignError, match="unknown model"):
+        crosscheck("curl", ["chain", "rigid"], "paper-optimized")
+
+
+def test_crosscheck_cantilever_rows_without_the_fem():
+    from mjcodesign.crosscheck import TOL_CROSS, crosscheck
+
+    rows, curves = crosscheck("cantilever", ["chain"], "soft")
+    assert curves == {}
+    assert [r["model"] for r in rows] == ["chain"]
+    r = rows[0]
+    assert set(r) == {"scenario", "model", "design", "metric", "value", "reference", "rel_diff"}
+    assert (r["scenario"], r["design"], r["metric"]) == ("cantilever", "soft", "tip_deflection_m")
+    assert r["rel_diff"] == pytest.approx(abs(r["value"] - r["reference"]) / r["reference"])
+    assert r["rel_diff"] < TOL_CROSS
+
+
+def test_tensions_scale_with_the_design():
+    from mjcodesign.crosscheck import default_tensions, press_tension
+
+    soft = default_tensions(Stiffness.preset("soft"))
+    assert soft == pytest.approx([0.02, 0.04, 0.08])
+    assert press_tension(Stiffness.preset("soft")) == pytest.approx(0.04)
+    assert press_tension(Stiffness.preset("paper-optimized")) == pytest.approx(0.2138, rel=1e-3)
