@@ -1,0 +1,318 @@
+"""``mjcodesign datagen``, ``mjcodesign data info`` and ``mjcodesign bench datagen``.
+
+Wire them into the main CLI with ``cli_data.add_parser(subparsers)`` and
+``cli_data.add_bench_parser(bench_subparsers)``. Every input is checked before anything is written, so
+a refused command (exit 2, one line on stderr) leaves no folder behind.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib.util
+import json
+import os
+import sys
+from pathlib import Path
+
+from mjcodesign.cli.common import Parser, emit, quiet_warp, user_cache_dir
+
+__all__ = ["add_parser", "add_bench_parser", "run_datagen", "run_info", "run_bench", "datagen_config"]
+
+_MODELS = ("chain", "flex")
+_BENCH_OBJECTS = "012_strawberry,013_apple,010_potted_meat_can"
+# Ray on this machine binds its external address unless told otherwise (shared/NOTES.md).
+_RAY_LOCAL_ENV = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0", "RAY_USAGE_STATS_ENABLED": "0"}
+
+
+def add_parser(subparsers) -> None:
+    """Register ``datagen`` and ``data`` (with ``data info``) on an ``argparse`` subparsers object."""
+    p = subparsers.add_parser(
+        "datagen",
+        help="generate a grasp dataset (Parquet): objects x poses x designs, resumable, on all cores",
+    )
+    p.add_argument(
+        "--objects",
+        required=True,
+        help="a set (ycb-in-domain, ycb-ood, egad-like), a folder of OBJ/STL/PLY files, or comma-separated "
+        "YCB names, egad-like:N or mesh files",
+    )
+    p.add_argument("--poses-per-object", type=int, default=50, help="poses asked of the sampler per object")
+    p.add_argument("--designs-per-pose", type=int, default=35, help="stiffness designs per pose")
+    p.add_argument(
+        "--density",
+        default="light",
+        help="object density per pose: light (100), heavy (400), a number [kg/m³], or uniform:LO,HI",
+    )
+    p.add_argument(
+        "--tendon", default="force:10", help="force:N, tension per finger [N] (position:TICKS: not yet)"
+    )
+    p.add_argument("--model", choices=_MODELS, default="chain")
+    p.add_argument("--backend", choices=("mujoco", "mjwarp"), default="mujoco")
+    p.add_argument(
+        "--device",
+        choices=("auto", "cpu", "cuda"),
+        default="auto",
+        help="mjwarp: Warp device (auto: CUDA if any)",
+    )
+    p.add_argument("--sampler", choices=("uniform", "sobol"), default="uniform", help="design sampler")
+    p.add_argument("--workers", type=int, default=1, help="processes (1: this one, MuJoCo on every core)")
+    p.add_argument(
+        "--ray", default=None, help="run the shards on Ray: 'local' (this machine) or a cluster address"
+    )
+    p.add_argument("--seed", type=int, default=0, help="seeds poses, densities, designs and point clouds")
+    p.add_argument("--object-seed", type=int, default=0, help="seeds CoACD and egad-like shapes")
+    p.add_argument(
+        "--scenario",
+        default=None,
+        help='grasp phases as JSON (text or a file), GraspScenario fields, e.g. \'{"lift": 0.05, "impulse": 0}\'',
+    )
+    p.add_argument("--out", required=True, help="dataset folder (created; a rerun continues it)")
+    p.add_argument("--resume", action="store_true", help="continue the dataset in --out (it must exist)")
+    p.set_defaults(func=run_datagen)
+
+    data = subparsers.add_parser("data", help="datasets written by datagen")
+    dsub = data.add_subparsers(dest="what", required=True, parser_class=Parser)
+    info = dsub.add_parser("info", help="counts and success rates of a dataset")
+    info.add_argument("dir", help="dataset folder")
+    info.add_argument("--json", action="store_true")
+    info.add_argument("--plot", default=None, help="draw success against mean ln E per object into FILE.png")
+    info.set_defaults(func=run_info)
+
+
+def add_bench_parser(bench_subparsers) -> None:
+    """Register ``datagen`` on the ``bench`` command's subparsers object."""
+    p = bench_subparsers.add_parser(
+        "datagen", help="data generation: raw mujoco.rollout vs the pipeline with writes, pose/cloud time"
+    )
+    p.add_argument("--objects", default=_BENCH_OBJECTS, help="comma-separated objects, or a set name")
+    p.add_argument("--poses-per-object", type=int, default=4)
+    p.add_argument("--designs-per-pose", type=int, default=35)
+    p.add_argument("--backend", choices=("mujoco", "mjwarp"), default="mujoco")
+    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default=None, help="also write the JSON to this file")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=run_bench)
+
+
+def _scenario(text: str | None):
+    """A GraspScenario from ``--scenario`` (JSON text or a JSON file)."""
+    from mjcodesign.errors import DesignError
+    from mjcodesign.scenarios.grasp import GraspScenario
+
+    if text is None:
+        return GraspScenario()
+    raw = Path(text).read_text(encoding="utf-8") if Path(text).is_file() else text
+    try:
+        fields = json.loads(raw)
+    except ValueError:
+        raise DesignError("--scenario must be a JSON object or a JSON file") from None
+    names = {f.name for f in dataclasses.fields(GraspScenario)} - {"tension", "tendon"}
+    if not isinstance(fields, dict) or set(fields) - names:
+        bad = sorted(set(fields) - names) if isinstance(fields, dict) else fields
+        raise DesignError(
+            f"--scenario: unknown fields {bad} (the tendon is set by --tendon); known: {sorted(names)}"
+        )
+    try:
+        return GraspScenario(**fields)
+    except TypeError as exc:
+        raise DesignError(f"--scenario: {exc}") from None
+
+
+def datagen_config(args: argparse.Namespace):
+    """The :class:`~mjcodesign.data.DatagenConfig` of ``datagen``'s arguments (library errors: exit 2)."""
+    from mjcodesign.data import DatagenConfig, parse_density_spec, parse_tendon, resolve_objects
+
+    same = ("poses_per_object", "designs_per_pose", "model", "backend", "sampler", "seed", "object_seed")
+    return DatagenConfig(
+        objects=resolve_objects(args.objects),
+        density=parse_density_spec(args.density),
+        tension=parse_tendon(args.tendon),
+        scenario=_scenario(args.scenario),
+        **{k: getattr(args, k) for k in same},
+    )
+
+
+def quiet_worker() -> None:
+    """Run first in every worker process: Warp's banner and module log off stdout (the JSON goes there)."""
+    if importlib.util.find_spec("warp") is not None:
+        try:
+            quiet_warp()
+        except (ImportError, OSError, RuntimeError):
+            pass  # the task that needs Warp reports it
+
+
+def _device(args: argparse.Namespace) -> str:
+    """Warp device for ``--device`` (auto: CUDA when present); checks the mjwarp backend is installed."""
+    from mjcodesign.errors import DesignError, UnsupportedError
+
+    if args.backend != "mjwarp":
+        return "cpu"
+    if importlib.util.find_spec("mujoco_warp") is None or importlib.util.find_spec("warp") is None:
+        raise DesignError("--backend mjwarp needs mujoco-warp and warp-lang (pip install 'mjcodesign[warp]')")
+    quiet_worker()
+    import warp as wp
+
+    has_cuda = wp.get_cuda_device_count() > 0
+    if args.device == "cuda" and not has_cuda:
+        raise UnsupportedError("--device cuda: Warp finds no CUDA device here")
+    return "cuda" if args.device == "cuda" or (args.device == "auto" and has_cuda) else "cpu"
+
+
+def _check_run(args: argparse.Namespace, config) -> None:
+    """Refuse what cannot run before anything is written."""
+    from mjcodesign.data import MANIFEST
+    from mjcodesign.errors import DesignError, UnsupportedError
+
+    if args.workers < 1:
+        raise DesignError(f"--workers must be >= 1, got {args.workers}")
+    if args.ray is not None:
+        if args.workers != 1:
+            raise DesignError("--ray runs the shards on Ray's CPUs: leave --workers at 1")
+        if importlib.util.find_spec("ray") is None:
+            raise DesignError("--ray needs the ray package (pip install 'mjcodesign[ray]')")
+    if args.resume and not (Path(args.out) / MANIFEST).is_file():
+        raise DesignError(
+            f"--resume: {args.out} holds no dataset to resume (run without --resume to start one)"
+        )
+    if config.backend == "mjwarp" and config.model.is_flex:
+        raise UnsupportedError(
+            "--backend mjwarp batches designs as worlds, which share flex stiffness: use mujoco"
+        )
+
+
+class _Bar:
+    """The progress bar on stderr: samples done of expected, samples/s of this run, ETA."""
+
+    def __init__(self, designs_per_pose: int):
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+        console = Console(stderr=True)
+        self.progress = Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TextColumn("{task.fields[rate]:.1f} samples/s"),
+            TimeRemainingColumn(),
+            console=console,
+            transient=True,
+            disable=not console.is_terminal,
+        )
+        self.per_shard = designs_per_pose
+        self.task = None
+        self.done = 0
+        self.t0 = None
+
+    def __enter__(self):
+        self.progress.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        return self.progress.__exit__(*exc)
+
+    def __call__(self, event) -> None:
+        import time
+
+        p = self.progress
+        if event.kind == "start":
+            self.t0 = time.perf_counter()
+            self.task = p.add_task("datagen", total=event.total * self.per_shard, rate=0.0)
+            p.update(self.task, completed=event.done * self.per_shard)
+        elif event.kind == "object" or event.kind == "object_failed":
+            p.update(self.task, total=event.total * self.per_shard, description=f"datagen {event.keys[0]}")
+        elif event.kind in ("shard", "shard_failed"):
+            self.done += event.samples + event.rejected
+            rate = self.done / max(time.perf_counter() - self.t0, 1e-9)
+            p.update(self.task, advance=self.per_shard, rate=rate)
+
+
+def run_datagen(args: argparse.Namespace) -> int:
+    """Run ``datagen``: the summary JSON on stdout; library errors propagate (exit 2 there)."""
+    from concurrent.futures.process import BrokenProcessPool
+
+    from mjcodesign.data import generate
+
+    config = datagen_config(args)
+    _check_run(args, config)
+    device = _device(args)
+    quiet_worker()  # the poses' SDF runs on Warp in this process with --workers 1
+    if args.ray == "local":
+        for k, v in _RAY_LOCAL_ENV.items():
+            os.environ.setdefault(k, v)
+    try:
+        with _Bar(config.designs_per_pose) as bar:
+            res = generate(
+                config,
+                args.out,
+                workers=args.workers,
+                ray=args.ray,
+                device=device,
+                cache_dir=user_cache_dir(),
+                worker_setup=quiet_worker,
+                command=["mjcodesign", *sys.argv[1:]],
+                on_event=bar,
+            )
+    except BrokenProcessPool:
+        sys.stderr.write("error: a worker process died (out of memory?); rerun the same command to resume\n")
+        return 1
+    print(json.dumps(res))
+    return 0
+
+
+def run_info(args: argparse.Namespace) -> int:
+    """Run ``data info``."""
+    from mjcodesign.data import open_dataset, plot_success, summarize
+
+    ds = open_dataset(args.dir)
+    res = summarize(ds)
+    if args.plot:
+        res["plot"] = str(plot_success(ds, args.plot))
+    if args.json:
+        print(json.dumps(res))
+        return 0
+    flat = {k: v for k, v in res.items() if not isinstance(v, dict)}
+    emit(flat, False)
+    rows = [{"object": k, **v} for k, v in res["by_object"].items()]
+    if rows:
+        emit(
+            [
+                {k: r.get(k, "") for k in ("object", "status", "poses", "samples", "success_rate")}
+                for r in rows
+            ],
+            False,
+        )
+    for key in ("by_density", "by_design_group"):
+        emit([{key[3:]: k, **v} for k, v in res[key].items()] or [{key[3:]: "-"}], False)
+    for key in ("failures", "rejected_by_kind", "rejected_top_reasons"):
+        if res[key]:
+            emit({f"{key}: {k}": v for k, v in res[key].items()}, False)
+    return 0
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    """Run ``bench datagen``."""
+    from mjcodesign.bench.datagen import bench_datagen
+    from mjcodesign.data import resolve_objects
+
+    device = _device(args)
+    quiet_worker()
+    res = bench_datagen(
+        objects=list(resolve_objects(args.objects)),
+        poses_per_object=args.poses_per_object,
+        designs_per_pose=args.designs_per_pose,
+        backend=args.backend,
+        device=device,
+        seed=args.seed,
+        cache_dir=user_cache_dir(),
+    )
+    if args.out:
+        from mjcodesign.bench import write_json
+
+        write_json(res, args.out)
+    if args.json:
+        print(json.dumps(res))
+    else:
+        emit({k: v for k, v in res.items() if not isinstance(v, dict | list)}, False)
+    return 0

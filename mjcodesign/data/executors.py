@@ -1,0 +1,197 @@
+"""Where tasks run: in this process, in a pool of processes, or as Ray remote tasks.
+
+Each executor takes tasks (``"prepare"`` an :class:`~mjcodesign.data.tasks.ObjectTask`, or ``"run"`` a
+list of :class:`~mjcodesign.data.tasks.ShardTask`), runs at most :attr:`slots` at a time, and hands
+back finished ones with their result or exception. A process keeps one
+:class:`~mjcodesign.data.tasks.Worker` (objects, compiled scenes, simulator) for all its tasks.
+
+* :class:`InlineExecutor`: runs a task when it is submitted (``--workers 1``).
+* :class:`PoolExecutor`: ``concurrent.futures.ProcessPoolExecutor`` with the ``spawn`` context (no
+  fork of a process holding MuJoCo's and Warp's threads); each worker runs ``cores // workers``
+  MuJoCo threads and exits when its parent dies, so a killed run leaves no worker behind.
+* :class:`RayExecutor`: Ray remote tasks with ``max_retries`` (a lost worker's task is rerun), taken
+  with ``ray.wait``. ``ray`` is imported only here, when one is made.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import logging
+import multiprocessing
+import os
+import threading
+import time
+from collections.abc import Callable
+
+from mjcodesign.data.tasks import Worker
+
+__all__ = ["InlineExecutor", "PoolExecutor", "RayExecutor", "cpu_count", "execute"]
+
+_RAY_RETRIES = 3  # reruns of a task whose worker process died
+_PARENT_POLL_S = 0.5  # how often a pool worker checks that its parent is alive
+_RAY_OBJECT_STORE = 256 * 1024 * 1024  # [bytes] a local Ray's object store (results are small)
+
+_worker: Worker | None = None  # this process's worker (pool and Ray processes)
+_setup_done = False
+
+
+def cpu_count() -> int:
+    """Cores this process may run on."""
+    return len(os.sched_getaffinity(0))
+
+
+def execute(kind: str, payload, worker: Worker):
+    """Run one task on ``worker``: ``prepare`` an object or ``run`` a list of shards."""
+    if kind == "prepare":
+        return worker.prepare(payload)
+    if kind == "run":
+        return worker.run(payload)
+    raise ValueError(f"unknown task kind {kind!r}")
+
+
+class _Done:
+    """A finished task of the inline executor."""
+
+    def __init__(self, result=None, error: BaseException | None = None):
+        self.result, self.error = result, error
+
+
+class InlineExecutor:
+    """Runs each task in this process when it is submitted; MuJoCo uses every core."""
+
+    slots = 1
+
+    def __init__(self, device: str = "cpu"):
+        self.worker = Worker(nthread=cpu_count(), device=device)
+
+    def submit(self, kind: str, payload) -> _Done:  # noqa: D102
+        try:
+            return _Done(execute(kind, payload, self.worker))
+        except Exception as exc:  # handed to the caller as a pool would
+            return _Done(error=exc)
+
+    def wait(self, handles: list) -> list[tuple[object, object, BaseException | None]]:  # noqa: D102
+        return [(h, h.result, h.error) for h in handles]
+
+    def close(self) -> None:  # noqa: D102
+        pass
+
+
+def _init_pool_worker(nthread: int, device: str, setup: Callable[[], None] | None, parent: int) -> None:
+    global _worker
+    _worker = Worker(nthread=nthread, device=device)
+    if setup is not None:
+        setup()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(_PARENT_POLL_S)
+        os._exit(1)  # the driver died (e.g. kill -9): stop computing shards nobody will write
+
+    threading.Thread(target=watch, daemon=True).start()
+
+
+def _pool_task(kind: str, payload):
+    return execute(kind, payload, _worker)
+
+
+class PoolExecutor:
+    """``workers`` spawned processes; ``slots`` tasks in flight (default twice the workers)."""
+
+    def __init__(
+        self,
+        workers: int,
+        *,
+        device: str = "cpu",
+        setup: Callable[[], None] | None = None,
+        slots: int | None = None,
+    ):
+        self.slots = slots or 2 * workers
+        nthread = max(1, cpu_count() // workers)
+        self.pool = cf.ProcessPoolExecutor(
+            max_workers=workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_init_pool_worker,
+            initargs=(nthread, device, setup, os.getpid()),
+        )
+
+    def submit(self, kind: str, payload) -> cf.Future:  # noqa: D102
+        return self.pool.submit(_pool_task, kind, payload)
+
+    def wait(self, handles: list) -> list[tuple[object, object, BaseException | None]]:  # noqa: D102
+        done, _ = cf.wait(handles, return_when=cf.FIRST_COMPLETED)
+        out = []
+        for f in done:
+            err = f.exception()
+            if isinstance(err, cf.process.BrokenProcessPool):
+                raise err
+            out.append((f, None if err else f.result(), err))
+        return out
+
+    def close(self) -> None:  # noqa: D102
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _ray_task(kind: str, payload, device: str, setup: Callable[[], None] | None):
+    global _worker, _setup_done
+    if not _setup_done and setup is not None:
+        setup()
+    _setup_done = True
+    if _worker is None:
+        _worker = Worker(nthread=1, device=device)
+    return execute(kind, payload, _worker)
+
+
+class RayExecutor:
+    """Tasks as Ray remote tasks (one CPU and one MuJoCo thread each), at most ``slots`` in flight.
+
+    ``address``: ``"local"`` starts a Ray instance on this machine with ``num_cpus`` CPUs (its
+    addresses are loopback only when the caller set ``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0``, see
+    shared/NOTES.md); anything else is the address of a running cluster, which this joins.
+    """
+
+    def __init__(
+        self,
+        address: str,
+        *,
+        num_cpus: int | None = None,
+        device: str = "cpu",
+        setup: Callable[[], None] | None = None,
+        slots: int | None = None,
+    ):
+        import ray
+
+        self.ray = ray
+        if address == "local":
+            ray.init(
+                num_cpus=num_cpus or cpu_count(),
+                include_dashboard=False,
+                log_to_driver=False,
+                object_store_memory=_RAY_OBJECT_STORE,
+                logging_level=logging.WARNING,  # not "Started a local Ray instance." under the progress bar
+                _node_ip_address="127.0.0.1",
+            )
+        else:
+            ray.init(address=address, log_to_driver=False)
+        cpus = int(ray.cluster_resources().get("CPU", 1))
+        self.slots = slots or 2 * cpus
+        self._remote = ray.remote(num_cpus=1, max_retries=_RAY_RETRIES, retry_exceptions=False)(_ray_task)
+        self._device, self._setup = device, setup
+
+    def submit(self, kind: str, payload):  # noqa: D102
+        return self._remote.remote(kind, payload, self._device, self._setup)
+
+    def wait(self, handles: list) -> list[tuple[object, object, BaseException | None]]:  # noqa: D102
+        ray = self.ray
+        done, _ = ray.wait(handles, num_returns=1)
+        out = []
+        for ref in done:
+            try:
+                out.append((ref, ray.get(ref), None))
+            except ray.exceptions.RayTaskError as exc:
+                cause = exc.cause if isinstance(exc.cause, Exception) else exc
+                out.append((ref, None, cause))
+        return out
+
+    def close(self) -> None:  # noqa: D102
+        self.ray.shutdown()

@@ -1,0 +1,214 @@
+"""Reading a dataset back: its tables as Arrow, and the summary ``mjcodesign data info`` prints.
+
+Only the files the manifest lists are read, so a folder that a run is still writing (or was killed
+while writing) reads as its finished part. No torch here; the surrogate's ``Dataset`` wraps this.
+
+Design groups, from the mean ln E of a design's 22 blocks (printable range 13.5–17.0, midpoint 15.25):
+``soft-like`` below 15.0, ``stiff-like`` above 15.5, ``mixed`` in between. Uniform draws per block
+give a mean of 15.25 ± 0.22 (1σ), so about 12 % of them are soft-like, 12 % stiff-like and 76 % mixed.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from mjcodesign.data.schema import TABLES
+from mjcodesign.data.store import FORMAT, MANIFEST
+from mjcodesign.errors import OutputError, UnsupportedError
+
+__all__ = [
+    "DESIGN_GROUPS",
+    "SOFT_BELOW",
+    "STIFF_ABOVE",
+    "Dataset",
+    "design_group",
+    "open_dataset",
+    "plot_success",
+    "summarize",
+]
+
+SOFT_BELOW = 15.0
+"""A design whose mean ln(E / Pa) is below this is soft-like (soft preset: 13.5)."""
+STIFF_ABOVE = 15.5
+"""A design whose mean ln(E / Pa) is above this is stiff-like (semi-rigid preset: 16.5)."""
+DESIGN_GROUPS = ("soft-like", "mixed", "stiff-like")
+_KEYS = {"poses": ["object_index", "pose_index"], "samples": ["object_index", "pose_index", "design_index"]}
+_EXACT_DENSITIES = 6  # up to this many distinct densities are listed one by one, more are binned
+_DENSITY_BINS = 4
+_PLOT_BINS = 8  # mean-ln-E bins of the success plot
+_TOP_REASONS = 10
+
+
+def design_group(mean_log_e: float) -> str:
+    """``soft-like``, ``mixed`` or ``stiff-like`` for a design's mean ln(E / Pa) (module docstring)."""
+    if mean_log_e < SOFT_BELOW:
+        return "soft-like"
+    return "stiff-like" if mean_log_e > STIFF_ABOVE else "mixed"
+
+
+class Dataset:
+    """A dataset folder: its manifest and its three tables (:mod:`mjcodesign.data.schema`)."""
+
+    def __init__(self, root: Path, manifest: dict):
+        self.root = root
+        self.manifest = manifest
+
+    def files(self, table: str) -> list[Path]:
+        """Files of ``table`` (poses, samples, rejected) that the manifest lists."""
+        if table == "poses":
+            rel = [o["poses_file"] for o in self.manifest["objects"] if o["status"] == "ready"]
+        else:
+            rel = [s["files"][table] for s in self.manifest["shards"].values() if table in s["files"]]
+        return [self.root / r for r in rel]
+
+    def table(self, table: str) -> pa.Table:
+        """All rows of ``table``, sorted by object, pose (and design)."""
+        schema = TABLES[table]
+        parts = [pq.read_table(f, schema=schema) for f in self.files(table)]
+        t = pa.concat_tables(parts) if parts else schema.empty_table()
+        keys = _KEYS["poses" if table == "poses" else "samples"]
+        return t.sort_by([(k, "ascending") for k in keys])
+
+    def samples(self) -> pa.Table:
+        """The training rows."""
+        return self.table("samples")
+
+    def poses(self) -> pa.Table:
+        """One row per (object, pose), with the point clouds."""
+        return self.table("poses")
+
+    def rejected(self) -> pa.Table:
+        """The sample errors (diverged, implausible, bad pose)."""
+        return self.table("rejected")
+
+
+def open_dataset(path: str | Path) -> Dataset:
+    """The dataset in folder ``path``; :class:`OutputError` if it holds none."""
+    root = Path(path)
+    mpath = root / MANIFEST
+    if not mpath.is_file():
+        raise OutputError(f"{root}: not a dataset ({MANIFEST} missing)")
+    try:
+        manifest = json.loads(mpath.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise OutputError(f"{mpath}: unreadable manifest ({type(exc).__name__})") from exc
+    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
+        raise OutputError(f"{root}: not an mjcodesign grasp dataset")
+    return Dataset(root, manifest)
+
+
+def _rate(success: np.ndarray) -> dict:
+    return {"samples": int(len(success)), "success_rate": float(success.mean()) if len(success) else 0.0}
+
+
+def _mean_log_e(samples: pa.Table) -> np.ndarray:
+    flat = samples.column("log_e").combine_chunks().flatten().to_numpy()
+    return flat.reshape(-1, 22).mean(axis=1) if len(flat) else np.zeros(0)
+
+
+def summarize(ds: Dataset) -> dict:
+    """Counts, success rate per object, per density and per design group, rejections by kind and reason."""
+    s = ds.samples()
+    rej = ds.rejected()
+    success = np.asarray(s.column("success").to_numpy(zero_copy_only=False), dtype=bool)
+    objects = np.asarray(s.column("object").to_pylist(), dtype=object)
+    density = s.column("density").to_numpy()
+    groups = np.array([design_group(v) for v in _mean_log_e(s)], dtype=object)
+    m = ds.manifest
+    per_object = {}
+    for o in m["objects"]:
+        name = o.get("name", o["source"])
+        sel = objects == name
+        per_object[name] = {**_rate(success[sel]), "status": o["status"], "poses": o.get("poses", 0)}
+        if o["status"] == "failed":
+            per_object[name]["error"] = o.get("error")
+    by_density = {}
+    values = np.unique(density)
+    if len(values) <= _EXACT_DENSITIES:
+        for v in values:
+            by_density[f"{v:g}"] = _rate(success[density == v])
+    else:
+        edges = np.linspace(density.min(), density.max(), _DENSITY_BINS + 1)
+        idx = np.clip(np.searchsorted(edges, density, side="right") - 1, 0, _DENSITY_BINS - 1)
+        for b in range(_DENSITY_BINS):
+            by_density[f"{edges[b]:.0f}-{edges[b + 1]:.0f}"] = _rate(success[idx == b])
+    kinds = rej.column("failure").to_pylist()
+    reasons = rej.column("reason").to_pylist()
+    top = sorted({r: reasons.count(r) for r in set(reasons)}.items(), key=lambda kv: (-kv[1], kv[0]))
+    failures = s.column("failure").to_pylist()
+    return {
+        "path": str(ds.root),
+        "complete": bool(m.get("complete")),
+        "schema_version": m.get("schema_version"),
+        "project_version": m.get("project_version"),
+        "backend": m["config"]["backend"],
+        "objects": len(m["objects"]),
+        "objects_ready": sum(o["status"] == "ready" for o in m["objects"]),
+        "objects_failed": sum(o["status"] == "failed" for o in m["objects"]),
+        "poses": ds.poses().num_rows,
+        "shards": len(m["shards"]),
+        "shards_failed": sum("error" in v for v in m["shards"].values()),
+        "samples": s.num_rows,
+        "rejected": rej.num_rows,
+        "success_rate": _rate(success)["success_rate"],
+        "failures": {k: failures.count(k) for k in sorted(set(failures)) if k != "none"},
+        "by_object": per_object,
+        "by_density": by_density,
+        "by_design_group": {g: _rate(success[groups == g]) for g in DESIGN_GROUPS},
+        "design_groups": {"soft_like_below": SOFT_BELOW, "stiff_like_above": STIFF_ABOVE},
+        "rejected_by_kind": {k: kinds.count(k) for k in sorted(set(kinds))},
+        "rejected_top_reasons": dict(top[:_TOP_REASONS]),
+    }
+
+
+def plot_success(ds: Dataset, path: str | Path) -> Path:
+    """Draw success rate against mean ln E (binned), one line per object, into a PNG; the path.
+
+    Raises :class:`UnsupportedError` without matplotlib, :class:`OutputError` if the file cannot be written.
+    """
+    try:
+        import matplotlib
+    except ImportError:
+        raise UnsupportedError("--plot needs matplotlib (pip install matplotlib)") from None
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    s = ds.samples()
+    mean = _mean_log_e(s)
+    success = np.asarray(s.column("success").to_numpy(zero_copy_only=False), dtype=float)
+    objects = np.asarray(s.column("object").to_pylist(), dtype=object)
+    fig, ax = plt.subplots(figsize=(8, 5))
+    if len(mean):
+        edges = np.linspace(mean.min(), mean.max() + 1e-9, _PLOT_BINS + 1)
+        centre = 0.5 * (edges[1:] + edges[:-1])
+        idx = np.clip(np.searchsorted(edges, mean, side="right") - 1, 0, _PLOT_BINS - 1)
+        for name in sorted(set(objects)):
+            sel = objects == name
+            rate = [
+                success[sel & (idx == b)].mean() if np.any(sel & (idx == b)) else np.nan
+                for b in range(_PLOT_BINS)
+            ]
+            ax.plot(centre, rate, marker="o", label=name)
+    ax.axvline(SOFT_BELOW, color="0.6", ls=":")
+    ax.axvline(STIFF_ABOVE, color="0.6", ls=":")
+    ax.set_xlabel("mean ln(E / Pa) of the design's 22 blocks")
+    ax.set_ylabel("success rate")
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_title(f"{ds.root.name}: {s.num_rows} samples")
+    if len(set(objects)) <= 20:
+        ax.legend(fontsize="small", loc="best")
+    fig.tight_layout()
+    out = Path(path)
+    try:
+        fig.savefig(out, dpi=120)
+    except OSError as exc:
+        raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from exc
+    finally:
+        plt.close(fig)
+    return out
