@@ -28,6 +28,7 @@ BENCHMARKS: dict[str, str] = {
     "poses": "mjcodesign.bench.poses:bench_poses",
     "viz": "mjcodesign.bench.viz:bench_viz",
     "fem": "mjcodesign.bench.fem:bench_fem",
+    "datagen": "mjcodesign.bench.datagen:bench_datagen",
 }
 """Benchmark name -> ``"module:function"``; the function takes keyword arguments and returns a dict."""
 

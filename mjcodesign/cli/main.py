@@ -101,6 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     bf.set_defaults(func=_cmd_bench_finger)
 
     from mjcodesign.cli import crosscheck as cli_crosscheck
+    from mjcodesign.cli import data as cli_data
     from mjcodesign.cli import fabrication as cli_fabrication
     from mjcodesign.cli import grasp as cli_grasp
     from mjcodesign.cli import poses as cli_poses
@@ -110,11 +111,13 @@ def build_parser() -> argparse.ArgumentParser:
     cli_crosscheck.add_bench_parser(bsub)
     cli_viz.add_bench_parser(bsub)
     cli_poses.add_bench_parser(bsub)
+    cli_data.add_bench_parser(bsub)
     cli_viz.add_parser(sub)
     cli_grasp.add_parser(sub)
     cli_crosscheck.add_parser(sub)
     cli_fabrication.add_parser(sub)
     cli_poses.add_parser(sub)
+    cli_data.add_parser(sub)
 
     from mjcodesign.hardware.cli import add_parser as add_hardware
 
@@ -130,10 +133,10 @@ def _reaches_warp(args: argparse.Namespace) -> bool:
     """
     command, what = args.command, getattr(args, "what", None)
     if command == "bench":
-        return what in ("fem", "poses")
+        return what in ("fem", "poses", "datagen")
     if command == "grasp":
         return "mjwarp" in getattr(args, "backend", "") or getattr(args, "pose", None) == "best"
-    return command in ("crosscheck", "poses")
+    return command in ("crosscheck", "poses", "datagen")
 
 
 def main(argv: list[str] | None = None) -> int:
