@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import struct
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +25,7 @@ from mjcodesign.errors import HardwareError, PoseError
 from .arm import FRANKA_HAND_MAX_WIDTH, check_transform
 
 __all__ = [
+    "ARRAY_FILE_ERRORS",
     "FileCamera",
     "GripperGeometry",
     "RealSenseCamera",
@@ -32,6 +34,10 @@ __all__ = [
     "load_point_cloud",
     "save_point_cloud",
 ]
+
+ARRAY_FILE_ERRORS = (OSError, ValueError, EOFError, struct.error, zipfile.BadZipFile)
+"""What ``np.load`` and the PLY reader raise on an unreadable file: EOFError for an empty one,
+BadZipFile for a damaged ``.npz``, ValueError for anything else that is not an array."""
 
 _PLY_TYPES = {
     "char": "i1",
@@ -176,9 +182,15 @@ def load_point_cloud(path: str | Path) -> np.ndarray:
                 pts = z["points"]
         else:
             raise HardwareError(f"{path}: unknown point cloud format (use .ply, .npz or .npy)")
-    except (OSError, ValueError, struct.error) as exc:
-        raise HardwareError(f"{path}: cannot read point cloud: {exc}") from None
+    except ARRAY_FILE_ERRORS as exc:
+        raise HardwareError(f"{path}: cannot read point cloud: {_reason(exc)}") from None
     return _check_points(pts, path)
+
+
+def _reason(exc: BaseException) -> str:
+    """One line for a read error: its message's first line, else its type (an empty file's EOFError)."""
+    text = str(exc).strip()
+    return text.splitlines()[0][:200] if text else type(exc).__name__
 
 
 def save_point_cloud(path: str | Path, points: np.ndarray) -> None:
@@ -216,8 +228,8 @@ def load_calibration(path: str | Path) -> np.ndarray:
                 matrix = next((z[k] for k in _CALIB_KEYS if k in z), None)
         else:
             matrix = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise HardwareError(f"{path}: cannot read calibration: {exc}") from None
+    except ARRAY_FILE_ERRORS as exc:
+        raise HardwareError(f"{path}: cannot read calibration: {_reason(exc)}") from None
     if matrix is None:
         raise HardwareError(f"{path}: no key among {_CALIB_KEYS}")
     try:

@@ -11,6 +11,13 @@ Pure Python, no dependencies: ``os.openpty`` and a thread. Use it as a context m
 
     with XL330Emulator(ids=(1, 2)) as emu:
         port = emu.port  # e.g. /dev/pts/7, opened by dynamixel_sdk.PortHandler
+
+The constructor returns once the serving thread is reading the bus. Faults can be injected by time
+(`XL330Emulator.cut_link`) or by events, which do not depend on how fast either side runs: drop the next
+n packets (`XL330Emulator.drop_packets`), or cut the link at a goal write until the client tries to
+switch torque off (`XL330Emulator.cut_link_on_goal` without a duration). A software peer answers only
+when the host schedules it: on a loaded host its replies can miss the SDK's 34 ms window of a 16 ms
+adapter latency, which real motors, answering from their own hardware, do not.
 """
 
 from __future__ import annotations
@@ -44,6 +51,9 @@ _BROADCAST_ID = 0xFE
 _EEPROM_END = 64  # addresses below this are EEPROM: writable only with torque off
 _TABLE_SIZE = 147  # last item: Present Temperature at 146 (1 byte)
 _CHILD_START_S = 20.0  # spawn start-up budget of `emulator_process` [s]
+_THREAD_START_S = (
+    20.0  # the serving thread reads the bus within this time of its start, or the emulator fails [s]
+)
 _POLL_S = 0.02  # serving thread wake-up period; bounds close() latency
 _EXTENDED_RANGE = 1_048_575  # |goal| limit in extended / current-based position modes [ticks]
 
@@ -255,21 +265,30 @@ class XL330Emulator:
         ids = tuple(int(i) for i in ids)
         if not ids or any(not 0 <= i < _BROADCAST_ID for i in ids) or len(set(ids)) != len(ids):
             raise ValueError(f"motor IDs must be distinct and in 0..252, got {ids}")
-        if speed_ticks_s <= 0:
-            raise ValueError(f"speed_ticks_s must be positive, got {speed_ticks_s}")
+        if not (math.isfinite(speed_ticks_s) and speed_ticks_s > 0):
+            raise ValueError(f"speed_ticks_s must be finite and positive, got {speed_ticks_s}")
         self._motors = {i: _Motor.new(i, speed_ticks_s, initial_position) for i in ids}
         self._lock = threading.Lock()
         self._link_down_until = 0.0
         self._cut_on_goal_s = 0.0
+        self._cut_on_goal_until_torque_off = False
+        self._down_until_torque_off = False
+        self._drop_next = 0
         self.packets = 0
         """Instruction packets received with a valid CRC (including ones for absent IDs)."""
+        self.dropped = 0
+        """Packets dropped unanswered by `drop_packets`, or by `cut_link_on_goal` without a duration."""
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)  # no echo, no line discipline: bytes pass unchanged
         self.port = os.ttyname(self._slave)
         """Path of the pseudo-terminal that a client opens (e.g. ``/dev/pts/7``)."""
         self._stop = threading.Event()
+        self._ready = threading.Event()
         self._thread = threading.Thread(target=self._serve, name="xl330-emulator", daemon=True)
         self._thread.start()
+        if not self._ready.wait(_THREAD_START_S):  # the ready signal: the bus is being read
+            self.close()
+            raise RuntimeError(f"the emulator's serving thread did not start within {_THREAD_START_S:g} s")
 
     # ---- inspection and fault injection (for tests and manual trials) ----
 
@@ -294,10 +313,21 @@ class XL330Emulator:
         with self._lock:
             self._link_down_until = time.monotonic() + duration_s
 
-    def cut_link_on_goal(self, duration_s: float) -> None:
-        """Cut the link for `duration_s` right after the next goal-position write is applied."""
+    def cut_link_on_goal(self, duration_s: float | None = None) -> None:
+        """Cut the link right after the next goal-position write is applied.
+
+        For `duration_s` seconds; or, when None, until the client gives up and tries to switch torque
+        off: that attempt is dropped too, and the link is back for its next one. Whatever the link
+        drops is neither applied nor answered.
+        """
         with self._lock:
-            self._cut_on_goal_s = duration_s
+            self._cut_on_goal_s = 0.0 if duration_s is None else duration_s
+            self._cut_on_goal_until_torque_off = duration_s is None
+
+    def drop_packets(self, n: int) -> None:
+        """Drop the next `n` instruction packets, whenever they come: neither applied nor answered."""
+        with self._lock:
+            self._drop_next = n
 
     # ---- lifecycle ----
 
@@ -321,6 +351,7 @@ class XL330Emulator:
 
     def _serve(self) -> None:
         buf = bytearray()
+        self._ready.set()
         while not self._stop.is_set():
             try:
                 ready, _, _ = select.select([self._master], [], [], _POLL_S)
@@ -364,9 +395,22 @@ class XL330Emulator:
                 if dxl_id in self._motors:
                     replies.append(_packet(dxl_id, _INST_STATUS, bytes([_ERR_CRC])))
                 continue
-            self.packets += 1
             body = unstuff(pkt[7:-2])
+            if self._dropped(body[0], body[1:]):
+                continue
+            self.packets += 1
             replies += self._execute(dxl_id, body[0], body[1:])
+
+    def _dropped(self, inst: int, params: bytes) -> bool:
+        """Whether an event-triggered fault drops this packet (`drop_packets`, `cut_link_on_goal`)."""
+        if self._drop_next > 0:
+            self._drop_next -= 1
+        elif self._down_until_torque_off:
+            self._down_until_torque_off = not _is_torque_off(inst, params)
+        else:
+            return False
+        self.dropped += 1
+        return True
 
     def _status(self, dxl_id: int, error: int, data: bytes = b"") -> bytes:
         return _packet(dxl_id, _INST_STATUS, bytes([error]) + data)
@@ -417,9 +461,26 @@ class XL330Emulator:
 
     def _after_write(self, addr: int, data: bytes, err: int) -> None:
         gp = ADDR["goal_position"]
-        if err == 0 and self._cut_on_goal_s > 0 and addr <= gp < addr + len(data):
+        if err != 0 or not addr <= gp < addr + len(data):
+            return
+        if self._cut_on_goal_s > 0:
             self._link_down_until = time.monotonic() + self._cut_on_goal_s
             self._cut_on_goal_s = 0.0
+        if self._cut_on_goal_until_torque_off:
+            self._down_until_torque_off = True
+            self._cut_on_goal_until_torque_off = False
+
+
+def _is_torque_off(inst: int, params: bytes) -> bool:
+    """Whether an instruction writes 0 to Torque Enable (a write, or a sync write's first record)."""
+    te = ADDR["torque_enable"]
+    if inst == _INST_WRITE and len(params) >= 3:
+        addr = struct.unpack_from("<H", params)[0]
+        return addr <= te < addr + len(params) - 2 and params[2 + te - addr] == 0
+    if inst == _INST_SYNC_WRITE and len(params) >= 6:
+        addr, size = struct.unpack_from("<HH", params)
+        return addr <= te < addr + size and params[5 + te - addr] == 0
+    return False
 
 
 def _serve_in_child(conn: object, ids: tuple[int, ...], speed: float, position: int, cut_s: float) -> None:

@@ -1,6 +1,11 @@
 import json
+import os
+import signal
+import socket
 import subprocess
 import sys
+import time
+from pathlib import Path
 
 import pytest
 
@@ -134,3 +139,207 @@ def test_quiet_warp_keeps_json_clean():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and r.stdout == "{}\n", r.stdout + r.stderr
     assert "CUDA driver" not in r.stderr, r.stderr
+
+
+# -- viewers bind 127.0.0.1 only -----------------------------------------------------------------
+# A desktop viewer needs a display. Here a fake X server takes the viewer's connection and never
+# answers, so the viewer waits in its X handshake with its gRPC server already listening (it binds
+# before it opens a window): the test reads that server's sockets from /proc/net/tcp{,6}.
+_LOOPBACK_HEX = "0100007F"  # 127.0.0.1 as /proc/net/tcp writes it
+_LISTEN = "0A"
+
+
+def _sockets_on(port: int) -> dict[str, str]:
+    """Inode -> local address (hex) of every socket listening on TCP ``port``, IPv4 and IPv6."""
+    found = {}
+    for table in (Path("/proc/net/tcp"), Path("/proc/net/tcp6")):
+        rows = table.read_text().splitlines()[1:] if table.exists() else []
+        for fields in (row.split() for row in rows):
+            address, hex_port = fields[1].rsplit(":", 1)
+            if fields[3] == _LISTEN and int(hex_port, 16) == port:
+                found[fields[9]] = address
+    return found
+
+
+def _pids_holding(inodes) -> set[int]:
+    """Processes that hold any of these socket inodes open."""
+    wanted = {f"socket:[{i}]" for i in inodes}
+    pids = set()
+    for fd_dir in Path("/proc").glob("[0-9]*/fd"):
+        try:
+            if any(os.readlink(fd) in wanted for fd in fd_dir.iterdir()):
+                pids.add(int(fd_dir.parent.name))
+        except OSError:  # a process that ended, or one of another user
+            continue
+    return pids
+
+
+def _await_sockets(port: int, alive, timeout_s: float = 60.0) -> dict[str, str]:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if found := _sockets_on(port):
+            return found
+        assert alive(), "the viewer's process ended before listening"
+        time.sleep(0.05)
+    raise AssertionError(f"nothing listens on port {port} after {timeout_s} s")
+
+
+@pytest.fixture
+def fake_display(monkeypatch):
+    """DISPLAY of an X server (a Linux abstract socket) that accepts connections and never answers."""
+    if not (sys.platform.startswith("linux") and Path("/proc/net/tcp").exists()):
+        pytest.skip("reads listening sockets from /proc and uses a Linux abstract socket")
+    pytest.importorskip("rerun")
+    server = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    for n in range(4711, 4911):
+        try:
+            server.bind(f"\0/tmp/.X11-unix/X{n}")
+            break
+        except OSError:
+            continue
+    server.listen(16)
+    env = {k: v for k, v in os.environ.items() if k != "WAYLAND_DISPLAY"}
+    yield {**env, "DISPLAY": f":{n}", "RERUN_ANALYTICS": "0"}
+    server.close()
+
+
+def _free_tcp_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _box_recording(tmp_path) -> Path:
+    import trimesh
+
+    box, rrd = tmp_path / "box.stl", tmp_path / "box.rrd"
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(box)
+    r = _run("grasp", "--object", str(box), "--impulse", "0", "--rrd", str(rrd))
+    assert r.returncode == 0, r.stderr
+    return rrd
+
+
+def test_desktop_view_binds_loopback_only(tmp_path, fake_display):
+    rrd, port = _box_recording(tmp_path), _free_tcp_port()
+    cmd = [sys.executable, "-m", "mjcodesign.cli", "view", str(rrd), "--port", str(port)]
+    proc = subprocess.Popen(
+        cmd, env=fake_display, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+    )
+    try:
+        sockets = _await_sockets(port, lambda: proc.poll() is None)
+        assert set(sockets.values()) == {_LOOPBACK_HEX}, sockets
+    finally:
+        proc.send_signal(signal.SIGINT)  # view closes its viewer and returns 130
+        code = proc.wait(timeout=30)
+    assert code == 130, proc.stderr.read()
+    assert not _sockets_on(port)  # the viewer went with it
+
+
+def test_spawn_starts_a_viewer_bound_to_loopback_only(tmp_path, fake_display):
+    import trimesh
+
+    box, port = tmp_path / "box.stl", _free_tcp_port()
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(box)
+    args = ["grasp", "--object", str(box), "--impulse", "0", "--spawn", "--viewer-port", str(port), "--json"]
+    r = subprocess.run(
+        [sys.executable, "-m", "mjcodesign.cli", *args],
+        capture_output=True, text=True, timeout=300, env={**fake_display, "XDG_CACHE_HOME": str(tmp_path)},
+    )  # fmt: skip
+    sockets = _sockets_on(port)
+    viewers = _pids_holding(sockets)
+    try:
+        assert r.returncode == 0, r.stderr
+        assert json.loads(r.stdout)["reason"] is not None
+        # The viewer outlives the command (it is the user's window) and listens on 127.0.0.1 only.
+        assert sockets and set(sockets.values()) == {_LOOPBACK_HEX}, sockets
+        assert viewers, "no process holds the viewer's socket"
+    finally:
+        for pid in viewers:
+            os.kill(pid, signal.SIGTERM)
+
+
+def test_view_and_spawn_without_a_display_are_refused_before_binding(tmp_path):
+    pytest.importorskip("rerun")
+    if not sys.platform.startswith("linux"):
+        pytest.skip("a desktop window needs DISPLAY or WAYLAND_DISPLAY only on Linux and the BSDs")
+    import trimesh
+
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    box, port = tmp_path / "box.stl", _free_tcp_port()
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(box)
+    for args in (
+        ["view", str(_box_recording(tmp_path)), "--port", str(port)],
+        ["grasp", "--object", str(box), "--spawn", "--viewer-port", str(port)],
+    ):
+        r = subprocess.run(
+            [sys.executable, "-m", "mjcodesign.cli", *args],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env=env,
+        )
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1 and "--web" in lines[0], r.stderr
+        assert not _sockets_on(port)
+
+
+def test_benchmarks_refuse_bad_arguments_before_running():
+    from mjcodesign.bench import run_benchmark
+    from mjcodesign.errors import DesignError
+
+    for name, kwargs in (
+        ("finger", {"models": ["rubber"]}),
+        ("finger", {"models": ["chain"], "seconds": float("nan")}),
+        ("finger", {"models": ["chain"], "seconds": -1.0}),
+        ("finger", {"models": ["chain"], "flex_cells": 0}),
+        ("grasp", {"rollouts": 0}),  # once silently 32
+        ("grasp", {"rollouts": -2}),
+        ("viz", {"repeats": 0}),
+    ):
+        with pytest.raises(DesignError):
+            run_benchmark(name, **kwargs)
+
+
+def test_bench_finger_reports_progress_per_model_on_stderr_only():
+    from mjcodesign.bench import run_benchmark
+
+    calls = []
+    res = run_benchmark("finger", models=["chain"], seconds=0.01, progress=lambda *a: calls.append(a))
+    assert calls == [("chain", 0)] and set(res) == {"chain"}
+    r = _run("bench", "finger", "--models", "chain", "--seconds", "0.01", "--json")
+    assert r.returncode == 0 and set(json.loads(r.stdout)) == {"chain"}, r.stderr  # stdout: the JSON alone
+
+
+def test_finger_export_flex_notes_the_approximate_tendon_on_stderr(tmp_path):
+    r = _run("finger", "export", "--model", "flex", "--out", str(tmp_path / "flex"), "--json")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["tendon_mode"] == "native"
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("note:") and "approximate" in lines[0], r.stderr
+    r = _run("finger", "export", "--model", "chain", "--out", str(tmp_path / "chain"), "--json")
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+
+
+def test_poses_out_says_what_it_wrote_on_stderr(tmp_path):
+    pytest.importorskip("warp")
+    import trimesh
+
+    box, out = tmp_path / "box.stl", tmp_path / "p.npz"
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(box)
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache")}
+    cmd = [
+        sys.executable,
+        "-m",
+        "mjcodesign.cli",
+        "poses",
+        "--object",
+        str(box),
+        "--n",
+        "2",
+        "--out",
+        str(out),
+    ]
+    r = subprocess.run([*cmd, "--json"], capture_output=True, text=True, timeout=600, env=env)
+    assert r.returncode == 0, r.stderr
+    n = len(json.loads(r.stdout)["poses"])  # stdout: the JSON alone
+    assert out.is_file() and r.stderr.strip().splitlines()[-1] == f"wrote {n} poses of box to {out}", r.stderr

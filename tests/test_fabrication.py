@@ -317,6 +317,33 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, case):
     assert r.stdout == ""
 
 
+def _tree(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_export_failing_midway_leaves_the_folder_as_it_was(tmp_path, monkeypatch):
+    from mjcodesign.errors import OutputError
+    from mjcodesign.fabrication import export as export_module
+    from mjcodesign.fabrication import export_print
+
+    out = tmp_path / "out"
+    export_print("soft", None, out)  # a complete earlier export in the folder
+    before = _tree(out)
+
+    def full_disk(plan, directory):  # the STLs fail once both 3MF files have been written
+        raise OutputError(f"cannot write STL files to {directory}: No space left on device")
+
+    monkeypatch.setattr(export_module, "write_stls", full_disk)
+    with pytest.raises(OutputError, match="No space left"):
+        export_print("paper-optimized", None, out)
+    assert _tree(out) == before  # the old set, whole: no new 3MF beside old STLs
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []  # no staging folder left
+    fresh = tmp_path / "new" / "out"
+    with pytest.raises(OutputError):
+        export_print("paper-optimized", None, fresh)
+    assert not (tmp_path / "new").exists()  # the folders it made are gone again
+
+
 def test_cli_module_imports_no_numpy():
     code = "import sys, mjcodesign.cli.fabrication; print('numpy' in sys.modules)"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=60)

@@ -271,12 +271,13 @@ class RerunRecorder:
         static.add(f"{root}/metrics", "TextDocument", "media_type", ["text/markdown"])
         static.send(self.rec)
 
-    def close(self) -> None:
+    def close(self, *, discard: bool = False) -> None:
         """Flush everything, close the sinks, end the stream's threads and write the file (complete).
 
         Rerun keeps a dropped stream, with its two threads, until an "orphan" sweep (``rr.init`` runs
         one); without the sweep every recording made in a process left two threads behind that now and
         then spun on ``sched_yield``, taking CPU time from the simulation. A second call does nothing.
+        ``discard`` (a refused run): write no file, and remove the one a file sink began (``spawn``).
         """
         if self._closed:
             return
@@ -289,6 +290,10 @@ class RerunRecorder:
         import rerun_bindings  # rerun-sdk's native module; rr.init calls the same sweep
 
         rerun_bindings.flush_and_cleanup_orphaned_recordings()
+        if discard:
+            if self._spawn and self.path is not None:
+                self.path.unlink(missing_ok=True)
+            return
         if encoded is not None:
             try:
                 if self.path.exists() and not self.path.is_symlink():

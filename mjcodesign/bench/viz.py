@@ -150,12 +150,17 @@ def bench_viz(
     all of ``cases``).
     """
     from mjcodesign.design.stiffness import Stiffness
+    from mjcodesign.errors import DesignError
     from mjcodesign.jobs import GraspJob, SceneCache, load_grasp_object, run_jobs
     from mjcodesign.objects import box_object
     from mjcodesign.scenarios.grasp import GraspScenario, auto_pose
     from mjcodesign.sim import MujocoBackend
     from mjcodesign.sim.observe import load_observer
 
+    if repeats < 1:
+        raise DesignError(f"repeats must be >= 1, got {repeats}")
+    if any(d is not None and d < 1 for d in decimations):
+        raise DesignError(f"decimations must be None (default) or steps >= 1, got {decimations}")
     sim = MujocoBackend(nthread=1)
     scenario = GraspScenario()
     out: dict = {

@@ -6,14 +6,28 @@ No ``cli.*`` module imports another's private names or ``cli.main``; what they s
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import logging
+import math
 import os
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
-__all__ = ["Parser", "emit", "parse_design", "user_cache_dir", "quiet_warp"]
+__all__ = [
+    "Parser",
+    "emit",
+    "parse_design",
+    "user_cache_dir",
+    "quiet_warp",
+    "path_text",
+    "port_number",
+    "int_at_least",
+    "finite_float",
+    "short",
+]
 
 _NO_DRIVER = b"Could not find or load the NVIDIA CUDA driver"  # expected on CPU-only machines
 
@@ -24,6 +38,74 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str):  # noqa: D102
         sys.stderr.write(f"error: {message}\n")
         raise SystemExit(2)
+
+
+def short(text: str, keep: int = 60) -> str:
+    """``text`` quoted, cut to ``keep`` characters with an ellipsis: a 5,000-character path stays one line."""
+    return repr(text if len(text) <= keep else text[:keep] + "…")
+
+
+def path_text(text: str) -> str:
+    """The argparse type of a path argument: not empty, and a name the file system can look up.
+
+    An empty path would mean the current directory (``Path("")`` is ``.``); a name past ``NAME_MAX`` or
+    ``PATH_MAX`` would fail later with ``ENAMETOOLONG`` wherever it is first used. A path that does not
+    exist passes: the command says what it expected there (names such as ``025_mug`` are not files).
+    """
+    if not text:
+        raise argparse.ArgumentTypeError("empty path")
+    try:
+        os.stat(text)
+    except ValueError:  # an embedded NUL
+        raise argparse.ArgumentTypeError(f"not a path: {short(text)}") from None
+    except OSError as exc:
+        if exc.errno == errno.ENAMETOOLONG:
+            raise argparse.ArgumentTypeError(
+                f"file name too long ({len(text)} characters): {short(text)}"
+            ) from None
+    return text
+
+
+def port_number(text: str) -> int:
+    """The argparse type of a TCP port: an integer in 1..65535."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"must be a port number in 1..65535, got {short(text)}")
+    return value
+
+
+def int_at_least(low: int) -> Callable[[str], int]:
+    """The argparse type of an integer >= ``low``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {short(text)}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value}")
+        return value
+
+    return parse
+
+
+def finite_float(low: float, *, strict: bool = False) -> Callable[[str], float]:
+    """The argparse type of a finite number >= ``low`` (> ``low`` when ``strict``): never NaN or inf."""
+    bound = f"> {low:g}" if strict else f">= {low:g}"
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value) or value < low or (strict and value == low):
+            raise argparse.ArgumentTypeError(f"must be a finite number {bound}, got {short(text)}")
+        return value
+
+    return parse
 
 
 def parse_design(text: str):

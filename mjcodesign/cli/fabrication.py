@@ -10,6 +10,8 @@ import argparse
 import json
 from pathlib import Path
 
+from mjcodesign.cli.common import path_text
+
 __all__ = ["add_parser", "run"]
 
 
@@ -28,6 +30,11 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
+def _path(text: str) -> Path:
+    """The argparse type of a path, checked as text (:func:`path_text`): ``Path("")`` would be ``.``."""
+    return Path(path_text(text))
+
+
 def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--design",
@@ -36,11 +43,16 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--calibration",
-        type=Path,
+        type=_path,
         default=None,
         help="calibration TOML (default: the packaged EXAMPLE table for TPU 95A, placeholder values)",
     )
-    p.add_argument("--out", type=Path, required=True, help="output directory (created if missing)")
+    p.add_argument(
+        "--out",
+        type=_path,
+        required=True,
+        help="output directory (created if missing; nothing lands in it unless every file was written)",
+    )
     p.add_argument("--json", action="store_true", help="print the per-block mapping as JSON on stdout")
 
 

@@ -1,19 +1,23 @@
 """``mjcodesign view``, ``mjcodesign bench viz`` and the recording flags of ``grasp`` and ``crosscheck``.
 
 Recording goes through the observer registered as ``rerun`` (``mjcodesign.observers`` entry points, the
-``viz`` package); this module never imports ``viz``. ``view`` runs the ``rerun`` viewer that ships with
-``rerun-sdk``; its web viewer and gRPC server bind 127.0.0.1 only.
+``viz`` package); this module never imports ``viz``. ``view`` and ``--spawn`` run the ``rerun`` viewer
+that ships with ``rerun-sdk``; its gRPC server (desktop and web) and web viewer bind 127.0.0.1 only.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
+import socket
 import subprocess
 import sys
+import tempfile
+import time
 from pathlib import Path
 
-from mjcodesign.cli.common import emit, user_cache_dir
+from mjcodesign.cli.common import emit, int_at_least, path_text, port_number, short, user_cache_dir
 
 __all__ = [
     "add_parser",
@@ -26,6 +30,8 @@ __all__ = [
 _LOOPBACK = "127.0.0.1"
 DEFAULT_VIEWER_PORT = 9876
 """Rerun's default viewer port."""
+_VIEWER_START_S = 20.0  # a spawned desktop viewer listens within this time, or is reported [s]
+_POLL_S = 0.05  # [s]
 
 
 def add_recording_flags(p: argparse.ArgumentParser, *, decimation: bool = True) -> None:
@@ -33,52 +39,120 @@ def add_recording_flags(p: argparse.ArgumentParser, *, decimation: bool = True) 
 
     ``--rrd FILE`` writes an offline recording (no viewer); ``--spawn`` streams to a desktop viewer.
     """
-    p.add_argument("--rrd", default=None, help="write a Rerun recording to this .rrd file (no viewer)")
+    p.add_argument(
+        "--rrd", type=path_text, default=None, help="write a Rerun recording to this .rrd file (no viewer)"
+    )
     p.add_argument("--spawn", action="store_true", help="also stream to a desktop Rerun viewer")
     p.add_argument(
         "--viewer-port",
-        type=int,
+        type=port_number,
         default=DEFAULT_VIEWER_PORT,
         help=f"--spawn: the viewer's gRPC port on {_LOOPBACK}; a viewer already there is reused",
     )
     if decimation:
         p.add_argument(
             "--decimation",
-            type=int,
+            type=int_at_least(1),
             default=None,
             help="log every N-th simulation step (default: 10 states per simulated second)",
         )
 
 
 def open_recorder(args: argparse.Namespace):
-    """The Rerun observer for ``--rrd``/``--spawn``, or None when neither is given."""
+    """The Rerun observer for ``--rrd``/``--spawn``, or None when neither is given.
+
+    ``--spawn`` streams to the viewer already listening on 127.0.0.1 at ``--viewer-port``, or starts a
+    desktop viewer there, bound to 127.0.0.1 (Rerun's own spawn binds 0.0.0.0), before the recorder
+    looks for one. Raises :class:`ObserverError` when there is no display to show a new viewer on.
+    """
     spawn = getattr(args, "spawn", False)
     if not args.rrd and not spawn:
         return None
     from mjcodesign.sim import load_observer
 
+    port = getattr(args, "viewer_port", DEFAULT_VIEWER_PORT)
+    if spawn and not _listening(port):
+        from mjcodesign.errors import ObserverError
+
+        if not _has_display():
+            raise ObserverError(
+                "--spawn: no display (DISPLAY or WAYLAND_DISPLAY) for the desktop viewer; record with "
+                "--rrd FILE and open it with `mjcodesign view FILE --web`"
+            )
+        start_viewer(port)
     return load_observer(
         "rerun",
         path=args.rrd,
         spawn=spawn,
-        port=getattr(args, "viewer_port", DEFAULT_VIEWER_PORT),
+        port=port,
         decimation=getattr(args, "decimation", None),
     )
+
+
+def _has_display() -> bool:
+    """Whether a desktop window can open: X11 or Wayland on Linux and the BSDs; always on macOS, Windows."""
+    if sys.platform == "darwin" or sys.platform.startswith("win"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def _listening(port: int) -> bool:
+    """Whether something accepts TCP connections on 127.0.0.1 at ``port``."""
+    try:
+        with socket.create_connection((_LOOPBACK, port), timeout=1.0):
+            return True
+    except OSError:
+        return False
+
+
+def start_viewer(port: int) -> subprocess.Popen:
+    """Start a desktop viewer whose gRPC server listens on 127.0.0.1 at ``port``; return once it listens.
+
+    The viewer is detached (its own session): it stays open after the command ends, and a Ctrl-C of the
+    command does not close it. Raises :class:`ObserverError` if it exits first or does not listen within
+    :data:`_VIEWER_START_S`.
+    """
+    from mjcodesign.errors import ObserverError
+
+    cmd = _viewer_executable() + ["--port", str(port), "--bind", _LOOPBACK, "--expect-data-soon"]
+    log = tempfile.TemporaryFile()  # the viewer's own log, read back only if it fails to start
+    env = {**os.environ, "RERUN_APP_ONLY": "true"}  # as Rerun's spawn: skips the analytics prompt
+    proc = subprocess.Popen(
+        cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=log, env=env, start_new_session=True
+    )
+    deadline = time.monotonic() + _VIEWER_START_S
+    while not _listening(port):
+        if proc.poll() is not None:
+            log.seek(0)
+            last = [ln for ln in log.read().decode(errors="replace").splitlines() if ln.strip()][-1:]
+            raise ObserverError(
+                f"the Rerun viewer exited at start (exit code {proc.returncode})"
+                + (f": {last[0].strip()[:200]}" if last else "")
+            )
+        if time.monotonic() > deadline:
+            proc.terminate()
+            raise ObserverError(
+                f"the Rerun viewer did not listen on port {port} within {_VIEWER_START_S:g} s"
+            )
+        time.sleep(_POLL_S)
+    log.close()
+    return proc
 
 
 def view_command(
     path: str | Path, *, web: bool = False, port: int | None = None, web_port: int | None = None
 ) -> list[str]:
-    """The viewer's command line: desktop, or web viewer + gRPC server bound to 127.0.0.1.
+    """The viewer's command line: desktop or web viewer, its gRPC server bound to 127.0.0.1.
 
     ``port``: the viewer's (or the web viewer's gRPC server's) port; ``web_port``: the web viewer's
     HTTP port. None keeps Rerun's defaults (9876, 9090).
     """
     cmd = _viewer_executable()
     if web:
-        cmd += ["--serve-web", "--bind", _LOOPBACK]
+        cmd += ["--serve-web"]
         if web_port is not None:
             cmd += ["--web-viewer-port", str(web_port)]
+    cmd += ["--bind", _LOOPBACK]
     if port is not None:
         cmd += ["--port", str(port)]
     return cmd + [str(path)]
@@ -113,6 +187,12 @@ def _cmd_view(args) -> int:
         raise ObserverError(f"recording not found: {path}")
     if importlib.util.find_spec("rerun") is None:
         raise ObserverError("the Rerun viewer is not installed (pip install 'mjcodesign[viz]')")
+    _check_recording(path)
+    if not args.web and not _has_display():
+        raise ObserverError(
+            "no display (DISPLAY or WAYLAND_DISPLAY) for the desktop viewer: use --web to serve the "
+            "web viewer on 127.0.0.1"
+        )
     proc = subprocess.Popen(view_command(path, web=args.web, port=args.port, web_port=args.web_port))
     try:
         return proc.wait()
@@ -124,6 +204,27 @@ def _cmd_view(args) -> int:
             proc.kill()
             proc.wait()
         return 130
+
+
+def _check_recording(path: Path) -> None:
+    """Raise :class:`ObserverError` unless ``path`` is a Rerun recording holding some logged data.
+
+    Reads the file's chunks up to the first one of a logged entity (Rerun's own ``/__properties`` are
+    not data), so that the viewer is never started on a file it would show as empty.
+    """
+    from rerun.chunk import RrdReader
+
+    from mjcodesign.errors import ObserverError
+
+    try:
+        has_data = any(not str(c.entity_path).startswith("/__") for c in RrdReader(str(path)).stream())
+    except (RuntimeError, OSError, ValueError) as exc:
+        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ObserverError(
+            f"{short(str(path))} is not a readable Rerun recording ({reason[:200]})"
+        ) from None
+    if not has_data:
+        raise ObserverError(f"{short(str(path))}: the recording holds no data")
 
 
 def _cmd_bench_viz(args) -> int:
@@ -160,10 +261,10 @@ def _cmd_bench_viz(args) -> int:
 def add_parser(subparsers) -> None:
     """Register ``view`` on the top-level sub-parsers."""
     p = subparsers.add_parser("view", help="open a Rerun recording (.rrd) in the desktop or web viewer")
-    p.add_argument("file", help="a .rrd file written with --rrd")
+    p.add_argument("file", type=path_text, help="a .rrd file written with --rrd")
     p.add_argument("--web", action="store_true", help=f"serve the web viewer on {_LOOPBACK} instead")
-    p.add_argument("--port", type=int, default=None, help="viewer / gRPC server port (default 9876)")
-    p.add_argument("--web-port", type=int, default=None, help="--web: HTTP port (default 9090)")
+    p.add_argument("--port", type=port_number, default=None, help="viewer / gRPC server port (default 9876)")
+    p.add_argument("--web-port", type=port_number, default=None, help="--web: HTTP port (default 9090)")
     p.set_defaults(func=_cmd_view)
 
 
@@ -177,12 +278,12 @@ def add_bench_parser(bench_subparsers) -> None:
         default="chain-box,chain-held,chain-ycb",
         help="comma-separated, from chain-box, chain-held, chain-ycb, flex-box",
     )
-    p.add_argument("--repeats", type=int, default=5, help="rollouts per measurement (median)")
+    p.add_argument("--repeats", type=int_at_least(1), default=5, help="rollouts per measurement (median)")
     p.add_argument(
         "--decimations",
         default="default,5,1",
         help="logged every N steps, comma-separated ('default': 10 Hz)",
     )
-    p.add_argument("--out", default=None, help="also write the JSON to this file")
+    p.add_argument("--out", type=path_text, default=None, help="also write the JSON to this file")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench_viz)

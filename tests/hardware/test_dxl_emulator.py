@@ -163,3 +163,11 @@ def test_close_is_prompt():
 def test_rejects_bad_ids():
     with pytest.raises(ValueError):
         XL330Emulator(ids=(1, 1))
+    with pytest.raises(ValueError):
+        XL330Emulator(ids=(300,))
+
+
+@pytest.mark.parametrize("speed", [-5.0, 0.0, float("nan"), float("inf")])
+def test_rejects_a_speed_that_is_not_finite_and_positive(speed):
+    with pytest.raises(ValueError, match="speed"):
+        XL330Emulator(ids=(1,), speed_ticks_s=speed)
