@@ -10,7 +10,13 @@ from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError, UnsupportedError
 
 
-def test_fem_backend_is_a_simulator_that_refuses_grasps():
+def test_fem_backend_is_a_simulator_that_refuses_bad_input():
+    # The FEM runs the grasp since issue 18 (tests/test_fem_grasp.py); what it refuses is typed: a scene or
+    # scenario of the wrong type, and an observer (it has no MuJoCo states to replay)
+    from mjcodesign.errors import MjcodesignError
+    from mjcodesign.models.types import FingerModel
+    from mjcodesign.objects import box_object
+    from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
     from mjcodesign.sim.fem import FemBackend
     from mjcodesign.sim.protocol import Simulator, get_backend
 
@@ -19,9 +25,20 @@ def test_fem_backend_is_a_simulator_that_refuses_grasps():
     assert isinstance(backend, Simulator)
     assert backend.name == "fem"
     for method, args in [("run", ()), ("run_batch", ([],)), ("run_poses", ([],))]:
-        with pytest.raises(UnsupportedError, match="cantilever, curl and press") as info:
-            getattr(backend, method)(None, None, *args, observer=None)
+        with pytest.raises(MjcodesignError, match="runs a GraspScene, not NoneType") as info:
+            getattr(backend, method)(None, GraspScenario(), *args)
         assert "\n" not in str(info.value)
+    obj = box_object((0.05,) * 3, 100.0)
+    scene = build_scene(obj, FingerDesign(), Stiffness.preset("soft"), FingerModel.CHAIN, auto_pose(obj))
+    with pytest.raises(MjcodesignError, match="runs a GraspScenario, not dict"):
+        backend.run(scene, {"tension": 5})
+    with pytest.raises(UnsupportedError, match="no MuJoCo states") as info:
+        backend.run(scene, GraspScenario(), observer=object())
+    assert "\n" not in str(info.value)
+    assert (
+        backend.run_batch(scene, GraspScenario(), []) == []
+        and backend.run_poses(scene, GraspScenario(), []) == []
+    )
 
 
 def test_fem_results_are_frozen_records():
@@ -79,3 +96,30 @@ def test_tensions_scale_with_the_design():
     assert soft == pytest.approx([0.02, 0.04, 0.08])
     assert press_tension(Stiffness.preset("soft")) == pytest.approx(0.04)
     assert press_tension(Stiffness.preset("paper-optimized")) == pytest.approx(0.2138, rel=1e-3)
+
+
+def test_crosscheck_design_sweep_ends_with_a_summary_per_model():
+    # `random:A..B`: every seed's rows in turn, then per model the worst and median |rel_diff| of them
+    # (the parsing and the summary arithmetic alone: tests/test_landscape.py)
+    from mjcodesign.crosscheck import crosscheck
+
+    rows, curves = crosscheck("cantilever", ["chain"], "random:3..5")
+    assert curves == {}
+    per_design = [r for r in rows if not r["metric"].startswith("summary:")]
+    assert [r["design"] for r in per_design] == ["random:3", "random:4", "random:5"]
+    summary = {r["metric"]: r for r in rows if r["metric"].startswith("summary:")}
+    assert set(summary) == {"summary:worst_rel_diff", "summary:median_rel_diff"}
+    diffs = [r["rel_diff"] for r in per_design]
+    assert summary["summary:worst_rel_diff"]["value"] == pytest.approx(max(diffs))
+    assert summary["summary:median_rel_diff"]["value"] == pytest.approx(float(np.median(diffs)))
+    assert all(r["design"] == "random:3..5" and r["model"] == "chain" for r in summary.values())
+
+
+def test_crosscheck_cli_refuses_a_reversed_sweep(capsys):
+    from mjcodesign.cli.main import main
+
+    assert (
+        main(["crosscheck", "--scenario", "cantilever", "--models", "chain", "--design", "random:5..3"]) == 2
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "below the first" in err[0]

@@ -252,7 +252,10 @@ def test_held_objects_feel_their_weight(reference, config):
     # A held, static object: the fingers' force on it balances gravity, |F| = m g whatever the design
     # (NOTES: coefficient of variation 0.005-0.11). The box at its top-down pose, as a shard.
     (task,), mass = _auto_tasks(config, reference.manifest["objects"][1], 400.0)
-    (res,) = Worker().run([task])
+    # Designs that hold the box: on the FEM-calibrated chain (issue 16) the config's three random designs
+    # sweep it out while tightening in this short scenario (docs/benchmarks.md, the soft finger's failure)
+    holders = tuple(tuple(Stiffness.preset(n).as_list()) for n in ("semi-rigid", "paper-optimized"))
+    (res,) = Worker().run([dataclasses.replace(task, log_e=holders)])
     rows = res.samples.to_pylist()
     held = [np.linalg.norm(r["body_force"][3:]) / (mass * _G) for r in rows if r["success"]]
     assert len(held) >= 2, [r["reason"] for r in rows]
@@ -400,11 +403,14 @@ _PARITY_PALM_Z = 0.141  # [m] the palm height of tests/test_mjwarp_parity.py
 def test_mjwarp_rows_match_mujoco_c(reference, config):
     pytest.importorskip("mujoco_warp")
     # The case tests/test_mjwarp_parity.py sets its tolerances on: the box top-down and 3 mm off along
-    # the palm x, the paper-optimized and soft designs, its scenario; the four (pose, design) pairs are
-    # the worlds of one MJWarp call on the CPU, and the rows go through the dataset's row builder.
+    # the palm x, paper-optimized and a slipping uniform design, its scenario; the four (pose, design)
+    # pairs are the worlds of one MJWarp call on the CPU, and the rows go through the dataset's row builder.
     # Random designs do not hold to this tolerance: on these two poses, 32 random designs moved the
     # object up to 29 mm apart (marginal grasps that slip), 1 in 32 disagreed on success.
-    presets = tuple(tuple(Stiffness.preset(n).as_list()) for n in ("paper-optimized", "soft"))
+    # The slipping design is a uniform ln E = 13.8: on the FEM-calibrated chain (issue 16) the soft preset
+    # breaks the energy bound (a rejected row), and ln E 14.0 slips marginally 3 mm off (MuJoCo C and
+    # MJWarp part by 6 mm there); 13.8 slips cleanly at both poses (paths equal to 2 µm, measured).
+    presets = (tuple(Stiffness.preset("paper-optimized").as_list()), (13.8,) * 22)
     parity = dataclasses.replace(config, scenario=_PARITY_SCENARIO)
     # At the palm height the parity tolerance was measured at (tests/test_mjwarp_parity.py, 141 mm): the
     # auto pose sits 0.35 mm higher, where this grasp is marginal and float32 MJWarp ends 9 mm away.
@@ -480,7 +486,7 @@ def test_datagen_and_data_info(small_cli, work, capsys):
         (["--objects", "ycb-no-such-set"], "unknown object or set"),
         (["--poses-per-object", "0"], "--poses-per-object"),
         (["--designs-per-pose", "-3"], "--designs-per-pose"),
-        (["--tendon", "position:1000"], "not implemented yet"),
+        (["--tendon", "position:0"], "ticks > 0"),
         (["--tendon", "force:abc"], "--tendon"),
         (["--density", "uniform:500,100"], "LO must be below HI"),
         (["--scenario", '{"tension": 5}'], "--scenario"),

@@ -33,7 +33,18 @@ def _pose(obj):
 @pytest.mark.slow
 def test_mjwarp_matches_mujoco_c():
     obj = box_object((0.05,) * 3, 400.0)
-    designs = [Stiffness.preset("paper-optimized"), Stiffness.preset("soft")]
+    # The failing design is a uniform log E = 14.0 (the box slips out: "no finger contact"), not the soft
+    # preset: on the FEM-calibrated chain the soft preset breaks the energy bound (MuJoCo C: 44.3 mJ gained
+    # over 635.8 mJ put in, 7% > ENERGY_TOL, at t = 0.286 s with the box flung at 0.83 m/s), and its reason
+    # carries numbers read at the step of the largest excess, which float32 shifts by one step (MJWarp:
+    # 37.8 mJ over 621.1 mJ at t = 0.284 s) although the paths agree to 1.6 µm. Measured paths at this
+    # pose: log E 14.0 parts by 0.04 mm, log E 13.7 by 0.46 mm (at the tolerance: marginal, not used).
+    # The soft preset is not even stable in MuJoCo C alone: run alone, first in a batch or after
+    # paper-optimized it breaks the bound (44.5 mJ), after paper-optimized and log E 14.0 it does not,
+    # even on one thread (measured, repeatable: the rollout depends on what ran before it on its MjData,
+    # likely the solver's warm start; not traced further). Before mjwarp.py kept every step's velocities, MJWarp
+    # left the dampers' loss out of the bound and never flagged it.
+    designs = [Stiffness.preset("paper-optimized"), Stiffness(np.full((2, 11), 14.0))]
     scene = build_scene(obj, FingerDesign(), designs[0], FingerModel.CHAIN, _pose(obj))
     # A short scenario: close, tighten, lift, hold; the impulse is left out to keep the CPU run short.
     scenario = GraspScenario(
@@ -55,10 +66,13 @@ def test_mjwarp_pose_batch_matches_mujoco_c():
     # Two poses of one design as two worlds (batched body_pos/body_quat, per-world state and controls).
     obj = box_object((0.05,) * 3, 400.0)
     p0 = _pose(obj)
-    # The second pose sits 3 mm off the object's centre along the palm's x: another contact patch and
-    # a path 0.67 mm from the first pose's. (Poses where the grasp is marginal, e.g. 3 mm off along
-    # the closing axis or 5 mm higher, differ by 0.65 mm or in success between float32 and float64.)
-    poses = [p0, GripperPose((0.003, 0.0, p0.position[2]), p0.quat, p0.openings)]
+    # The second pose sits 13 mm off the object's centre along the palm's x: another contact patch and
+    # a path 0.87 mm from the first pose's on the FEM-calibrated chain (measured; 3 mm off, the offset
+    # used before, now parts by only 0.14 mm, 10 mm by 0.60 mm, so the poses would not differ beyond the
+    # path tolerance). MuJoCo C and MJWarp part by 2.4 µm there. (Poses where the grasp is marginal, e.g.
+    # 3 mm off along the closing axis or 5 mm higher, differed by 0.65 mm or in success between float32
+    # and float64.)
+    poses = [p0, GripperPose((0.013, 0.0, p0.position[2]), p0.quat, p0.openings)]
     scene = build_scene(obj, FingerDesign(), Stiffness.preset("paper-optimized"), FingerModel.CHAIN, p0)
     scenario = GraspScenario(
         settle_s=0.05, close_s=0.1, tighten_s=0.1, lift_s=0.1, hold_s=0.06, impulse=0.0, post_hold_s=0.02

@@ -1,3 +1,6 @@
+import json
+from pathlib import Path
+
 import mujoco
 import numpy as np
 import pytest
@@ -64,17 +67,20 @@ def test_curl_is_deterministic():
     np.testing.assert_array_equal(runs[0], runs[1])
 
 
-# Two discretisations of the same finger (lumped hinges vs finite-cell flex) under the same tendon.
-_TOL_FLEX_VS_CHAIN_CURL = 0.10
+# Flex against the FEM under the tendon, small bend (first order): bend = T ∂φ/∂T, tip = T ∂u/∂T.
+_TOL_FLEX_CURL = 0.10  # issue 16's curl target
+_FEM = json.loads((Path(__file__).resolve().parents[1] / "docs" / "calibration_fem.json").read_text())
 
 
-@pytest.mark.slow
-def test_flex_point_force_curl_agrees_with_chain():
-    s = Stiffness.preset("semi-rigid")
-    chain = curl(FingerDesign(), s, FingerModel.CHAIN, 1.0, tendon_mode=TendonMode.POINT_FORCE)
-    flex = curl(FingerDesign(), s, FingerModel.FLEX, 1.0, tendon_mode=TendonMode.POINT_FORCE)
-    assert flex["bend_angle_rad"] > 0
-    rel = abs(flex["bend_angle_rad"] - chain["bend_angle_rad"]) / chain["bend_angle_rad"]
-    assert rel < _TOL_FLEX_VS_CHAIN_CURL, (flex["bend_angle_rad"], chain["bend_angle_rad"])
-    tip_c, tip_f = np.array(chain["tip_displacement_m"]), np.array(flex["tip_displacement_m"])
-    assert np.linalg.norm(tip_f - tip_c) < _TOL_FLEX_VS_CHAIN_CURL * np.linalg.norm(tip_c)
+@pytest.mark.xfail(
+    strict=True,
+    reason="the flex's cells bend about their own mid-height, so the tendon's lever on a segment is "
+    "beam theory's, not the FEM's (segments turn at their flexure roots, 1.4 mm up): 21% too stiff in "
+    "bend on semi-rigid (README, limits)",
+)
+def test_flex_small_curl_matches_the_recorded_fem():
+    rec = _FEM["designs"]["semi-rigid"]
+    s = Stiffness(rec["log_e"])
+    tension = 0.05 / rec["tendon"]["face10"]
+    flex = curl(FingerDesign(), s, FingerModel.FLEX, tension, tendon_mode=TendonMode.POINT_FORCE)
+    assert flex["bend_angle_rad"] == pytest.approx(tension * rec["tendon"]["face10"], rel=_TOL_FLEX_CURL)

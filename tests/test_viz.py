@@ -29,13 +29,20 @@ ROOT = Path(__file__).resolve().parents[1]
 _KEYS = {"success", "body_force", "displacement", "ground_contact", "reason", "wall_time_s"}
 _BOX = 0.05  # box side [m]
 _RHO = 400.0  # heavy preset [kg/m³]: a 50 g box the chain gripper holds
-# A short grasp (0.52 s simulated) that still closes, tightens, lifts 3 cm and holds.
+# A short grasp (0.87 s simulated) that still closes, tightens, lifts 3 cm and holds. On the
+# FEM-calibrated chain the lift's end sets the held box swinging in the grip: |F| on it (paper-optimized,
+# measured step by step) falls to 0.60 of its mean as the lift ends (t = 0.41 s), then rings at ~12 Hz
+# (peaks 1.11 at 0.47 s and 1.05 at 0.55 s) and decays slowly. The test reads the hold's second half, so
+# the hold must outlast the ringing: hold 0.1 s -> that half spans 0.91-1.11 of the mean, 0.2 s ->
+# 0.95-1.06, 0.3 s -> 0.96-1.02, 0.4 s -> 0.98-1.02 (the outcome's mean is m g within 0.1%). The lift
+# takes the default 0.2 s (a 0.15-s lift rings harder: 0.88-1.12 with a 0.1-s hold).
 _SCENARIO = GraspScenario(
-    impulse=0.0, settle_s=0.02, close_s=0.1, tighten_s=0.1, lift_s=0.15, hold_s=0.1, post_hold_s=0.05
+    impulse=0.0, settle_s=0.02, close_s=0.1, tighten_s=0.1, lift_s=0.2, hold_s=0.4, post_hold_s=0.05
 )
 _DECIMATION = 5
 _TOL_EXACT = 1e-12  # logged values replay the same states as the outcome: equal up to rounding [m]
-# logged |F| at hold frames vs the outcome's mean of 5 hold samples: the grip still settles (±2-3%)
+# logged |F| at hold frames vs the outcome's mean of 5 hold samples: the grip still settles (±2-3%,
+# measured ±2.4% with the 0.4-s hold)
 _TOL_HOLD_FORCE = 0.05
 _TOL_VOLUME = 1e-5  # closed-surface volume vs sum of tet volumes: float32 vertex positions in Rerun
 _ROOT = "/designs/paper-optimized"
@@ -638,7 +645,7 @@ def test_bad_recording_input_exits_2_with_one_line(tmp_path, case):
     elif case == "decimation":
         args += ["--decimation", "0"]
     elif case == "rerun_missing":  # as if rerun-sdk were not installed
-        code = f"import sys; sys.modules['rerun'] = None; from mjcodesign.cli import main; sys.exit(main({args!r}))"
+        code = f"import sys; sys.modules['rerun'] = None; from mjcodesign.cli.main import main; sys.exit(main({args!r}))"
     elif case == "view_missing":
         args = ["view", str(tmp_path / "none.rrd")]
     elif case == "backend":

@@ -12,6 +12,7 @@ from mujoco import rollout as mj_rollout
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
+from mjcodesign.errors import DesignError
 from mjcodesign.jobs import GraspJob, SceneCache, load_grasp_object, run_jobs
 from mjcodesign.models.simulate import check_state, reset_warnings
 from mjcodesign.models.types import FingerModel
@@ -44,8 +45,13 @@ def bench_grasp(
     machine disturb less than wall time; ``*_per_cpu_s`` are rollouts per CPU second (one free core).
     Loading, decomposing the object and building the scene happen once and are not timed.
     """
-    n = rollouts or _DEFAULT_ROLLOUTS[model]
-    repeats = repeats or _DEFAULT_REPEATS[model]
+    if model not in _DEFAULT_ROLLOUTS:
+        raise DesignError(f"unknown finger model {model!r}: choose from {', '.join(_DEFAULT_ROLLOUTS)}")
+    for name, value in (("rollouts", rollouts), ("repeats", repeats)):
+        if value is not None and value < 1:
+            raise DesignError(f"{name} must be >= 1, got {value}")
+    n = _DEFAULT_ROLLOUTS[model] if rollouts is None else rollouts
+    repeats = _DEFAULT_REPEATS[model] if repeats is None else repeats
     obj = load_grasp_object(source, _BENCH_DENSITY, seed=seed, cache_dir=cache_dir)
     rng = np.random.default_rng(seed)
     designs = [Stiffness(rng.uniform(LOG_E_MIN, LOG_E_MAX, 22)) for _ in range(n)]

@@ -1,8 +1,10 @@
 """``mjcodesign crosscheck`` and ``mjcodesign bench fem``: the MuJoCo finger models against the Warp FEM.
 
 Rows (``--json`` prints a list of them): ``scenario``, ``model``, ``design``, ``metric``, ``value``,
-``reference``, ``rel_diff``. The comparisons are `mjcodesign.crosscheck`; the FEM's speed benchmark is
-`mjcodesign.bench.fem`. This module parses the flags, calls them and prints.
+``reference``, ``rel_diff``. ``--scenario grasp`` is the grasp agreement study instead
+(`mjcodesign.crosscheck.grasp`): one line per case as it finishes on stderr, then the summary (``--json``:
+the whole report, cases and summary). The comparisons are `mjcodesign.crosscheck`; the FEM's speed
+benchmark is `mjcodesign.bench.fem`. This module parses the flags, calls them and prints.
 """
 
 from __future__ import annotations
@@ -12,7 +14,17 @@ import sys
 
 from mjcodesign.cli.common import emit
 from mjcodesign.cli.viz import add_recording_flags, open_recorder
-from mjcodesign.crosscheck import MODELS, SCENARIOS, TOL_CROSS, crosscheck, plot_curves
+from mjcodesign.crosscheck import (
+    GRASP_CASES,
+    MODELS,
+    SCENARIOS,
+    TOL_CROSS,
+    crosscheck,
+    grasp_study,
+    parse_sweep,
+    plot_curves,
+    short_settings,
+)
 
 __all__ = ["add_parser", "add_bench_parser"]
 
@@ -27,8 +39,90 @@ def _note(line: str) -> None:
     print(line, file=sys.stderr)
 
 
+def _cmd_grasp(args) -> int:
+    import time
+    from pathlib import Path
+
+    from mjcodesign.cli.common import user_cache_dir
+    from mjcodesign.sim.fem import FemOptions
+
+    if args.authors_case:
+        from mjcodesign.crosscheck.authors_case import authors_case
+
+        fem_mesh = FemOptions(
+            h=args.fem_h, h_flexure=args.fem_h_flexure, spine_layers=args.fem_layers, waypoint_layers=False
+        )
+        from mjcodesign.sim.fem import FemDynamics
+
+        dyn = None if args.fem_dt is None else FemDynamics(dt=args.fem_dt)
+        rows = authors_case(
+            args.models.split(","),
+            row=args.authors_row,
+            fem_options=fem_mesh,
+            fem_dynamics=dyn,
+            cache_dir=user_cache_dir(),
+        )
+        if args.out:
+            Path(args.out).write_text(json.dumps(_plain(rows)))
+        emit(_plain(rows), True)
+        return 0
+    if args.short:
+        settings = short_settings()
+    else:
+        mesh = FemOptions(
+            h=args.fem_h, h_flexure=args.fem_h_flexure, spine_layers=args.fem_layers, waypoint_layers=False
+        )
+        settings = {"cases": GRASP_CASES, "fem_options": mesh}
+        if args.fem_dt is not None:  # issue 18: the FEM substep of the study
+            from mjcodesign.sim.fem import FemDynamics
+
+            settings["fem_dynamics"] = FemDynamics(dt=args.fem_dt)
+    if args.cases is not None:
+        first, _, last = args.cases.rpartition(":")
+        settings["cases"] = settings["cases"][int(first or 0) : int(last)]
+
+    done: list[dict] = []
+
+    def follow(rec: dict) -> None:
+        models = [m for m in args.models.split(",") if m in rec]
+        parts = [f"{m} {'ok' if rec[m]['success'] else rec[m]['reason']}" for m in models] or [
+            rec["bad_pose"]
+        ]
+        _note(f"{rec['case']}: " + " | ".join(parts))
+        done.append(rec)
+        if args.out:  # a long study keeps what it has finished
+            Path(args.out).write_text(json.dumps({"partial": True, "cases": _plain(done)}))
+
+    t0 = time.perf_counter()
+    records, summary = grasp_study(
+        models=args.models.split(","), cache_dir=user_cache_dir(), on_case=follow, **settings
+    )
+    report = {"wall_time_s": time.perf_counter() - t0, "summary": summary, "cases": _plain(records)}
+    if args.out:
+        Path(args.out).write_text(json.dumps(report))
+    emit(report if args.json else summary, args.json)
+    return 0
+
+
+def _plain(obj):
+    """JSON-ready copy (arrays to lists)."""
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_plain(v) for v in obj]
+    if hasattr(obj, "tolist"):
+        return obj.tolist()
+    return obj
+
+
 def _cmd_crosscheck(args) -> int:
+    if args.scenario == "grasp":
+        return _cmd_grasp(args)
     tensions = [float(v) for v in args.tensions.split(",")] if args.tensions else None
+    if args.plot and parse_sweep(args.design) is not None:
+        from mjcodesign.errors import DesignError
+
+        raise DesignError("--plot draws one design's curves; give --design a single design, not a sweep")
     rec = open_recorder(args)
     try:
         rows, curves = crosscheck(
@@ -46,10 +140,12 @@ def _cmd_crosscheck(args) -> int:
     if args.plot:
         plot_curves(curves, args.plot)
     emit(rows, args.json)
+    reference = "the FEM" if "fem" in args.models.split(",") else "its reference (no FEM run)"
     for r in rows:
         if r["model"] != "fem" and r["rel_diff"] is not None and r["rel_diff"] > TOL_CROSS:
             _note(
-                f"note: {r['model']} misses the FEM by {r['rel_diff']:.0%} (> {TOL_CROSS:.0%}) on {r['metric']}"
+                f"note: {r['model']} misses {reference} by {r['rel_diff']:.0%} (> {TOL_CROSS:.0%}) "
+                f"on {r['metric']} ({r['design']})"
             )
     return 0
 
@@ -62,7 +158,14 @@ def _cmd_bench_fem(args) -> int:
     from mjcodesign.bench.fem import bench_fem
 
     res = bench_fem(
-        h=args.fem_h, spine_layers=args.fem_layers, dyn_steps=args.steps, grasp_horizon=args.grasp_horizon
+        h=args.fem_h,
+        spine_layers=args.fem_layers,
+        dyn_steps=args.steps,
+        grasp_horizon=args.grasp_horizon,
+        gripper=None if args.gripper == "none" else args.gripper,
+        gradient=not args.no_gradient,
+        gripper_only=args.gripper_only,
+        gripper_dt=args.gripper_dt,
     )
     if args.out:
         from pathlib import Path
@@ -84,13 +187,35 @@ def _fem_flags(p, *, h: float, layers: int, order: int) -> None:
 def add_parser(subparsers) -> None:
     """Register ``crosscheck`` on the top-level sub-parsers."""
     p = subparsers.add_parser("crosscheck", help="run one case in every backend (MuJoCo models, Warp FEM)")
-    p.add_argument("--scenario", choices=SCENARIOS, required=True)
+    p.add_argument("--scenario", choices=(*SCENARIOS, "grasp"), required=True)
     p.add_argument("--models", default="chain,flex,fem", help=f"comma-separated, from {MODELS}")
     p.add_argument(
-        "--design", default="paper-optimized", help="preset name, random:SEED or 11/22 comma-separated log E"
+        "--design",
+        default="paper-optimized",
+        help="preset name, random:SEED, 11/22 comma-separated log E, or random:A..B (a sweep of seeds A to B, "
+        "ending with per-model worst and median |rel_diff| rows)",
     )
     p.add_argument("--tensions", default=None, help="curl tensions [N], comma-separated (press: the first)")
     p.add_argument("--plot", default=None, help="curl: write tip paths and bend against tension to this PNG")
+    p.add_argument(
+        "--cases", default=None, help="grasp: run the study's cases N (the first N) or A:B (a slice of them)"
+    )
+    p.add_argument(
+        "--short", action="store_true", help="grasp: the CI version (two cases, short horizon, coarse mesh)"
+    )
+    p.add_argument("--out", default=None, help="grasp: also write the JSON report to this file")
+    p.add_argument(
+        "--fem-h-flexure", type=float, default=None, help="grasp: FEM cell size in flexures and cuts [m]"
+    )
+    p.add_argument(
+        "--authors-case",
+        action="store_true",
+        help="grasp: the authors' simulator's one case instead (mustard bottle, ln E 13.5/15/16.5)",
+    )
+    p.add_argument("--authors-row", type=int, default=0, help="grasp --authors-case: the authors' pose row")
+    p.add_argument(
+        "--fem-dt", type=float, default=None, help="grasp: FEM substep [s] (default the paper's 2.5e-6)"
+    )
     # Quadratic tets, 2 spine layers: within 4% of Euler–Bernoulli on the cantilever (mjcodesign.sim.fem).
     _fem_flags(p, h=4e-3, layers=2, order=2)
     add_recording_flags(p, decimation=False)
@@ -106,6 +231,17 @@ def add_bench_parser(bench_subparsers) -> None:
     _fem_flags(p, h=3e-3, layers=4, order=1)
     p.add_argument("--steps", type=int, default=2000, help="explicit substeps to time")
     p.add_argument("--grasp-horizon", type=float, default=0.2, help="dynamic grasp to time [s]")
+    p.add_argument(
+        "--gripper",
+        choices=("none", "coarse", "default", "fine"),
+        default="coarse",
+        help="mesh of the whole two-finger grasp to time (mjcodesign.bench.fem.GRIPPER_MESHES), or none",
+    )
+    p.add_argument("--no-gradient", action="store_true", help="time the two-finger grasp forward only")
+    p.add_argument("--gripper-only", action="store_true", help="time only the two-finger grasp")
+    p.add_argument(
+        "--gripper-dt", type=float, default=None, help="two-finger grasp substep [s] (default 2.5e-6)"
+    )
     p.add_argument("--out", default=None, help="also write the JSON to this file")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench_fem)

@@ -45,7 +45,9 @@ def add_parser(subparsers) -> None:
         help="object density per pose: light (100), heavy (400), a number [kg/m³], or uniform:LO,HI",
     )
     p.add_argument(
-        "--tendon", default="force:10", help="force:N, tension per finger [N] (position:TICKS: not yet)"
+        "--tendon",
+        default="force:10",
+        help="force:N (tension per finger [N]) or position:TICKS (the XL330 servo's goal, ticks of 4096)",
     )
     p.add_argument("--model", choices=_MODELS, default="chain")
     p.add_argument("--backend", choices=("mujoco", "mjwarp"), default="mujoco")
@@ -128,7 +130,7 @@ def datagen_config(args: argparse.Namespace):
     return DatagenConfig(
         objects=resolve_objects(args.objects),
         density=parse_density_spec(args.density),
-        tension=parse_tendon(args.tendon),
+        tendon=parse_tendon(args.tendon),
         scenario=_scenario(args.scenario),
         **{k: getattr(args, k) for k in same},
     )

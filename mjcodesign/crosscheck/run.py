@@ -7,6 +7,7 @@ along the finger; its FEM uses linear tets (contact acts at corner vertices).
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 
 import numpy as np
@@ -16,7 +17,34 @@ from mjcodesign.crosscheck.rows import BEAM_METRICS, MODELS, SCENARIOS, curl_met
 from mjcodesign.crosscheck.shapes import Shapes
 from mjcodesign.crosscheck.tensions import default_tensions
 
-__all__ = ["crosscheck", "model_curl"]
+__all__ = ["crosscheck", "model_curl", "parse_sweep", "summary_rows"]
+
+_SWEEP = re.compile(r"^random:(\d+)\.\.(\d+)$")
+
+
+def parse_sweep(text: str) -> list[str] | None:
+    """``random:A..B`` as the design names ``random:A`` … ``random:B``; None for any other text."""
+    from mjcodesign.errors import DesignError
+
+    match = _SWEEP.match(text.strip())
+    if match is None:
+        return None
+    a, b = int(match.group(1)), int(match.group(2))
+    if b < a:
+        raise DesignError(f"design sweep {text!r}: the last seed is below the first")
+    return [f"random:{s}" for s in range(a, b + 1)]
+
+
+def summary_rows(scenario: str, design: str, rows: list[dict]) -> list[dict]:
+    """Per model (the FEM reference excluded), the worst and median |rel_diff| of ``rows``."""
+    out = []
+    for m in dict.fromkeys(r["model"] for r in rows):
+        diffs = [r["rel_diff"] for r in rows if r["model"] == m and r["rel_diff"] is not None]
+        if m == "fem" or not diffs:
+            continue
+        out.append(row(scenario, m, design, "summary:worst_rel_diff", max(diffs), None))
+        out.append(row(scenario, m, design, "summary:median_rel_diff", float(np.median(diffs)), None))
+    return out
 
 
 def crosscheck(
@@ -31,7 +59,10 @@ def crosscheck(
 ) -> tuple[list[dict], dict]:
     """Run ``scenario`` in every backend of ``models``; return (rows, curves for plotting).
 
-    ``design_name``: a preset, ``random:SEED`` or 11/22 log E (`mjcodesign.design.stiffness.Stiffness.parse`).
+    ``design_name``: a preset, ``random:SEED`` or 11/22 log E (`mjcodesign.design.stiffness.Stiffness.parse`),
+    or ``random:A..B``: every seed from A to B (both included), each design's rows in turn, then per
+    MuJoCo model two summary rows (metric ``summary:worst_rel_diff`` and ``summary:median_rel_diff``,
+    the value over every row of that model with a reference; curves are not kept).
     ``fem_options`` (`mjcodesign.sim.fem.FemOptions`) mesh the FEM; ``tensions`` [N] are the curl's (the
     press takes the first). ``observer`` (:class:`mjcodesign.sim.observe.Observer`), if given, receives
     every model's rest shape as it is computed (:class:`~mjcodesign.crosscheck.shapes.Shapes` names
@@ -47,6 +78,20 @@ def crosscheck(
     for m in models:
         if m not in MODELS:
             raise DesignError(f"unknown model {m!r}; choose from {MODELS}")
+    sweep = parse_sweep(design_name)
+    if sweep is not None:
+        rows = []
+        for name in sweep:
+            rows += crosscheck(
+                scenario,
+                models,
+                name,
+                fem_options=fem_options,
+                tensions=tensions,
+                observer=observer,
+                on_note=on_note,
+            )[0]
+        return rows + summary_rows(scenario, design_name, rows), {}
     stiffness = Stiffness.parse(design_name)
     shapes = Shapes(observer, stiffness)
     curves: dict[str, dict] = {}
@@ -61,13 +106,17 @@ def crosscheck(
 
 
 def _cantilever_rows(models, design_name: str, stiffness, fem_options, shapes: Shapes) -> list[dict]:
-    """Tip deflection of every model under a tip load, against Euler–Bernoulli."""
+    """Tip deflection of every model under a tip load, against the FEM when it runs.
+
+    The FEM itself, and every model when the FEM does not run, against Euler–Bernoulli.
+    """
     from mjcodesign.design.finger import FingerDesign
     from mjcodesign.scenarios.static import validate_beam
 
     design = FingerDesign()
     rows = []
-    for m in models:
+    fem_value = None
+    for m in sorted(models, key=lambda m: m != "fem"):  # the FEM first: it is the others' reference
         label = f"cantilever/{m}"
         if m == "fem":
             from mjcodesign.sim.fem import FemFinger
@@ -79,12 +128,18 @@ def _cantilever_rows(models, design_name: str, stiffness, fem_options, shapes: S
             metrics = {k: float(getattr(r, k)) for k in BEAM_METRICS}
             shapes.fem(label, fem, r.positions, metrics, forces=load)
             value, reference = r.tip_deflection_m, r.analytic_m
+            fem_value = (r.force_n, r.tip_deflection_m)
         else:
-            res = validate_beam(design, stiffness, m, observe=shapes.mujoco(label, tip_load=True))
+            force = None if fem_value is None else fem_value[0]
+            res = validate_beam(
+                design, stiffness, m, force=force, observe=shapes.mujoco(label, tip_load=True)
+            )
             shapes.set_metrics(label, pick(res, BEAM_METRICS), tip_force=[0.0, 0.0, res["force_n"]])
-            value, reference = res["tip_deflection_m"], res["analytic_m"]
+            value = res["tip_deflection_m"]
+            reference = res["analytic_m"] if fem_value is None else fem_value[1]
         rows.append(row("cantilever", m, design_name, "tip_deflection_m", value, reference))
-    return rows
+    order = {m: i for i, m in enumerate(models)}
+    return sorted(rows, key=lambda r: order[r["model"]])
 
 
 def _curl_rows(models, design_name: str, stiffness, fem_options, tensions, shapes: Shapes):

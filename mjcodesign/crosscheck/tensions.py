@@ -31,7 +31,7 @@ def default_tensions(stiffness) -> list[float]:
     lever = design.waypoint_heights()
 
     def compliance(young) -> float:
-        return float(np.sum(lever / hinge_stiffness(design, np.asarray(young, dtype=float))))
+        return float(np.sum(lever / hinge_stiffness(design, np.asarray(young, dtype=float), "beam")))
 
     scale = compliance(np.full(design.n_blocks, np.exp(13.5))) / compliance(stiffness.finger(0))
     return [_CURL_TENSION_SOFT * scale * f for f in _CURL_TENSION_FRACTIONS]

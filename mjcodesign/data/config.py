@@ -17,9 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from mjcodesign.design.finger import FingerDesign
-from mjcodesign.errors import DesignError, MeshError, UnsupportedError
+from mjcodesign.errors import DesignError, MeshError
 from mjcodesign.models.types import FingerModel, SimOptions
 from mjcodesign.objects import MESH_SUFFIXES, OBJECT_SETS, CoacdSettings, named_set, parse_density
+from mjcodesign.scenarios.drive import TendonForce, TendonPosition
+from mjcodesign.scenarios.drive import parse_tendon as _parse_tendon
 from mjcodesign.scenarios.grasp import GraspScenario
 
 __all__ = [
@@ -85,28 +87,12 @@ def parse_density_spec(text: str) -> DensitySpec:
     return DensitySpec(rho, rho, text)
 
 
-def parse_tendon(text: str) -> float:
-    """The tendon tension per finger [N] of ``force:N``.
+def parse_tendon(text: str) -> TendonForce | TendonPosition:
+    """The tendon drive of ``--tendon``: ``force:N`` (tension per finger [N]) or ``position:TICKS``.
 
-    ``position:TICKS`` (a position-controlled tendon, as on the hardware) is refused with
-    :class:`UnsupportedError`: the grasp scene has only the force-mode tendon so far.
+    `mjcodesign.scenarios.parse_tendon`; raises its :class:`~mjcodesign.scenarios.TendonSpecError`.
     """
-    text = str(text).strip()
-    mode, _, value = text.partition(":")
-    if mode == "position":
-        raise UnsupportedError(
-            f"--tendon {text}: position-mode tendons are not implemented yet (use force:N)"
-        )
-    if mode != "force" or not value:
-        raise DesignError(f"--tendon {text}: write force:N (tension per finger [N])")
-    try:
-        tension = float(value)
-    except ValueError:
-        raise DesignError(f"--tendon {text}: N must be a number [N]") from None
-    max_tension = SimOptions().max_tension
-    if not (np.isfinite(tension) and 0 < tension <= max_tension):
-        raise DesignError(f"--tendon {text}: tension must be in (0, {max_tension:g}] N")
-    return tension
+    return _parse_tendon(text)
 
 
 def resolve_objects(text: str) -> tuple[str, ...]:
@@ -165,14 +151,17 @@ class DatagenConfig:
     """Poses asked of the sampler per object (it may find fewer)."""
     designs_per_pose: int
     density: DensitySpec
-    tension: float = field(default=10.0)
-    """Tendon tension per finger [N] (force-mode tendon)."""
+    tension: float | None = field(default=10.0)
+    """Tendon tension per finger [N]: the force mode's shorthand, used when :attr:`tendon` is None.
+    Set from :attr:`tendon` otherwise (None in position mode)."""
+    tendon: TendonForce | TendonPosition | None = None
+    """The tendon drive (`mjcodesign.scenarios.drive`); None: ``TendonForce(tension=tension)``."""
     model: FingerModel = FingerModel.CHAIN
     backend: str = "mujoco"
     sampler: str = "uniform"
     seed: int = 0
     scenario: GraspScenario = field(default_factory=GraspScenario)
-    """Phases of the grasp; its ``tension`` is replaced by :attr:`tension`."""
+    """Phases of the grasp; its tendon drive is replaced by :attr:`tendon`."""
     object_seed: int = 0
     """Seeds CoACD and the ``egad-like`` shapes (apart from :attr:`seed`, so CoACD's cache is reused)."""
     cloud_points: int = CLOUD_POINTS
@@ -194,7 +183,16 @@ class DatagenConfig:
             raise DesignError(f"unknown backend {self.backend!r}: choose from {', '.join(BACKENDS)}")
         if self.sampler not in SAMPLERS:
             raise DesignError(f"unknown sampler {self.sampler!r}: choose from {', '.join(SAMPLERS)}")
-        object.__setattr__(self, "scenario", dataclasses.replace(self.scenario, tension=float(self.tension)))
+        tendon = self.tendon
+        if tendon is None:
+            if self.tension is None:
+                raise DesignError("a dataset needs a tendon drive: give tension or tendon")
+            tendon = TendonForce(tension=self.tension)
+        if not isinstance(tendon, TendonForce | TendonPosition):
+            raise DesignError(f"tendon must be a TendonForce or TendonPosition, got {tendon!r}")
+        object.__setattr__(self, "tendon", tendon)
+        object.__setattr__(self, "tension", tendon.tension if isinstance(tendon, TendonForce) else None)
+        object.__setattr__(self, "scenario", dataclasses.replace(self.scenario, tendon=tendon))
 
     @property
     def coacd(self) -> CoacdSettings:
@@ -214,7 +212,7 @@ class DatagenConfig:
                 "low_kg_m3": self.density.low,
                 "high_kg_m3": self.density.high,
             },
-            "tendon": {"mode": "force", "tension_n": float(self.tension)},
+            "tendon": _tendon_dict(self.tendon),
             "model": self.model.value,
             "backend": self.backend,
             "sampler": self.sampler,
@@ -231,3 +229,18 @@ class DatagenConfig:
         """SHA-256 of :meth:`as_dict` and the schema version: equal exactly when the rows must be equal."""
         text = json.dumps({"schema_version": SCHEMA_VERSION, **self.as_dict()}, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _tendon_dict(tendon: TendonForce | TendonPosition) -> dict:
+    """The manifest's ``tendon``: the mode and its parameters in SI units (force: as before issue 16)."""
+    if isinstance(tendon, TendonForce):
+        return {"mode": "force", "tension_n": float(tendon.tension)}
+    return {
+        "mode": "position",
+        "ticks": tendon.ticks,
+        "spool_radius_m": tendon.spool_radius,
+        "current_limit_a": tendon.current_limit,
+        "speed_rad_s": tendon.speed,
+        "saturation_ticks": tendon.saturation_ticks,
+        "max_tension_n": float(tendon.max_tension),
+    }

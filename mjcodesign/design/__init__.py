@@ -6,10 +6,12 @@ Light (numpy only): importing any module here imports this package, and so all o
 from mjcodesign.design.beam import (
     block_bending_compliance,
     block_effective_ei,
+    block_tip_rotation,
     cantilever_tip_deflection,
     second_moment,
     section_compliance,
 )
+from mjcodesign.design.calibration import CalibratedFem, block_compliance, calibration_for
 from mjcodesign.design.finger import Block, BlockKind, FingerDesign, Routing
 from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, PRESETS, Stiffness
 from mjcodesign.design.tendon_law import TENDON_VARIANTS, tendon_forces, unit_vectors
@@ -26,8 +28,12 @@ __all__ = [
     "second_moment",
     "block_bending_compliance",
     "block_effective_ei",
+    "block_tip_rotation",
     "cantilever_tip_deflection",
     "section_compliance",
+    "CalibratedFem",
+    "block_compliance",
+    "calibration_for",
     "TENDON_VARIANTS",
     "tendon_forces",
     "unit_vectors",

@@ -16,6 +16,7 @@ __all__ = [
     "block_effective_ei",
     "cantilever_tip_deflection",
     "section_compliance",
+    "block_tip_rotation",
 ]
 
 # Gauss–Legendre nodes per smooth piece; the integrands are polynomial ratios of low degree, and 24
@@ -74,3 +75,17 @@ def cantilever_tip_deflection(design: FingerDesign, young: np.ndarray, force: fl
     for blk, e in zip(design.blocks(), young, strict=True):
         total += _integrate(blk, blk.x0, blk.x1, lambda x: (L - x) ** 2) / e
     return force * total
+
+
+def block_tip_rotation(design: FingerDesign, young: np.ndarray) -> np.ndarray:
+    """Each block's rotation [rad] under a unit transverse tip force [N], shape (n_blocks,).
+
+    Δφ_i = ∫_block (L − x) / (E_i I(x)) dx   (Euler–Bernoulli, small deflection).
+    """
+    L = design.length
+    return np.array(
+        [
+            _integrate(blk, blk.x0, blk.x1, lambda x: L - x) / float(e)
+            for blk, e in zip(design.blocks(), np.asarray(young, dtype=float), strict=True)
+        ]
+    )

@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from mjcodesign.errors import StiffnessError
 
-__all__ = ["LOG_E_MIN", "LOG_E_MAX", "PRESETS", "Stiffness"]
+__all__ = ["DESIGN_FILE_SUFFIXES", "LOG_E_MIN", "LOG_E_MAX", "PRESETS", "Stiffness", "read_design_file", "write_design_file"]
 
 LOG_E_MIN = 13.5
 """Softest printable block, ln(E / Pa): about 0.73 MPa (TPU 95A at low infill)."""
@@ -30,6 +32,9 @@ PRESETS: dict[str, np.ndarray] = {
 """Named designs, each 22 values of ln(E / Pa): finger A base to tip, then finger B."""
 _RANDOM = "random:"
 """Prefix of a seeded random design in `Stiffness.parse`."""
+DESIGN_FILE_SUFFIXES = (".json", ".txt", ".csv")
+"""A design file (:func:`read_design_file`): JSON with ``design``, or comma-separated ln E as text."""
+_DESIGN_KEY = "design"
 
 
 @dataclass(frozen=True)
@@ -84,8 +89,13 @@ class Stiffness:
 
     @classmethod
     def parse(cls, text: str, n_blocks: int = _BLOCKS_PER_FINGER) -> Stiffness:
-        """Parse a preset name, ``random:SEED`` (`Stiffness.random`) or a comma-separated list of log E."""
+        """Parse a preset, ``random:SEED`` (`Stiffness.random`), comma-separated log E or a design file.
+
+        A design file is a path ending in one of :data:`DESIGN_FILE_SUFFIXES` (:func:`read_design_file`).
+        """
         text = text.strip()
+        if Path(text).suffix.lower() in DESIGN_FILE_SUFFIXES:
+            return read_design_file(text, n_blocks)
         if text.startswith(_RANDOM):
             seed = text[len(_RANDOM) :]
             if not seed.isdigit():
@@ -130,3 +140,39 @@ def _is_number(text: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+def read_design_file(path: str | Path, n_blocks: int = _BLOCKS_PER_FINGER) -> Stiffness:
+    """The design in a design file; :class:`StiffnessError` for a missing or malformed one.
+
+    JSON holding ``design`` (2·n or n ln(E/Pa)) or a bare JSON list, or text with the values comma- or
+    newline-separated (``mjcodesign optimize`` writes ``design.txt``).
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise StiffnessError(f"cannot read design file {p}: {getattr(exc, 'strerror', None) or exc}") from None
+    try:
+        raw = json.loads(text)
+    except ValueError:
+        try:
+            raw = [float(v) for v in text.replace("\n", ",").split(",") if v.strip()]
+        except ValueError:
+            raise StiffnessError(f"{p}: not a design file (JSON with {_DESIGN_KEY!r}, or ln E values)") from None
+    if isinstance(raw, dict) and _DESIGN_KEY in raw:
+        raw = raw[_DESIGN_KEY]
+    if not isinstance(raw, list) or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in raw):
+        raise StiffnessError(f"{p}: a design file holds {_DESIGN_KEY!r}: a list of ln(E/Pa) values")
+    try:
+        return Stiffness(raw, n_blocks=n_blocks)
+    except StiffnessError as exc:
+        raise StiffnessError(f"{p}: {exc}") from None
+
+
+def write_design_file(path: str | Path, design: Stiffness, **meta) -> Path:
+    """Write ``design`` as JSON (``design``: 22 ln(E/Pa), plus ``meta``), read by :func:`read_design_file`."""
+    p = Path(path)
+    p.write_text(json.dumps({_DESIGN_KEY: design.as_list(), **meta}, indent=1) + "\n", encoding="utf-8")
+    return p
+

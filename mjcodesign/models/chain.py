@@ -1,9 +1,14 @@
 """Hinge-chain (pseudo-rigid-body) finger.
 
-Each block's bending compliance is lumped into one hinge at the block's midpoint, with stiffness
-``k_i = E_i I_i / l_i`` where ``I_i = l_i / ∫ dx / I(x)`` is the block's series-equivalent section.
-Hinges at block midpoints reproduce Euler–Bernoulli tip deflection to within 1% (shared/NOTES.md);
-hinges at block boundaries would overshoot by 12–25%.
+Each block's bending compliance is lumped into one hinge at the block's midpoint (hinges at block
+boundaries overshoot by 12–25%, shared/NOTES.md). Its stiffness and axis come from
+:attr:`SimOptions.stiffness_model`:
+
+* ``fem`` (default): ``k_i = 1 / c_i`` with ``c_i`` block i's rotation per unit moment in the calibrated
+  FEM (:func:`mjcodesign.design.calibration.block_compliance`, per design in ~0.1 ms), about an axis at
+  the block's fitted bending height (a segment bends at its flexure roots, ~1.4 mm up);
+* ``beam``: Euler–Bernoulli, ``k_i = E_i I_i / l_i`` with ``I_i = l_i / ∫ dx / I(x)`` the block's
+  series-equivalent section, about the section's mid-height (exact for uniform designs only).
 
 Rigid piece ``k`` spans from block ``k``'s midpoint to block ``k+1``'s midpoint; piece 0's proximal
 half belongs to the base. Adjacent pieces are parent and child, so MuJoCo never collides them; the
@@ -18,21 +23,38 @@ import mujoco
 import numpy as np
 
 from mjcodesign.design.beam import block_effective_ei
+from mjcodesign.design.calibration import block_compliance, calibration_for
 from mjcodesign.design.finger import Block, BlockKind, FingerDesign
 from mjcodesign.models.types import CONTYPE_FINGER, CONTYPE_WORLD, FingerHandle, FingerModel, SimOptions
 
-__all__ = ["add_chain_finger", "hinge_stiffness", "contact_solref"]
+__all__ = ["add_chain_finger", "hinge_stiffness", "hinge_axes", "contact_solref"]
 
 # Contact stiffness of a block face: a flat punch of the block's width, k_c = E w (N/m), and a
 # time constant from the block's mass, tau = 2 pi sqrt(m / k_c), floored at MuJoCo's stable 2 dt.
 _CONTACT_DAMPRATIO = 1.0
 
 
-def hinge_stiffness(design: FingerDesign, young: np.ndarray) -> np.ndarray:
-    """Hinge stiffness k_i = E_i I_i / l_i [N m / rad] of every block, shape (n_blocks,)."""
+def hinge_stiffness(design: FingerDesign, young: np.ndarray, model: str = "fem") -> np.ndarray:
+    """Hinge stiffness [N m / rad] of every block, shape (n_blocks,), for the stiffness ``model``.
+
+    ``fem``: the inverse of the calibrated FEM's block compliance; ``beam``: k_i = E_i I_i / l_i.
+    """
+    young = np.asarray(young, dtype=float)
+    if model == "fem":
+        return 1.0 / block_compliance(design, young)
     return np.array(
         [block_effective_ei(b, e) / b.length for b, e in zip(design.blocks(), young, strict=True)]
     )
+
+
+def hinge_axes(design: FingerDesign, model: str = "fem") -> np.ndarray:
+    """Height of every hinge's axis above the spine's underside [m], shape (n_blocks,).
+
+    ``fem``: the calibrated bending heights; ``beam``: half the section height at the block's middle.
+    """
+    if model == "fem":
+        return calibration_for(design).axis_heights.copy()
+    return np.array([_neutral_axis(b) for b in design.blocks()])
 
 
 def contact_solref(block: Block, young: float, density: float, timestep: float) -> tuple[float, float]:
@@ -133,7 +155,7 @@ class _ChainBuilder:
             self.design.density,
         )
 
-    def link(self, parent, i: int, origin_prev: float, k: float, waypoint: np.ndarray):
+    def link(self, parent, i: int, origin_prev: float, k: float, axis: float, waypoint: np.ndarray):
         """Block ``i``'s body under ``parent`` (frame at x=origin_prev): hinge, pieces, waypoint site."""
         blk = self.blocks[i]
         p = self.prefix
@@ -142,10 +164,10 @@ class _ChainBuilder:
             name=f"{p}hinge{i}",
             type=mujoco.mjtJoint.mjJNT_HINGE,
             axis=[0, -1, 0],
-            pos=[0, 0, _neutral_axis(blk)],
+            pos=[0, 0, axis],
             stiffness=float(k),
             damping=float(self.options.damping_time * k),
-            armature=1e-7,
+            armature=self.options.hinge_armature,
         )
         self.piece(body, i, blk.mid, blk.x1, blk.mid, "d")
         if i + 1 < len(self.blocks):
@@ -178,7 +200,8 @@ def add_chain_finger(
     spec: mujoco.MjSpec, parent, design: FingerDesign, young: np.ndarray, prefix: str, options: SimOptions
 ) -> FingerHandle:
     """Add a chain finger under ``parent`` (whose frame is the finger frame) and return its handle."""
-    k = hinge_stiffness(design, young)
+    k = hinge_stiffness(design, young, options.stiffness_model)
+    axes = hinge_axes(design, options.stiffness_model)
     wps = design.waypoints()
     handle = FingerHandle(
         prefix=prefix,
@@ -193,7 +216,7 @@ def add_chain_finger(
     body = parent
     origin_prev = 0.0
     for i, blk in enumerate(blocks):
-        body = builder.link(body, i, origin_prev, k[i], wps[i])
+        body = builder.link(body, i, origin_prev, k[i], axes[i], wps[i])
         origin_prev = blk.mid
     builder.tip(body)
     return handle

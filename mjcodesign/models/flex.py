@@ -32,7 +32,8 @@ import functools
 import mujoco
 import numpy as np
 
-from mjcodesign.design.beam import cantilever_tip_deflection, section_compliance
+from mjcodesign.design.beam import block_tip_rotation, cantilever_tip_deflection, section_compliance
+from mjcodesign.design.calibration import calibration_for
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.tendon_law import tendon_forces
 from mjcodesign.errors import DesignError
@@ -42,8 +43,11 @@ from mjcodesign.models.types import CONTYPE_FINGER, CONTYPE_WORLD, FingerHandle,
 __all__ = [
     "add_flex_finger",
     "apply_cell_young",
+    "fit_cell_young",
+    "flex_block_rotations",
     "rescale_cell_young",
     "cell_young",
+    "effective_young",
     "finger_mesh",
     "lagrange_weights",
     "locking_factor",
@@ -121,6 +125,21 @@ def cell_young(design: FingerDesign, young: np.ndarray, n_cells: int) -> np.ndar
         comp = sum(section_compliance(blk, a, b) / e for blk, e in zip(blocks, young, strict=True))
         out[c] = geo / comp
     return out
+
+
+def effective_young(design: FingerDesign, young: np.ndarray, model: str = "fem") -> np.ndarray:
+    """Block moduli [Pa] that make beam theory's block rotations the calibrated FEM's, (n_blocks,).
+
+    ``fem``: ``E_i Δφ_i(beam) / Δφ_i(FEM)`` with Δφ_i block i's rotation under a tip load (the
+    per-block correction of :mod:`mjcodesign.design.calibration`: ~0.8 for a flexure between stiff
+    segments, up to 5x softer for a segment's flexure roots); ``beam``: ``young`` itself. The cells are
+    then homogenised from these moduli as before.
+    """
+    young = np.asarray(young, dtype=float)
+    if model == "beam":
+        return young
+    fem = np.diff(np.r_[0.0, calibration_for(design).face_angles(young)])
+    return young * block_tip_rotation(design, young) / fem
 
 
 def node_weights(order: int) -> np.ndarray:
@@ -301,9 +320,12 @@ def add_flex_finger(
     node_mass = _node_masses(design, n_cells, order, shape)
     nodes = _add_nodes(parent, design, shape, node_mass, handle)
     _add_flex_element(spec, parent, design, handle, options, (n_cells, order), nodes)
-    e_cell = cell_young(design, young, n_cells)
+    e_cell = cell_young(design, effective_young(design, young, options.stiffness_model), n_cells)
     r = locking if locking is not None else locking_factor(design, n_cells, options.poisson, order)
     handle.cell_young = e_cell * r
+    if options.stiffness_model == "fem" and locking is None:
+        target = np.diff(np.r_[0.0, calibration_for(design).face_angles(np.asarray(young, float))])
+        handle.fem_fit = (design, target)
     chains = _add_waypoint_sites(spec, design, prefix, shape, order)
     handle.waypoint_sites = chains[0]
     handle.site_chains = chains
@@ -341,13 +363,86 @@ def _cell_records(m: mujoco.MjModel, handle: FingerHandle) -> np.ndarray:
 
 
 def apply_cell_young(m: mujoco.MjModel, handle: FingerHandle) -> None:
-    """Scale each cell's stiffness record of the compiled flex to the handle's cell moduli."""
+    """Scale each cell's stiffness record of the compiled flex (at the reference modulus) to the cell moduli.
+
+    With ``handle.fem_fit`` (the ``fem`` stiffness model) the cell moduli are first fitted so that the
+    flex's own linear blocks turn as the FEM's do (:func:`fit_cell_young`).
+    """
     rec = _cell_records(m, handle)
+    handle.unit_records = rec / _E_REF
+    if handle.fem_fit is not None:
+        design, target = handle.fem_fit
+        handle.cell_young = fit_cell_young(m, handle, design, handle.unit_records, handle.cell_young, target)
     rec *= (handle.cell_young / _E_REF)[:, None]
 
 
+_FIT_ITER = 30
+"""Fixed-point iterations of :func:`fit_cell_young` at most."""
+_FIT_RTOL = 1e-4
+"""It stops when no block's rotation is further than this from the FEM's (relative)."""
+
+
+def _block_planes(design: FingerDesign, handle: FingerHandle) -> np.ndarray:
+    """Index of the node plane at every block's distal face (the cells follow the blocks)."""
+    nx = handle.grid[0]
+    planes = np.array([round(b.x1 / design.length * (nx - 1)) for b in design.blocks()])
+    if not np.allclose(planes / (nx - 1) * design.length, [b.x1 for b in design.blocks()], atol=1e-9):
+        raise DesignError("the flex's cells do not follow the blocks: no per-block calibration")
+    return planes
+
+
+def flex_block_rotations(
+    design: FingerDesign, handle: FingerHandle, unit: np.ndarray, cell_e: np.ndarray
+) -> np.ndarray:
+    """Block rotations [rad/N] of the linear flex under a unit tip load, cell moduli ``cell_e`` [Pa].
+
+    ``unit`` (n_cells, nd²): the cells' stiffness records per pascal (MuJoCo's sign). A block's rotation
+    is the change of the spine section's rotation, −(u_x(z = t) − u_x(z = 0)) / t interpolated in z and
+    averaged over the width, from its proximal to its distal face, as
+    `mjcodesign.sim.fem.FemFinger.section_angles` measures the FEM's.
+    """
+    nx, ny, nz, _, order = handle.grid
+    K = _assemble(cell_e[:, None] * unit, handle.grid)
+    f = _tip_load(handle)
+    n = len(f)
+    free = np.arange(3 * ny * nz, n)
+    u = np.zeros(n)
+    u[free] = np.linalg.solve(K[np.ix_(free, free)], f[free])
+    ux = u.reshape(nx, ny, nz, 3)[..., 0].mean(axis=1)  # (nx, nz): mean over the width
+    t = design.flexure_thickness
+    spine = lagrange_weights(np.array([0.0, t / design.height_base]), order)  # u_x at z = 0 and z = t
+    at = ux @ spine.T
+    phi = -(at[:, 1] - at[:, 0]) / t
+    return np.diff(np.r_[0.0, phi[_block_planes(design, handle)]])
+
+
+def fit_cell_young(
+    m: mujoco.MjModel,
+    handle: FingerHandle,
+    design: FingerDesign,
+    unit: np.ndarray,
+    start: np.ndarray,
+    target: np.ndarray,
+) -> np.ndarray:
+    """Cell moduli [Pa] (n_cells,) whose linear flex turns every block as ``target`` [rad/N] does.
+
+    A block's rotation goes as the inverse of its cells' modulus, so each block's cells are scaled by
+    its rotation over the target's until all agree to ``_FIT_RTOL`` (a fixed point; a few iterations).
+    """
+    planes = _block_planes(design, handle)
+    order = handle.grid[4]
+    cell_block = np.searchsorted(planes, (np.arange(handle.grid[3]) + 1) * order, side="left")
+    e = np.asarray(start, dtype=float).copy()
+    for _ in range(_FIT_ITER):
+        ratio = flex_block_rotations(design, handle, unit, e) / target
+        if np.max(np.abs(ratio - 1.0)) < _FIT_RTOL:
+            break
+        e = e * ratio[cell_block]
+    return e
+
+
 def rescale_cell_young(
-    m: mujoco.MjModel, handle: FingerHandle, design: FingerDesign, young: np.ndarray, poisson: float
+    m: mujoco.MjModel, handle: FingerHandle, design: FingerDesign, young: np.ndarray, options: SimOptions
 ) -> None:
     """Rewrite the records in ``m`` (holding ``handle.cell_young``) for block moduli ``young`` [Pa].
 
@@ -355,8 +450,12 @@ def rescale_cell_young(
     a test checks it against a recompile.
     """
     _, _, _, n_cells, order = handle.grid
-    new = cell_young(design, young, n_cells) * locking_factor(design, n_cells, poisson, order)
+    e = effective_young(design, young, options.stiffness_model)
+    new = cell_young(design, e, n_cells) * locking_factor(design, n_cells, options.poisson, order)
     rec = _cell_records(m, handle)
+    if options.stiffness_model == "fem":
+        target = np.diff(np.r_[0.0, calibration_for(design).face_angles(np.asarray(young, float))])
+        new = fit_cell_young(m, handle, design, handle.unit_records, new, target)
     rec *= (new / handle.cell_young)[:, None]
 
 
@@ -367,22 +466,35 @@ def assemble_stiffness(m: mujoco.MjModel, handle: FingerHandle) -> np.ndarray:
     A cell's record lists its nodes ``li, lj, lk`` (``lk`` fastest), three dofs each; rigid rotations
     lie in the null space of the assembled matrix (tested), which pins that ordering.
     """
-    nx, ny, nz, n_cells, order = handle.grid
-    fid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_FLEX, handle.flex)
-    adr = int(m.flex_stiffnessadr[fid])
+    return _assemble(_cell_records(m, handle), handle.grid)
+
+
+def _assemble(records: np.ndarray, grid: tuple) -> np.ndarray:
+    """Global stiffness [N/m] from per-cell records (n_cells, nd²) in MuJoCo's sign (see above)."""
+    nx, ny, nz, n_cells, order = grid
     nd = 3 * (order + 1) ** 3
     K = np.zeros((3 * nx * ny * nz,) * 2)
     for c in range(n_cells):
-        Ke = m.flex_stiffness[adr + c * nd * nd : adr + (c + 1) * nd * nd].reshape(nd, nd)
         idx = []
         for li in range(order + 1):
             for lj in range(order + 1):
                 for lk in range(order + 1):
                     g = ((c * order + li) * ny + lj) * nz + lk
                     idx += [3 * g, 3 * g + 1, 3 * g + 2]
-        K[np.ix_(idx, idx)] += Ke
+        K[np.ix_(idx, idx)] += records[c].reshape(nd, nd)
     # MuJoCo stores the records with the sign of the passive force (f = record @ u): negate.
     return -K
+
+
+def _tip_load(handle: FingerHandle) -> np.ndarray:
+    """Nodal forces [N] (3 n_nodes,) of a unit +z load on the tip face, with consistent weights."""
+    nx, ny, nz, _, order = handle.grid
+    w1 = node_weights(order)
+    f = np.zeros(3 * nx * ny * nz)
+    for gj in range(ny):
+        for gk in range(nz):
+            f[3 * (((nx - 1) * ny + gj) * nz + gk) + 2] = w1[gj] * w1[gk]
+    return f
 
 
 def static_tip_deflection(m: mujoco.MjModel, handle: FingerHandle, force: float) -> float:
@@ -396,16 +508,11 @@ def static_tip_deflection(m: mujoco.MjModel, handle: FingerHandle, force: float)
 
 def static_tip_solve(m: mujoco.MjModel, handle: FingerHandle, force: float) -> tuple[float, np.ndarray]:
     """:func:`static_tip_deflection` [m] and the free nodes' displacement [m] (for :func:`load_nodes`)."""
-    nx, ny, nz, _, order = handle.grid
+    _, ny, nz, _, _ = handle.grid
     K = assemble_stiffness(m, handle)
-    w1 = node_weights(order)
-    f = np.zeros(K.shape[0])
-    tip = []
-    for gj in range(ny):
-        for gk in range(nz):
-            g = ((nx - 1) * ny + gj) * nz + gk
-            f[3 * g + 2] = force * w1[gj] * w1[gk]
-            tip.append((3 * g + 2, w1[gj] * w1[gk]))
+    weights = _tip_load(handle)
+    f = force * weights
+    tip = [(i, weights[i]) for i in np.flatnonzero(weights)]
     free = np.arange(3 * ny * nz, K.shape[0])  # gi = 0 is clamped
     u = np.zeros_like(f)
     u[free] = np.linalg.solve(K[np.ix_(free, free)], f[free])
@@ -497,7 +604,7 @@ def locking_factor(design: FingerDesign, n_cells: int, poisson: float, order: in
     which a test checks against running the dynamics to rest. Dividing every cell's modulus by it
     makes the uniform finger match beam theory exactly; piecewise designs are then checked, not fitted.
     """
-    opts = SimOptions(gravity=False, flex_cells=n_cells, poisson=poisson)
+    opts = SimOptions(gravity=False, flex_cells=n_cells, poisson=poisson, stiffness_model="beam")
     spec = new_spec("locking", opts, flex=True, scene=False)
     base = spec.worldbody.add_body(name="base")
     h = add_flex_finger(

@@ -1,13 +1,64 @@
-"""Stepping with solver-warning checks: a warning is a failure, never ignored."""
+"""Stepping with solver-warning checks: a warning is a failure, never ignored, and never printed.
+
+MuJoCo prints the first warning of each kind per ``MjData`` to stdout and appends it to
+``MUJOCO_LOG.TXT`` in the working directory, and ``mujoco.rollout`` clears the counters of its data
+before every rollout, so a batch printed one line per thread. :func:`captured_warnings` routes MuJoCo's
+warning callback into a list while a rollout runs (the one process-wide hook the library sets: it is
+installed on entry and the previous handler restored on exit, under a lock, nested uses sharing it), so
+the backends count the warnings into a ``DIVERGED`` outcome instead.
+"""
 
 from __future__ import annotations
+
+import contextlib
+import threading
+from collections.abc import Iterator
 
 import mujoco
 import numpy as np
 
 from mjcodesign.errors import SimulationDiverged
 
-__all__ = ["check_state", "has_warning", "reset_warnings"]
+__all__ = ["check_state", "has_warning", "reset_warnings", "captured_warnings", "warning_counts"]
+
+_CAPTURE_LOCK = threading.Lock()
+_CAPTURES: list[list[str]] = []
+_SAVED_HANDLER: list = []
+
+
+def _on_warning(message: str) -> None:
+    with _CAPTURE_LOCK:
+        for log in _CAPTURES:
+            log.append(message)
+
+
+@contextlib.contextmanager
+def captured_warnings() -> Iterator[list[str]]:
+    """A list that collects MuJoCo's warning messages (any thread) while the block runs; none print."""
+    log: list[str] = []
+    with _CAPTURE_LOCK:
+        if not _CAPTURES:
+            _SAVED_HANDLER[:] = [mujoco.get_mju_user_warning()]
+            mujoco.set_mju_user_warning(_on_warning)
+        _CAPTURES.append(log)
+    try:
+        yield log
+    finally:
+        with _CAPTURE_LOCK:
+            del _CAPTURES[next(i for i, x in enumerate(_CAPTURES) if x is log)]  # by identity
+            if not _CAPTURES:
+                mujoco.set_mju_user_warning(_SAVED_HANDLER[0])
+                _SAVED_HANDLER.clear()
+
+
+def warning_counts(d: mujoco.MjData) -> dict[str, int]:
+    """The failing warnings ``d`` counted, by name (``BADQACC``...), nonzero ones only."""
+    return {
+        mujoco.mjtWarning(w).name.removeprefix("mjWARN_"): int(d.warning[w].number)
+        for w in _FATAL_WARNINGS
+        if d.warning[w].number > 0
+    }
+
 
 _FATAL_WARNINGS = (
     mujoco.mjtWarning.mjWARN_INERTIA,  # also raised when the flex M+K solve under-converges
@@ -45,8 +96,12 @@ def check_state(d: mujoco.MjData, context: str = "") -> None:
             "INERTIA": "under-converged M+K solve or singular inertia: raise iterations or lower the timestep",
             "BADQACC": "acceleration blew up: lower the timestep",
         }.get(name, "")
+        count = int(d.warning[w].number)
         raise SimulationDiverged(
-            f"{context}MuJoCo warning {name} at t={d.time:.4f} s" + (f" ({hint})" if hint else "")
+            f"{context}MuJoCo warning {name}"
+            + (f" (x{count})" if count > 1 else "")
+            + f" at t={d.time:.4f} s"
+            + (f" ({hint})" if hint else "")
         )
     if not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel))):
         raise SimulationDiverged(f"{context}state is not finite at t={d.time:.4f} s")

@@ -21,6 +21,7 @@ __all__ = [
     "CONTYPE_WORLD",
     "MAX_OPENING",
     "LIFT_KP",
+    "STIFFNESS_MODELS",
     "PALM_HALF",
     "FingerModel",
     "TendonMode",
@@ -51,6 +52,10 @@ LIFT_KP = 20000.0
 
 PALM_HALF = np.array([0.015, 0.045, 0.01])
 """Palm box half-sizes [m]."""
+
+
+STIFFNESS_MODELS = ("fem", "beam")
+"""How block moduli become finger stiffness (:attr:`SimOptions.stiffness_model`)."""
 
 
 class FingerModel(enum.Enum):
@@ -109,12 +114,29 @@ class SimOptions:
     """Sliding friction coefficient of finger contacts (paper: mu = 1)."""
     max_tension: float = 50.0
     """Upper bound of the tendon actuator [N]."""
+    hinge_armature: float = 1e-6
+    """Rotor-like inertia added to every chain hinge [kg m²] (selective mass scaling). A tendon at
+    tension T pulling a block over a lever d adds a geometric stiffness ~T d to its hinge; on the 2-g tip
+    block (3e-8 kg m² about its hinge) at 50 N that is ω dt ≈ 3.5 at dt = 2 ms, past the explicit limit
+    of 2, and the grasp blew up (BADQACC) or made energy. 1e-6 brings ω dt below 1 up to the tension
+    limit; it is 3% of one finger's inertia about its base, so the slow grasp motion hardly sees it
+    (docs/benchmarks.md, time step and armature)."""
+    stiffness_model: str = "fem"
+    """How block moduli become finger stiffness: ``fem``, calibrated to the converged Warp FEM
+    (:mod:`mjcodesign.design.calibration`; the default finger geometry only), or ``beam``,
+    Euler–Bernoulli (exact for uniform designs only; any geometry)."""
 
     def __post_init__(self) -> None:
+        if self.stiffness_model not in STIFFNESS_MODELS:
+            raise DesignError(
+                f"stiffness_model must be one of {STIFFNESS_MODELS}, got {self.stiffness_model!r}"
+            )
         if not (0 < self.timestep <= 0.01):
             raise DesignError(f"timestep must be in (0, 0.01] s, got {self.timestep}")
         if self.damping_time < 0.5 * self.timestep:
             raise DesignError("damping_time must be at least timestep/2 for stable hinge springs")
+        if not (np.isfinite(self.hinge_armature) and self.hinge_armature >= 0):
+            raise DesignError("hinge_armature must be a finite inertia >= 0 kg m²")
         if not (0 <= self.poisson < 0.5):
             raise DesignError("poisson must be in [0, 0.5)")
 
@@ -142,6 +164,19 @@ class FingerHandle:
     flex: str | None = None
     cell_young: np.ndarray | None = None
     """Flex: effective modulus written into each cell [Pa]."""
+    unit_records: np.ndarray | None = None
+    """Flex: the compiled cells' stiffness records per pascal, (n_cells, record size), kept when the
+    model is compiled so that a design rewritten later (:func:`mjcodesign.models.flex.rescale_cell_young`)
+    is fitted from the same numbers as a recompile."""
+    fem_fit: tuple[FingerDesign, np.ndarray] | None = None
+    """Flex under the ``fem`` stiffness model: the design and the calibrated FEM's block rotations under a
+    unit tip load [rad/N] that the cells are fitted to when the model is compiled
+    (:func:`mjcodesign.models.flex.apply_cell_young`)."""
+
+
+ROTATION_TOL = 1e-3
+"""Largest |RᵀR − I| entry of a pose's rotation block, as ``poses --import`` checks imported grasps: a
+rotation written to 4 digits is off by ~1e-4, a scaled or sheared block by far more."""
 
 
 @dataclass(frozen=True)
@@ -178,9 +213,22 @@ class GripperPose:
         T = np.asarray(T, dtype=float)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise PoseError("pose matrix must be a finite 4x4")
+        R = T[:3, :3]
+        # MuJoCo would turn any 3x3 block into some quaternion: a zero or scaled block is refused here.
+        if np.abs(R.T @ R - np.eye(3)).max() > ROTATION_TOL or np.linalg.det(R) < 0:
+            raise PoseError("the pose's 3x3 block is not a rotation (orthonormal, det +1)")
         q = np.zeros(4)
-        mujoco.mju_mat2Quat(q, T[:3, :3].ravel())
+        mujoco.mju_mat2Quat(q, R.ravel())
         return cls(tuple(T[:3, 3]), tuple(q), tuple(openings))
+
+    def matrix(self) -> np.ndarray:
+        """The 4x4 homogeneous palm pose [m]."""
+        R = np.zeros(9)
+        mujoco.mju_quat2Mat(R, np.asarray(self.quat, dtype=float))
+        T = np.eye(4)
+        T[:3, :3] = R.reshape(3, 3)
+        T[:3, 3] = self.position
+        return T
 
 
 @dataclass

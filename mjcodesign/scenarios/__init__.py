@@ -1,5 +1,13 @@
 """What is simulated: the grasp scenario and its outcome; the static scenarios (cantilever, curl, press)."""
 
+from mjcodesign.scenarios.drive import (
+    PAPER_TICKS,
+    TendonForce,
+    TendonPosition,
+    TendonSpecError,
+    parse_tendon,
+)
+from mjcodesign.scenarios.energy import ENERGY_FLOOR, ENERGY_TOL, EnergyBalance, energy_balance
 from mjcodesign.scenarios.grasp import (
     DEFAULT_IMPULSE,
     REFERENCE_POSE,
@@ -11,6 +19,7 @@ from mjcodesign.scenarios.grasp import (
     build_scene,
     compile_scene,
     control_spec,
+    drive_scene,
     object_vertices,
     paper_impulse,
     phase_controls,
@@ -30,6 +39,16 @@ __all__ = [
     "build_scene",
     "compile_scene",
     "control_spec",
+    "drive_scene",
+    "PAPER_TICKS",
+    "TendonForce",
+    "TendonPosition",
+    "TendonSpecError",
+    "parse_tendon",
+    "ENERGY_FLOOR",
+    "ENERGY_TOL",
+    "EnergyBalance",
+    "energy_balance",
     "object_vertices",
     "paper_impulse",
     "phase_controls",

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import InitVar, dataclass, field
 
 import mujoco
 import numpy as np
@@ -45,7 +45,9 @@ from mjcodesign.models.types import (
     SimOptions,
     TendonMode,
 )
-from mjcodesign.objects import GraspObject
+from mjcodesign.objects import FingerSweep, GraspObject, SweepStatus, sweep_failure, sweep_starts
+from mjcodesign.scenarios.drive import TendonForce, TendonPosition, apply_drive, tendon_targets
+from mjcodesign.scenarios.energy import add_energy_sensors
 
 __all__ = [
     "DEFAULT_IMPULSE",
@@ -63,6 +65,7 @@ __all__ = [
     "object_vertices",
     "start_openings",
     "paper_impulse",
+    "drive_scene",
 ]
 
 _GROUND_CLEARANCE = 0.005  # auto pose: palm above the object's top, tips above the ground [m]
@@ -72,6 +75,10 @@ REST_GAP = 5e-4
 """Height of the object's lowest point above the ground at t=0 [m]."""
 _MIN_HOLD_STEPS = 4  # the hold-force samples need a few steps before the impulse
 _OBJECT_FRICTION = (1.0, 0.005, 0.0001)  # paper: mu = 1
+# Object geoms get solmix 0, so a finger contact takes the finger block's solref (its stiffness from E,
+# time constant 4 ms at dt 2 ms) instead of MuJoCo's mix with the object's default 20 ms, a 12 ms
+# contact 9x softer: a fingertip sank 4.5 mm into the strawberry (docs/benchmarks.md, plausibility).
+# Object-ground contacts keep the ground's default.
 # Sparse constraint Jacobian in every grasp scene. MuJoCo's "auto" picks dense below nv = 60, but a
 # contact row touches only the object and one finger's chain (<= 14 of the chain scene's 31 dofs):
 # sparse took 0.89-0.90x the CPU time of dense on the can (min of 12 alternated single-thread runs,
@@ -106,14 +113,20 @@ DEFAULT_IMPULSE = paper_impulse()
 
 @dataclass(frozen=True, kw_only=True)
 class GraspScenario:
-    """Phase durations [s], tendon tension [N], lift [m] and disturbance impulse [N s]."""
+    """Phase durations [s], the tendon drive, lift [m] and disturbance impulse [N s].
+
+    ``tension=T`` [N] is a shorthand for ``tendon=TendonForce(tension=T)``; ``scenario.tension`` reads
+    the force mode's tension (None in position mode).
+    """
 
     settle_s: float = 0.05
     close_s: float = 0.1
     tighten_s: float = 0.15
     """Tension ramp [s]: 0.1 s (with a 0.1 s close) let a held 50 g box slip; 0.15 s holds it."""
-    tension: float = 10.0
-    """Tendon tension per finger at the end of the ramp [N] (at most ``SimOptions.max_tension``)."""
+    tendon: TendonForce | TendonPosition = field(default_factory=TendonForce)
+    """How the tendons are driven (:mod:`mjcodesign.scenarios.drive`): a tension ramped over the
+    tighten phase (default 10 N, the paper's simulator) or the XL330's position servo."""
+    tension: InitVar[float | None] = None
     lift: float = 0.03
     """Lift distance [m] (paper: about 3 cm in simulation)."""
     lift_s: float = 0.2
@@ -129,13 +142,16 @@ class GraspScenario:
     lifted_fraction: float = 0.5
     """Success needs the object to rise by at least this fraction of ``lift``."""
 
-    def __post_init__(self) -> None:
+    def __post_init__(self, tension: float | None) -> None:
+        if tension is not None and not isinstance(tension, _ReadTension):
+            if isinstance(self.tendon, TendonPosition):
+                raise DesignError("tension is the force mode's shorthand: give it or a position-mode tendon")
+            object.__setattr__(self, "tendon", TendonForce(tension=tension))
+        if not isinstance(self.tendon, TendonForce | TendonPosition):
+            raise DesignError(f"tendon must be a TendonForce or TendonPosition, got {self.tendon!r}")
         for name in ("settle_s", "close_s", "tighten_s", "lift_s", "hold_s", "post_hold_s"):
             if not (np.isfinite(getattr(self, name)) and getattr(self, name) >= 0):
                 raise DesignError(f"{name} must be a finite duration >= 0 s")
-        max_tension = SimOptions().max_tension
-        if not (0 < self.tension <= max_tension):
-            raise DesignError(f"tension must be in (0, {max_tension:g}] N, got {self.tension}")
         if not (0 < self.lift <= 0.2):
             raise DesignError(f"lift must be in (0, 0.2] m, got {self.lift}")
         if not (0 <= self.impulse <= 5.0):
@@ -150,6 +166,22 @@ class GraspScenario:
         n["impulse"] = 1
         n["post_hold"] = int(round(self.post_hold_s / dt))
         return n
+
+
+class _ReadTension(float):
+    """A tension read from a scenario: ``dataclasses.replace`` passes it back, and the tendon then wins."""
+
+
+def _scenario_tension(self: GraspScenario) -> float | None:
+    """Tension per finger of the force-mode tendon [N]; None in position mode."""
+    return _ReadTension(self.tendon.tension) if isinstance(self.tendon, TendonForce) else None
+
+
+# ``tension`` is an init-only shorthand for the force mode; reading it goes through the tendon. Python
+# 3.11's ``dataclasses.replace`` passes every init argument again, read with getattr: a value read
+# here is marked, so ``replace(s, tendon=...)`` keeps the new tendon and ``replace(s, tension=T)``
+# (a plain float) still sets the force mode's tension.
+GraspScenario.tension = property(_scenario_tension)
 
 
 @dataclass
@@ -237,25 +269,34 @@ def _taper(design: FingerDesign, x: float) -> float:
     return float(design.height_base - h)
 
 
-def start_openings(obj: GraspObject, pose: GripperPose) -> tuple[float, float]:
-    """Openings at t=0: outside the object's extent along the palm's y axis (clipped to the stroke)."""
+def start_openings(
+    obj: GraspObject, pose: GripperPose, design: FingerDesign | None = None
+) -> tuple[float, float]:
+    """Openings at t=0: each finger ``_START_CLEARANCE`` outside the part of the object in its sweep.
+
+    The part is what lies in the slab the fingers sweep while closing (between the fingertips and the
+    palm, across the finger width) on the collision geometry, as placed by :func:`build_scene`
+    (:func:`mjcodesign.objects.sweep_starts`): a mug's body beside the handle that the fingers close
+    on does not count. Never below the pose's openings; :class:`PoseError` with the exact reason when
+    the part is too wide for the stroke or a finger would start inside another part.
+    """
     R = np.zeros(9)
     mujoco.mju_quat2Mat(R, np.asarray(pose.quat, dtype=float))
-    y_axis = R.reshape(3, 3)[:, 1]
-    v = object_vertices(obj)
-    # Object points relative to the palm (COM at x = y = 0, resting on the ground as in build_scene).
-    rel = v + [0.0, 0.0, REST_GAP - float(v[:, 2].min())] - np.asarray(pose.position, dtype=float)
-    proj = rel @ y_axis
-    ext_a, ext_b = float(proj.max()), float(-proj.min())
-    if max(ext_a, ext_b) + _START_CLEARANCE > MAX_OPENING:
-        raise PoseError(
-            f"object {obj.name} is too big for the gripper opening: {1000 * (ext_a + ext_b):.0f} mm "
-            "across the closing axis"
-        )
-    return tuple(
-        float(min(MAX_OPENING, max(e + _START_CLEARANCE, s)))
-        for e, s in zip((ext_a, ext_b), pose.openings, strict=True)
+    v, f = obj.collision_mesh()
+    v = v + [0.0, 0.0, REST_GAP - float(v[:, 2].min())]
+    sweep = FingerSweep.of(design or FingerDesign(), clearance=_START_CLEARANCE)
+    starts, status, reach = sweep_starts(
+        v,
+        f,
+        R.reshape(1, 3, 3),
+        np.asarray(pose.position, dtype=float)[None],
+        np.asarray(pose.openings, dtype=float)[None],
+        sweep,
     )
+    for k in (0, 1):
+        if status[0, k] != SweepStatus.OK:
+            raise PoseError(sweep_failure(obj.name, int(status[0, k]), k, float(reach[0, k]), sweep))
+    return float(starts[0, 0]), float(starts[0, 1])
 
 
 REFERENCE_POSE = GripperPose((0.0, 0.0, 1.0), (1.0, 0.0, 0.0, 0.0), (MAX_OPENING, MAX_OPENING))
@@ -325,7 +366,10 @@ def compile_scene(
             friction=list(_OBJECT_FRICTION),
             density=0.0,
             rgba=[0.8, 0.75, 0.3, 1],
+            solmix=0.0,  # the finger's contact parameters govern a finger contact (_OBJECT_SOLMIX)
         )
+    compensated = [b.name for b in spec.bodies if b.gravcomp > 0]
+    add_energy_sensors(spec, compensated)
     spec.option.jacobian = _GRASP_JACOBIAN
     try:
         m = spec.compile()
@@ -351,7 +395,7 @@ def scene_at_pose(scene: GraspScene, pose: GripperPose) -> GraspScene:
     compiler alone converts (position servos' damping ratio to a gain) stays, 1e-13 off. Raises
     :class:`PoseError` like :func:`build_scene`.
     """
-    start = start_openings(scene.obj, pose)
+    start = start_openings(scene.obj, pose, scene.built.design)
     m = copy.copy(scene.model)
     m.body_pos[scene.mount_body] = pose.position
     if m.body_mass[scene.mount_body] == 0.0:
@@ -371,6 +415,26 @@ def _check_above_ground(scene: GraspScene) -> None:
     z = [float(d.site_xpos[t][2]) for t in tips] + [float(d.xpos[scene.palm_body][2])]
     if min(z) < 0.0:
         raise PoseError(f"pose puts the gripper below the ground (lowest point z = {1000 * min(z):.1f} mm)")
+
+
+def drive_scene(scene: GraspScene, scenario: GraspScenario) -> GraspScene:
+    """The scene as ``scenario``'s tendon drive needs it; backends call it before they roll out.
+
+    Force mode: the scene itself (its tendon actuators are compiled as force motors). Position mode: a
+    copy with servo actuators (:func:`mjcodesign.scenarios.drive.apply_drive`).
+    """
+    if isinstance(scenario.tendon, TendonForce):
+        return scene
+    m = copy.copy(scene.model)
+    ids = [
+        [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in h.actuators]
+        for h in scene.built.fingers
+    ]
+    apply_drive(m, ids, scenario.tendon)
+    moved = copy.copy(scene)
+    moved.built = dataclasses.replace(scene.built, model=m)
+    moved.model = m
+    return moved
 
 
 def control_spec() -> int:
@@ -401,11 +465,23 @@ def phase_controls(scene: GraspScene, scenario: GraspScenario) -> tuple[np.ndarr
         b = scene.pose.openings[i]
         frac = np.clip((steps - starts["close"] + 1) / max(n["close"], 1), 0.0, 1.0)
         ctrl[:, aid(f"{letter}_opening")] = a + (b - a) * frac
-    # Tension: ramp over the tighten phase, split among each finger's native tendon actuators.
-    frac = np.clip((steps - starts["tighten"] + 1) / max(n["tighten"], 1), 0.0, 1.0)
-    for h in scene.built.fingers:
-        for act in h.actuators:
-            ctrl[:, aid(act)] = scenario.tension * frac / len(h.actuators)
+    # Tendons: a tension ramped over the tighten phase and split among each finger's native tendon
+    # actuators, or the servos' length targets (control −ℓ*, see `drive.apply_drive`).
+    acts = [aid(a) for h in scene.built.fingers for a in h.actuators]
+    servo = bool(np.all(m.actuator_biastype[acts] == mujoco.mjtBias.mjBIAS_AFFINE))
+    if servo != isinstance(scenario.tendon, TendonPosition):
+        raise DesignError(f"the scene's tendon actuators do not match {scenario.tendon}: use drive_scene")
+    if isinstance(scenario.tendon, TendonPosition):
+        length0 = m.tendon_length0[m.actuator_trnid[acts, 0]]
+        targets = tendon_targets(
+            scenario.tendon, length0, starts["tighten"] * m.opt.timestep, m.opt.timestep, total
+        )
+        ctrl[:, acts] = -targets
+    else:
+        frac = np.clip((steps - starts["tighten"] + 1) / max(n["tighten"], 1), 0.0, 1.0)
+        for h in scene.built.fingers:
+            for act in h.actuators:
+                ctrl[:, aid(act)] = scenario.tendon.tension * frac / len(h.actuators)
     # Lift: smooth-step over the lift phase.
     s = np.clip((steps - starts["lift"] + 1) / max(n["lift"], 1), 0.0, 1.0)
     ctrl[:, aid("lift")] = scenario.lift * s * s * (3.0 - 2.0 * s)

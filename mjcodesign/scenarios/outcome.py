@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from mjcodesign.scenarios.energy import energy_balance
 from mjcodesign.scenarios.grasp import STATE_SPEC, GraspScenario, GraspScene, control_spec
 
 __all__ = ["Failure", "Outcome", "failed_outcome", "finger_wrench", "outcome_from_states", "outcome_steps"]
@@ -242,8 +243,15 @@ def outcome_from_states(
     ctrl: np.ndarray,
     starts: dict[str, int],
     data: mujoco.MjData | None = None,
+    *,
+    sensordata: np.ndarray | None = None,
 ) -> Outcome:
     """The outcome of a rollout from its initial state ``x0`` and per-step states (nstep, nstate).
+
+    ``sensordata`` (nstep, nsensordata), each step's sensors as ``mujoco.rollout`` returns them: the
+    rollout is checked against the energy bound (:mod:`mjcodesign.scenarios.energy`), and one that
+    breaks it is :attr:`Failure.IMPLAUSIBLE` (listed first, with its numbers) whatever else it did.
+    Every backend passes it; without it the bound is not checked.
 
     ``states[t]`` is the state after step t, ``ctrl`` the controls of :func:`phase_controls`. Contact
     forces are recomputed with ``mj_forward`` at the sampled states under the control of the step that
@@ -276,6 +284,10 @@ def outcome_from_states(
         (not force_ok, Failure.ZERO_FORCE, "zero finger force"),
     ]
     reasons = [(kind, text) for hit, kind, text in found if hit]
+    if sensordata is not None:
+        balance = energy_balance(m, ob, x0, states, ctrl, sensordata)
+        if not balance.plausible:
+            reasons.insert(0, (Failure.IMPLAUSIBLE, balance.reason(m.opt.timestep)))
     return Outcome(
         success=not reasons,
         body_force=tuple(body_force),

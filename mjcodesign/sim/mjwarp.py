@@ -9,10 +9,11 @@ is refused with :class:`UnsupportedError`. MJWarp 4.0 runs the trilinear flex on
 (28 s for 13 steps of 2 worlds with compiled kernels), but its flex does not track MuJoCo C's: flex
 nodes 0.056 mm apart after 6 steps and 0.70 mm after 13 (a strict expected failure in
 ``tests/test_mjwarp_parity.py``); untested on CUDA. The phase controls are copied into ``ctrl`` and
-``xfrc_applied`` before every step. The states at the steps the outcome reads are copied back and
-the outcome (contact wrench included) is evaluated by :func:`outcome_from_states` with MuJoCo C's
-``mj_forward`` on those states, so both backends share one outcome definition. On the CPU the first
-step compiles kernels (18–36 s, cached by Warp).
+``xfrc_applied`` before every step. Every step's sensors and velocities (the energy bound's terms and
+its dampers' loss, `mjcodesign.scenarios.energy`) and the full states at the steps the outcome reads
+are copied back and the outcome (contact wrench included) is evaluated by
+:func:`outcome_from_states` with MuJoCo C's ``mj_forward`` on those states, so both backends share one
+outcome definition. On the CPU the first step compiles kernels (18–36 s, cached by Warp).
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from mjcodesign.scenarios.grasp import (
     GraspScenario,
     GraspScene,
     build_scene,
+    drive_scene,
     phase_controls,
     scene_at_pose,
 )
@@ -132,6 +134,7 @@ class MjwarpBackend:
         import mujoco_warp as mjw
         import warp as wp
 
+        scenes = [drive_scene(sc, scenario) for sc in scenes]
         flex0 = scenes[0].model.flex_stiffness
         if any(not np.array_equal(sc.model.flex_stiffness, flex0) for sc in scenes[1:]):
             raise UnsupportedError(
@@ -158,13 +161,22 @@ class MjwarpBackend:
         d.qpos.assign(x0[:, 1 : 1 + nq])  # state = (time, qpos, qvel, act, ...)
         d.qvel.assign(x0[:, 1 + nq : 1 + nq + nv])
         keep = set(range(ctrl.shape[1])) if observer is not None else outcome_steps(starts)
+        keep |= {
+            starts["impulse"] - 1,
+            starts["impulse"],
+        }  # the impulse's work needs the velocities around it
         nu, nbody = mjm.nu, mjm.nbody
         states = np.zeros((n, ctrl.shape[1], x0.shape[1]))
+        sensors = np.zeros((n, ctrl.shape[1], mjm.nsensordata))  # every step: the energy bound sums them
         scratch = mujoco.MjData(mjm)
         for t in range(ctrl.shape[1]):
             d.ctrl.assign(ctrl[:, t, :nu])
             d.xfrc_applied.assign(ctrl[:, t, nu:].reshape(n, nbody, 6))
             mjw.step(m, d)
+            sensors[:, t] = d.sensordata.numpy()
+            # The energy bound's damper loss sums b v² over every step: a step whose velocities were
+            # left at zero drops that loss and loosens the bound (MuJoCo C's rollout has them all).
+            states[:, t, 1 + nq : 1 + nq + nv] = d.qvel.numpy()
             if t in keep:
                 qpos, qvel = d.qpos.numpy(), d.qvel.numpy()
                 act = d.act.numpy() if na else None
@@ -181,7 +193,9 @@ class MjwarpBackend:
             if not np.all(np.isfinite(states[w][sorted(keep)])):
                 outs.append(failed_outcome(Failure.DIVERGED, "diverged: mjwarp state is not finite"))
                 continue
-            outs.append(outcome_from_states(sc, scenario, x0[w], states[w], ctrl[w], starts))
+            outs.append(
+                outcome_from_states(sc, scenario, x0[w], states[w], ctrl[w], starts, sensordata=sensors[w])
+            )
         wall = (time.perf_counter() - t0) / n
         outs = [o.with_wall_time(wall) for o in outs]
         labels = labels or [f"world{w}" for w in range(n)]

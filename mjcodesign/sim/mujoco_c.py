@@ -9,25 +9,24 @@ import os
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
-from typing import NamedTuple
 
 import mujoco
 import numpy as np
 from mujoco import rollout as mj_rollout
 
-from mjcodesign.design.beam import block_bending_compliance
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import SimulationDiverged
 from mjcodesign.models.builder import make_data
-from mjcodesign.models.chain import contact_solref
-from mjcodesign.models.simulate import check_state, has_warning, reset_warnings
+from mjcodesign.models.chain import contact_solref, hinge_stiffness
+from mjcodesign.models.simulate import captured_warnings, check_state, has_warning, reset_warnings
 from mjcodesign.models.types import GripperPose
 from mjcodesign.scenarios.grasp import (
     STATE_SPEC,
     GraspScenario,
     GraspScene,
     control_spec,
+    drive_scene,
     phase_controls,
     scene_at_pose,
 )
@@ -39,31 +38,20 @@ __all__ = ["MujocoBackend", "initial_state", "scene_with_design", "scene_with_mo
 _CLOCK_TOL = 0.5  # [steps]: a rollout's time off by half a step means MuJoCo reset it
 
 
-class _BlockFacts(NamedTuple):
-    """What the chain's stiffness and contact formulas read from a block (computed once per design)."""
-
-    length: float
-    width: float
-    volume: float
-    compliance: float
-    """∫ dx / I(x) over the block [m^-3]."""
-
-
 @functools.lru_cache(maxsize=8)
-def _block_facts(design: FingerDesign) -> tuple[_BlockFacts, ...]:
-    return tuple(
-        _BlockFacts(b.length, b.width, b.volume, block_bending_compliance(b)) for b in design.blocks()
-    )
+def _blocks(design: FingerDesign) -> tuple:
+    return tuple(design.blocks())
 
 
 def with_stiffness(scene: GraspScene, stiffness: Stiffness) -> mujoco.MjModel:
     """A copy of the scene's model with another design's stiffness.
 
-    Chain: hinge stiffness k = E I / l (the arithmetic of :func:`mjcodesign.chain.hinge_stiffness`),
-    damping ``damping_time`` k and the blocks' contact solref (:func:`mjcodesign.chain.contact_solref`)
-    are rewritten instead of a recompile; the test checks they equal a recompiled model bitwise. Flex:
-    each cell's stiffness record is rescaled to the design's cell modulus
-    (:func:`mjcodesign.flex.rescale_cell_young`; equal to a recompile to round-off, tested).
+    Chain: hinge stiffness (:func:`mjcodesign.models.chain.hinge_stiffness` under the scene's stiffness
+    model, ~0.1 ms a finger for the FEM calibration), damping ``damping_time`` k and the blocks' contact
+    solref (:func:`mjcodesign.models.chain.contact_solref`) are rewritten instead of a recompile; the
+    test checks they equal a recompiled model bitwise. Flex: each cell's stiffness record is rescaled to
+    the design's cell modulus (:func:`mjcodesign.models.flex.rescale_cell_young`; equal to a recompile
+    to round-off, tested).
     """
     built = scene.built
     m = copy.copy(scene.model)
@@ -71,18 +59,18 @@ def with_stiffness(scene: GraspScene, stiffness: Stiffness) -> mujoco.MjModel:
         from mjcodesign.models.flex import rescale_cell_young
 
         for h, young in zip(built.fingers, stiffness.young, strict=True):
-            rescale_cell_young(m, h, built.design, young, built.options.poisson)
+            rescale_cell_young(m, h, built.design, young, built.options)
         return m
     design, opts = built.design, built.options
-    facts = _block_facts(design)
+    blocks = _blocks(design)
     ids = _chain_ids(scene)
     for i, young in enumerate(stiffness.young):
-        for j, (f, e) in enumerate(zip(facts, young, strict=True)):
-            k = float(e) * f.length / f.compliance / f.length  # == block_effective_ei(b, e) / b.length
+        k = hinge_stiffness(design, young, opts.stiffness_model)
+        for j, (blk, e) in enumerate(zip(blocks, young, strict=True)):
             jid, gids = ids[i][j]
-            m.jnt_stiffness[jid] = k
-            m.dof_damping[m.jnt_dofadr[jid]] = opts.damping_time * k
-            solref = contact_solref(f, float(e), design.density, opts.timestep)
+            m.jnt_stiffness[jid] = k[j]
+            m.dof_damping[m.jnt_dofadr[jid]] = opts.damping_time * k[j]
+            solref = contact_solref(blk, float(e), design.density, opts.timestep)
             for gid in gids:
                 m.geom_solref[gid] = solref
     return m
@@ -118,13 +106,14 @@ def _step_all(
     x0: np.ndarray,
     ctrl: np.ndarray,
     states: np.ndarray,
+    sensordata: np.ndarray,
     *,
     checked: bool,
     capture: Capture | None = None,
     steps: frozenset[int] = frozenset(),
     captured: dict | None = None,
 ) -> tuple[int, SimulationDiverged] | None:
-    """Run every step from ``x0`` into ``states``.
+    """Run every step from ``x0`` into ``states`` (and each step's sensors into ``sensordata``).
 
     ``checked`` checks MuJoCo's warnings and the state after every step and stops at the first bad
     one: ``(step, error)``; None when every step passed, or always when unchecked. ``capture`` takes
@@ -145,6 +134,7 @@ def _step_all(
             except SimulationDiverged as exc:
                 return t, exc
         mujoco.mj_getState(m, d, states[t], STATE_SPEC)
+        sensordata[t] = d.sensordata
     return None
 
 
@@ -172,30 +162,45 @@ class MujocoBackend:
         divergence) under ``label``.
         """
         t0 = time.perf_counter()
+        scene = drive_scene(scene, scenario)
         m = scene.model
         ctrl, starts = phase_controls(scene, scenario)
         x0 = initial_state(scene)
         d = mujoco.MjData(m)
         states = np.empty((len(ctrl), x0.size))
+        sensors = np.empty((len(ctrl), m.nsensordata))
         captured: dict = {}
         capture = observer if isinstance(observer, Capture) else None
         steps = (
             frozenset(capture.capture_steps(len(ctrl), m.opt.timestep, starts)) if capture else frozenset()
         )
-        bad = _step_all(
-            m, d, x0, ctrl, states, checked=False, capture=capture, steps=steps, captured=captured
-        )
-        if has_warning(d) or not np.isfinite(states).all():  # again, step by step, to name the step
-            bad = _step_all(m, d, x0, ctrl, states, checked=True)
+        with captured_warnings() as printed:
+            bad = _step_all(
+                m,
+                d,
+                x0,
+                ctrl,
+                states,
+                sensors,
+                checked=False,
+                capture=capture,
+                steps=steps,
+                captured=captured,
+            )
+            reset = _diverged(states[None], x0[None], m.opt.timestep)[0]
+            if has_warning(d) or reset or printed:  # again, step by step, to name the step
+                bad = _step_all(m, d, x0, ctrl, states, sensors, checked=True)
+                if bad is None:
+                    bad = len(ctrl), SimulationDiverged(f"MuJoCo warned: {printed[0]}")
         if bad is not None:
             t, exc = bad
-            out = failed_outcome(Failure.DIVERGED, f"diverged: {exc}", time.perf_counter() - t0)
+            out = failed_outcome(Failure.DIVERGED, _diverged_reason(exc, printed), time.perf_counter() - t0)
             captured = {k: v for k, v in captured.items() if k < t}
             _observe(
                 observer, label, scene, scenario, m, x0, states[:t], ctrl, starts, out, captured=captured
             )
             return out
-        out = outcome_from_states(scene, scenario, x0, states, ctrl, starts)
+        out = outcome_from_states(scene, scenario, x0, states, ctrl, starts, sensordata=sensors)
         out = out.with_wall_time(time.perf_counter() - t0)
         _observe(
             observer, label, scene, scenario, m, x0, states, ctrl, starts, out, scratch=d, captured=captured
@@ -258,6 +263,7 @@ class MujocoBackend:
         """
         labels = labels or [f"scene{i}" for i in range(len(scenes))]
         t0 = time.perf_counter()
+        scenes = [drive_scene(sc, scenario) for sc in scenes]
         plans: dict[tuple, tuple[np.ndarray, dict[str, int], np.ndarray]] = {}
         for sc in scenes:  # designs of one pose share their controls and initial state
             key = (id(sc.built), sc.pose)
@@ -271,9 +277,10 @@ class MujocoBackend:
         datas = [mujoco.MjData(models[0]) for _ in range(min(self.nthread, len(models)))]
         for d in datas:
             reset_warnings(d)
-        states, _ = mj_rollout.rollout(models, datas, x0, ctrl, control_spec=control_spec())
+        with captured_warnings() as printed:
+            states, sensors = mj_rollout.rollout(models, datas, x0, ctrl, control_spec=control_spec())
         bad = _diverged(states, x0, models[0].opt.timestep)
-        warned = False
+        warned = bool(printed)
         for d in datas:
             try:
                 check_state(d)
@@ -292,7 +299,14 @@ class MujocoBackend:
                 if not hasattr(scratch, "data"):
                     scratch.data = mujoco.MjData(models[0])
                 return outcome_from_states(
-                    scenes[i], scenario, x0[i], states[i], ctrl[i], starts, scratch.data
+                    scenes[i],
+                    scenario,
+                    x0[i],
+                    states[i],
+                    ctrl[i],
+                    starts,
+                    scratch.data,
+                    sensordata=sensors[i],
                 )
 
             for i, out in zip(good, pool.map(evaluate, good), strict=True):
@@ -327,6 +341,12 @@ def _observe(
                 captured=captured or {},
             )
         )
+
+
+def _diverged_reason(exc: SimulationDiverged, printed: list[str]) -> str:
+    """``diverged: ...`` with the first bad step's error and how many warnings MuJoCo raised."""
+    extra = f"; MuJoCo raised {len(printed)} warning(s), the first: {printed[0]}" if printed else ""
+    return f"diverged: {exc}{extra}"
 
 
 def _diverged(states: np.ndarray, x0: np.ndarray, dt: float) -> np.ndarray:

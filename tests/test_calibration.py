@@ -1,0 +1,142 @@
+"""The finger stiffness calibrated to the FEM, pinned against recorded FEM numbers.
+
+``docs/calibration_fem.json`` holds full quadratic-tet solves of designs the calibration never saw, on
+the mesh the shipped reduced model was built from (2 mm cells, 4 spine layers);
+``docs/calibration_fem_converged.json`` the two alternating extremes on the converged mesh (8 layers).
+Both were written by `mjcodesign.crosscheck.calibration.record_fem`; the tests compare with them
+instead of rerunning the FEM (1–6 min a solve here).
+"""
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mjcodesign.design.beam import cantilever_tip_deflection
+from mjcodesign.design.calibration import block_compliance, calibration_for
+from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
+from mjcodesign.errors import DesignError
+from mjcodesign.models.types import SimOptions
+from mjcodesign.scenarios.static import AUTO_DEFLECTION, curl, validate_beam
+
+_DOCS = Path(__file__).resolve().parents[1] / "docs"
+_REFERENCE = json.loads((_DOCS / "calibration_fem.json").read_text())
+_CONVERGED = json.loads((_DOCS / "calibration_fem_converged.json").read_text())
+_TOL_CANTILEVER = 0.05  # issue 16's target: every model within 5% of the converged FEM, every design
+_TOL_CURL = 0.10  # issue 16's target on the curl (here its small-bend limit: bend and tip)
+_TOL_REDUCED = 0.01  # reduced FEM vs the full FEM it reduces, unseen designs (measured below 1e-3)
+_CALIBRATION_CPU_S = 1e-3  # issue 16: calibrating a new design costs at most 1 ms
+_PINNED = ("alt14_17", "alt17_14", "random:1", "random:4", "soft")
+"""The issue's table: the two alternating extremes, the worst random designs, a uniform one."""
+
+
+def _recorded(name, reference=_REFERENCE):
+    rec = reference["designs"][name]
+    return Stiffness(rec["log_e"]), rec
+
+
+def test_the_pinned_designs_were_not_fitted():
+    train = calibration_for(FingerDesign()).mesh["train"]
+    for name in _PINNED:
+        assert name not in train and f"{name}/A" not in train
+    assert _REFERENCE["mesh"] == {
+        k: calibration_for(FingerDesign()).mesh[k] for k in ("h", "spine_layers", "order")
+    }
+
+
+@pytest.mark.parametrize("name", _PINNED)
+def test_reduced_fem_equals_the_full_fem(name):
+    stiffness, rec = _recorded(name)
+    y = calibration_for(FingerDesign()).solve(stiffness.finger(0))
+    outputs = calibration_for(FingerDesign()).outputs
+    for i, load in enumerate(("tip", "tendon")):
+        for key in ("tip_face_z", "tip_z", "face10"):
+            assert y[i][outputs.index(key)] == pytest.approx(rec[load][key], rel=_TOL_REDUCED), (load, key)
+
+
+@pytest.mark.parametrize("model", ["chain", "flex", "flex-quadratic"])
+@pytest.mark.parametrize("name", _PINNED)
+def test_cantilever_matches_the_recorded_fem(model, name):
+    # Linear tip deflection per newton of the base-clamped finger against the FEM's, δ = 1% of L
+    stiffness, rec = _recorded(name)
+    design = FingerDesign()
+    force = AUTO_DEFLECTION * design.length / rec["tip"]["tip_face_z"]
+    res = validate_beam(design, stiffness, model, force=force)
+    assert res["tip_deflection_m"] / force == pytest.approx(rec["tip"]["tip_face_z"], rel=_TOL_CANTILEVER)
+
+
+@pytest.mark.parametrize("name", ["alt14_17", "alt17_14"])
+def test_chain_cantilever_matches_the_converged_fem(name):
+    # The shipped reduced model is of the 4-layer mesh; the converged (8-layer) FEM is 2.7% softer on
+    # soft segments with stiff flexures. The chain must still be within the issue's 5% of it.
+    stiffness, rec = _recorded(name, _CONVERGED)
+    design = FingerDesign()
+    force = AUTO_DEFLECTION * design.length / rec["tip"]["tip_face_z"]
+    res = validate_beam(design, stiffness, "chain", force=force)
+    assert res["tip_deflection_m"] / force == pytest.approx(rec["tip"]["tip_face_z"], rel=_TOL_CANTILEVER)
+
+
+def test_beam_theory_misses_where_the_calibration_holds():
+    # The reason for the calibration: Euler–Bernoulli is off by 2.4x on soft segments with stiff flexures
+    stiffness, rec = _recorded("alt14_17", _CONVERGED)
+    eb = cantilever_tip_deflection(FingerDesign(), stiffness.finger(0), 1.0)
+    assert rec["tip"]["tip_face_z"] / eb > 2.0
+
+
+@pytest.mark.parametrize("name", ["alt14_17", "random:1", "soft"])
+def test_small_curl_matches_the_recorded_fem(name):
+    # Tendon at a tension bending the FEM by ~0.05 rad: first-order curl, bend = T ∂φ/∂T, tip = T ∂u/∂T
+    stiffness, rec = _recorded(name)
+    tension = 0.05 / rec["tendon"]["face10"]
+    r = curl(FingerDesign(), stiffness, "chain", tension)
+    assert r["bend_angle_rad"] == pytest.approx(tension * rec["tendon"]["face10"], rel=_TOL_CURL)
+    assert r["tip_displacement_m"][2] == pytest.approx(tension * rec["tendon"]["tip_z"], rel=_TOL_CURL)
+
+
+def test_calibration_costs_under_a_millisecond_per_design():
+    design = FingerDesign()
+    rng = np.random.default_rng(0)
+    young = np.exp(rng.uniform(LOG_E_MIN, LOG_E_MAX, (200, design.n_blocks)))
+    block_compliance(design, young[0])  # load the file once
+    t0 = time.process_time()
+    for e in young:
+        block_compliance(design, e)
+    assert (time.process_time() - t0) / len(young) < _CALIBRATION_CPU_S
+
+
+def test_calibration_refuses_another_geometry_but_not_another_routing():
+    with pytest.raises(DesignError, match="stiffness_model='beam'"):
+        calibration_for(FingerDesign(n_segments=4, length=0.1, flexure_length=0.006))
+    calibration_for(FingerDesign(routing="uniform-height"))
+    opts = SimOptions(stiffness_model="beam")  # any geometry then
+    assert opts.stiffness_model == "beam"
+
+
+def test_flex_cells_are_fitted_to_the_fem_blocks():
+    from mjcodesign.models.builder import build_finger
+    from mjcodesign.models.flex import flex_block_rotations
+
+    design, stiffness = FingerDesign(), Stiffness.random(7)
+    built = build_finger(design, stiffness, "flex")
+    h = built.fingers[0]
+    rec = built.model.flex_stiffness[int(built.model.flex_stiffnessadr[0]) :].reshape(h.grid[3], -1)
+    got = flex_block_rotations(design, h, rec / h.cell_young[:, None], h.cell_young)
+    target = np.diff(np.r_[0.0, calibration_for(design).face_angles(stiffness.finger(0))])
+    np.testing.assert_allclose(got, target, rtol=1e-3)  # the fit's own tolerance is 1e-4
+
+
+def test_bench_calibration_summarises_the_recorded_designs():
+    from mjcodesign.bench.calibration import bench_calibration
+
+    res = bench_calibration(models=("chain",), designs=("soft", "alt14_17"))
+    four, eight = res["summary"].values()  # the shipped model's mesh, then the converged one
+    assert four["chain"]["cantilever"]["n"] == 2 and eight["chain"]["cantilever"]["n"] == 1
+    assert four["chain"]["cantilever"]["misses"] == 0 and eight["beam"]["cantilever"]["misses"] == 1
+    worst = max(r["rel_diff"] for r in res["rows"] if r["model"] == "chain")
+    assert max(four["chain"]["cantilever"]["worst"], eight["chain"]["cantilever"]["worst"]) == worst
+    assert 0 < res["calibration_s_per_design"] < _CALIBRATION_CPU_S
+    with pytest.raises(DesignError, match="none of"):
+        bench_calibration(models=("chain",), designs=("random:999",))

@@ -1,0 +1,121 @@
+"""Every grasp rollout is checked against physics: the energy bound, MuJoCo's instability warnings."""
+
+import copy
+import os
+
+import mujoco
+import numpy as np
+import pytest
+
+from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.models.simulate import captured_warnings
+from mjcodesign.models.types import FingerModel
+from mjcodesign.objects import box_object
+from mjcodesign.scenarios import ENERGY_FLOOR, ENERGY_TOL, Failure, GraspScenario, energy_balance
+from mjcodesign.scenarios.grasp import STATE_SPEC, auto_pose, build_scene, control_spec, phase_controls
+from mjcodesign.sim import MujocoBackend, initial_state
+from mjcodesign.sim.mujoco_c import scene_with_model
+
+_BOX = 0.05  # box side [m]
+_RHO = 400.0  # heavy preset [kg/m³]: 50 g box
+
+
+@pytest.fixture(scope="module")
+def box_scene():
+    obj = box_object((_BOX,) * 3, _RHO)
+    return build_scene(
+        obj, FingerDesign(), Stiffness.preset("paper-optimized"), FingerModel.CHAIN, auto_pose(obj)
+    )
+
+
+def _rollout(scene, scenario):
+    """States, sensors, controls and the initial state of one rollout stepped here."""
+    m = scene.model
+    ctrl, _ = phase_controls(scene, scenario)
+    x0 = initial_state(scene)
+    d = mujoco.MjData(m)
+    mujoco.mj_setState(m, d, x0, STATE_SPEC)
+    states = np.empty((len(ctrl), x0.size))
+    sensors = np.empty((len(ctrl), m.nsensordata))
+    for t in range(len(ctrl)):
+        mujoco.mj_setState(m, d, ctrl[t], control_spec())
+        mujoco.mj_step(m, d)
+        mujoco.mj_getState(m, d, states[t], STATE_SPEC)
+        sensors[t] = d.sensordata
+    return x0, states, ctrl, sensors
+
+
+def test_ordinary_rollout_keeps_the_energy_bound(box_scene):
+    # E(t) − E(0) ≤ W⁺_act(t) + W_impulse(t): a held box with the default disturbance
+    scenario = GraspScenario()
+    x0, states, ctrl, sensors = _rollout(box_scene, scenario)
+    b = energy_balance(box_scene.model, box_scene.object_body, x0, states, ctrl, sensors)
+    assert b.plausible, b
+    assert b.total_work > 0.01  # the tendons and the lift did work (J)
+    out = MujocoBackend().run(box_scene, scenario)
+    assert Failure.IMPLAUSIBLE not in out.failures
+
+
+def test_energy_made_from_nothing_is_implausible(box_scene):
+    # The same rollout with a large impulse that the balance is not told about: the box gains
+    # ½ m Δv² (Δv = J / m = 4 m/s: 0.4 J) that no actuator put in, and the bound must catch it.
+    scenario = GraspScenario(impulse=0.2)
+    x0, states, ctrl, sensors = _rollout(box_scene, scenario)
+    told = energy_balance(box_scene.model, box_scene.object_body, x0, states, ctrl, sensors)
+    assert told.plausible, told
+    hidden = ctrl.copy()
+    nu = box_scene.model.nu
+    ob = box_scene.object_body
+    hidden[:, nu + 6 * ob : nu + 6 * ob + 6] = 0.0
+    b = energy_balance(box_scene.model, ob, x0, states, hidden, sensors)
+    assert not b.plausible
+    assert b.excess > 0.1  # J: most of the impulse's 0.4 J
+    assert "implausible" in b.reason(box_scene.model.opt.timestep)
+
+
+def test_tolerances_are_small_next_to_an_impulse():
+    # The bound's slack must stay far below the energy of the paper's disturbance on a light object:
+    # 0.0179 N s on a 5 g strawberry is 32 mJ, against a 0.1 mJ floor.
+    assert ENERGY_FLOOR < 0.01 * 0.5 * 0.0179**2 / 0.005
+    assert ENERGY_TOL <= 0.1
+
+
+def test_instability_is_diverged_and_counted_not_printed(box_scene, tmp_path, capfd, monkeypatch):
+    # A hinge 1e9 times too stiff for its 2 ms step blows up; MuJoCo's message is counted into the
+    # outcome and neither printed nor logged to MUJOCO_LOG.TXT.
+    monkeypatch.chdir(tmp_path)
+    m = copy.copy(box_scene.model)
+    jid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "A_hinge5")
+    m.jnt_stiffness[jid] *= 1e9
+    scene = scene_with_model(box_scene, m)
+    outs = MujocoBackend(nthread=2).run_scenes([scene, scene], GraspScenario(hold_s=0.02, post_hold_s=0.02))
+    single = MujocoBackend().run(scene, GraspScenario(hold_s=0.02, post_hold_s=0.02))
+    for out in (*outs, single):
+        assert out.failures == (Failure.DIVERGED,)
+        assert "BADQACC" in out.reason or "QACC" in out.reason
+        assert "warning(s)" in out.reason
+    printed = capfd.readouterr()
+    assert "WARNING" not in printed.out and "WARNING" not in printed.err
+    assert not os.path.exists(tmp_path / "MUJOCO_LOG.TXT")
+
+
+def _blow_up() -> None:
+    """One step of a slider pushed with 1e300 N: MuJoCo warns BADQACC (once per fresh data)."""
+    m = mujoco.MjModel.from_xml_string(
+        '<mujoco><worldbody><body><joint type="slide"/><geom size=".1" mass="1"/></body></worldbody></mujoco>'
+    )
+    d = mujoco.MjData(m)
+    d.qfrc_applied[0] = 1e300
+    mujoco.mj_step(m, d)
+
+
+def test_captured_warnings_nest_and_restore_the_previous_handler(capfd):
+    before = mujoco.get_mju_user_warning()
+    with captured_warnings() as outer:
+        with captured_warnings() as inner:
+            _blow_up()
+        _blow_up()
+    assert mujoco.get_mju_user_warning() is before
+    assert len(inner) == 1 and len(outer) == 2 and "QACC" in inner[0]
+    assert "WARNING" not in capfd.readouterr().out

@@ -1,0 +1,178 @@
+"""The tendon drive of a grasp: a fixed tension (the paper's simulator) or the XL330 position servo."""
+
+import dataclasses
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.errors import DesignError
+from mjcodesign.models.types import FingerModel
+from mjcodesign.objects import box_object
+from mjcodesign.scenarios import (
+    GraspScenario,
+    TendonForce,
+    TendonPosition,
+    TendonSpecError,
+    drive_scene,
+    parse_tendon,
+    phase_controls,
+)
+from mjcodesign.scenarios.grasp import STATE_SPEC, auto_pose, build_scene, control_spec
+from mjcodesign.sim import MujocoBackend, initial_state
+
+_G = 9.81
+_TOL_HOLD = 0.05  # issue: vertical finger force during the hold equals m g within 5%
+
+
+def test_parse_tendon_reads_both_modes_and_refuses_the_rest():
+    assert parse_tendon("force:10") == TendonForce(tension=10.0)
+    assert parse_tendon(" position:1000 ") == TendonPosition(ticks=1000.0)
+    for bad in (
+        "force",
+        "force:",
+        "pos:10",
+        "position:x",
+        "force:0",
+        "force:-1",
+        "force:nan",
+        "position:inf",
+        "position:0",
+    ):
+        with pytest.raises(TendonSpecError):
+            parse_tendon(bad)
+    assert issubclass(TendonSpecError, DesignError)  # the CLI's exit 2
+
+
+def test_xl330_servo_numbers_follow_from_the_hardware():
+    # T_max = τ_stall / r = 0.52 N m / 10 mm; pull = r 2π ticks / 4096; v = ω₀ r with ω₀ = 103 rpm
+    p = TendonPosition()
+    assert p.max_tension == pytest.approx(52.0)
+    assert p.pull == pytest.approx(0.010 * 2 * math.pi * 1000 / 4096)
+    assert p.pull_speed == pytest.approx(103 / 60 * 2 * math.pi * 0.010)
+    # a lower current limit lowers the tension limit in proportion (torque ∝ current below stall)
+    assert TendonPosition(current_limit=0.735).max_tension == pytest.approx(26.0)
+    # b / k must exceed dt / 2 = 1 ms for the explicit servo spring to be stable (drive.apply_drive)
+    assert p.damping / p.stiffness > 1e-3
+
+
+def test_tension_is_the_force_modes_shorthand():
+    assert GraspScenario(tension=4.0) == GraspScenario(tendon=TendonForce(tension=4.0))
+    assert GraspScenario().tension == 10.0
+    pos = GraspScenario(tendon=TendonPosition())
+    assert pos.tension is None
+    s = GraspScenario(tension=4.0)
+    assert dataclasses.replace(s, tension=7.0).tendon == TendonForce(tension=7.0)
+    assert dataclasses.replace(s, tendon=TendonForce(tension=5.0)).tension == 5.0
+    assert dataclasses.replace(s, tendon=TendonPosition()).tendon == TendonPosition()
+    assert dataclasses.replace(pos, lift=0.02).tendon == TendonPosition()
+    with pytest.raises(DesignError, match="shorthand"):
+        GraspScenario(tendon=TendonPosition(), tension=3.0)
+    with pytest.raises(DesignError):
+        GraspScenario(tension=60.0)  # above the tension motors' 50 N range
+
+
+@pytest.fixture(scope="module")
+def box():
+    return box_object((0.05,) * 3, 400.0)  # the tests' 50 g box
+
+
+def test_position_mode_needs_its_scene(box):
+    scene = build_scene(
+        box, FingerDesign(), Stiffness.preset("semi-rigid"), FingerModel.CHAIN, auto_pose(box)
+    )
+    scenario = GraspScenario(tendon=TendonPosition())
+    with pytest.raises(DesignError, match="drive_scene"):
+        phase_controls(scene, scenario)
+    assert drive_scene(scene, GraspScenario()) is scene  # force mode: the compiled actuators as they are
+
+
+def test_position_servo_tracks_its_target_and_saturates_at_the_current_limit(box):
+    # The tendon length follows ℓ* = ℓ₀ − min(v t, r 2π ticks / 4096); the tension is k (ℓ − ℓ*) while
+    # below T_max, and T_max once the box blocks the fingers.
+    scene = build_scene(
+        box, FingerDesign(), Stiffness.preset("semi-rigid"), FingerModel.CHAIN, auto_pose(box)
+    )
+    drive = TendonPosition()
+    scenario = GraspScenario(tendon=drive, impulse=0.0)
+    scene = drive_scene(scene, scenario)
+    m = scene.model
+    ctrl, starts = phase_controls(scene, scenario)
+    acts = [
+        mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a)
+        for h in scene.built.fingers
+        for a in h.actuators
+    ]
+    tendons = m.actuator_trnid[acts, 0]
+    d = mujoco.MjData(m)
+    mujoco.mj_setState(m, d, initial_state(scene), STATE_SPEC)
+    tension = []
+    for t in range(starts["hold"]):
+        mujoco.mj_setState(m, d, ctrl[t], control_spec())
+        mujoco.mj_step(m, d)
+        target = -ctrl[t, acts]
+        k_err = drive.stiffness * (d.ten_length[tendons] - target)
+        expected = np.clip(k_err, 0.0, drive.max_tension)
+        np.testing.assert_allclose(d.actuator_force[acts], expected, rtol=1e-9, atol=1e-9)
+        tension.append(d.actuator_force[acts].copy())
+    wound = m.tendon_length0[tendons] + ctrl[starts["hold"] - 1, acts]
+    np.testing.assert_allclose(wound, drive.pull, rtol=1e-12)  # the whole pull is commanded by the hold
+    assert np.max(tension) == pytest.approx(drive.max_tension)  # the box stops the fingers: saturated
+
+
+def test_position_mode_holds_the_box_with_its_weight(box):
+    # Static equilibrium of the lifted box: Σ F_z (finger contacts) = m g. Semi-rigid: softer designs
+    # wrap their free distal half under the box at 52 N and push it up (docs/benchmarks.md), no static hold.
+    scene = build_scene(
+        box, FingerDesign(), Stiffness.preset("semi-rigid"), FingerModel.CHAIN, auto_pose(box)
+    )
+    out = MujocoBackend().run(scene, GraspScenario(tendon=TendonPosition(), impulse=0.0, hold_s=0.3))
+    assert out.success, out.reason
+    assert out.body_force[5] == pytest.approx(box.mass * _G, rel=_TOL_HOLD)
+
+
+def test_datagen_config_takes_either_drive():
+    # a dataset's tendon: the force shorthand keeps its fingerprint; position mode reaches the scenario
+    from mjcodesign.data import DatagenConfig, parse_density_spec
+    from mjcodesign.data import parse_tendon as data_tendon
+
+    common = dict(objects=("egad-like:1",), poses_per_object=1, designs_per_pose=2)
+    density = parse_density_spec("light")
+    short = DatagenConfig(**common, density=density, tension=10.0)
+    force = DatagenConfig(**common, density=density, tendon=data_tendon("force:10"))
+    assert force.fingerprint() == short.fingerprint() and force.tension == 10.0
+    assert short.as_dict()["tendon"] == {"mode": "force", "tension_n": 10.0}
+    pos = DatagenConfig(**common, density=density, tendon=data_tendon("position:1000"))
+    assert pos.scenario.tendon == TendonPosition(ticks=1000) and pos.tension is None
+    d = pos.as_dict()["tendon"]
+    assert d["mode"] == "position" and d["ticks"] == 1000 and d["max_tension_n"] == pytest.approx(52.0)
+    assert pos.fingerprint() != force.fingerprint()
+    with pytest.raises(DesignError, match="tendon drive"):
+        DatagenConfig(**common, density=density, tension=None)
+
+
+def test_grasp_cli_takes_the_tendon_drive(tmp_path, capsys):
+    # `grasp --tendon position:TICKS`: the semi-rigid chain holds the 50 g box, vertical force = m g
+    import json
+
+    import trimesh
+
+    from mjcodesign.cli.main import main
+
+    box = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(box)
+    base = ["grasp", "--object", str(box), "--design", "semi-rigid", "--density", "heavy", "--impulse", "0"]
+    assert main([*base, "--tendon", "position:1000", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["success"], out["reason"]
+    assert out["body_force"][5] == pytest.approx(out["mass_kg"] * _G, rel=_TOL_HOLD)
+    for bad, match in (
+        (["--tendon", "position:abc"], "not a number"),
+        (["--tendon", "force:5", "--tension", "5"], "not both"),
+    ):
+        assert main([*base, *bad]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and match in err[0], err
