@@ -263,24 +263,45 @@ def load_grasp_object(
 
 
 def resolve_pose(
-    text: str, obj: GraspObject, geometry: FingerDesign | None = None, *, seed: int = 0
+    text: str,
+    obj: GraspObject,
+    geometry: FingerDesign | None = None,
+    *,
+    seed: int = 0,
+    cache_dir: Path | None = None,
 ) -> GripperPose:
     """A palm pose from a rule (:data:`POSE_RULES`) or a file.
 
-    A file is a candidate file (``.npz``, its first row) or JSON with ``pose`` (4x4) and ``openings`` (2).
+    A file is a candidate file (``FILE.npz`` for its first row, the best, or ``FILE.npz:ROW`` for row
+    ``ROW`` counted from 0) or JSON with ``pose`` (4x4) and ``openings`` (2). ``cache_dir`` keeps the
+    sampler's signed-distance grid for ``best``.
     """
     geometry = geometry or FingerDesign()
     if text == "auto":
         return auto_pose(obj, geometry)
     if text == "best":
-        return to_gripper_pose(sample_poses(obj, _BEST_OF, seed=seed, design=geometry))
-    path = Path(text)
+        return to_gripper_pose(sample_poses(obj, _BEST_OF, seed=seed, design=geometry, cache_dir=cache_dir))
+    path, row = _pose_file(text)
+    if path.suffix == ".npz":
+        return to_gripper_pose(read_candidates(path), row)
+    if path.suffix == ".npy":
+        raise PoseError(f"{path}: a pose file is an .npz from `mjcodesign poses --out` or JSON, not .npy")
     if not path.is_file():
         raise PoseError(f"pose file not found: {path}")
-    if path.suffix == ".npz":
-        return to_gripper_pose(read_candidates(path))
     try:
         raw = json.loads(path.read_text(encoding="utf-8"))
         return GripperPose.from_matrix(raw["pose"], tuple(raw["openings"]))
+    except PoseError as exc:
+        raise PoseError(f"{path}: {exc}") from None
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise PoseError(f"{path}: not a pose file ({type(exc).__name__}: {exc})") from exc
+
+
+def _pose_file(text: str) -> tuple[Path, int]:
+    """(path, row) of ``FILE`` or ``FILE.npz:ROW``; :class:`PoseError` for a bad row."""
+    head, sep, tail = text.rpartition(":")
+    if sep and head.endswith(".npz") and not Path(text).is_file():
+        if not tail.isdigit():
+            raise PoseError(f"bad pose row {tail!r} in {text!r}: use FILE.npz:ROW with ROW an integer >= 0")
+        return Path(head), int(tail)
+    return Path(text), 0

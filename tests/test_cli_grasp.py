@@ -58,9 +58,9 @@ def test_bad_input_exits_2_with_one_line(tmp_path, case):
         bad = tmp_path / "broken.ply"
         bad.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 3\nend_header\n1 2\n")
         args = ["--object", str(bad)]
-    elif case == "open":
+    elif case == "open":  # a flat sheet: no repair closes it (a bent one is closed by pymeshfix now)
         sheet = trimesh.Trimesh(
-            [[0, 0, 0], [0.05, 0, 0], [0, 0.05, 0], [0.05, 0.05, 0.01]], [[0, 1, 2], [1, 3, 2]]
+            [[0, 0, 0], [0.05, 0, 0], [0, 0.05, 0], [0.05, 0.05, 0]], [[0, 1, 2], [1, 3, 2]]
         )
         args = ["--object", _mesh(tmp_path, "sheet.stl", sheet)]
     elif case == "too_big":
@@ -91,15 +91,46 @@ def test_folder_runs_every_object_as_a_json_list(tmp_path):
     folder.mkdir()
     _mesh(folder, "a_box.stl", trimesh.creation.box(extents=(0.05, 0.05, 0.05)))
     _mesh(folder, "b_wide.obj", trimesh.creation.box(extents=(0.04, 0.2, 0.04)))  # too big to grasp
+    (folder / "empty.obj").write_bytes(b"")  # two objects of one stem: named apart by their suffix
+    (folder / "empty.stl").write_bytes(b"")
     (folder / "notes.txt").write_text("not a mesh")
     r = _run(tmp_path, "--object", str(folder), "--density", "heavy", "--impulse", "0", "--json", timeout=240)
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
-    assert [o["object"] for o in out] == ["a_box", "b_wide"]
+    assert [o["object"] for o in out] == ["a_box", "b_wide", "empty.obj", "empty.stl"]
     assert all(_KEYS <= set(o) for o in out)
     assert out[0]["success"], out[0]["reason"]
     assert not out[1]["success"] and out[1]["reason"].startswith("error:") and "too big" in out[1]["reason"]
-    assert len(r.stdout.strip().splitlines()) == 4  # "[", one line per object, "]"
+    assert all(not o["success"] and "empty" in o["reason"] for o in out[2:])
+    assert len(r.stdout.strip().splitlines()) == 6  # "[", one line per object, "]"
+
+
+def test_interrupted_folder_prints_what_finished_then_one_line(tmp_path, monkeypatch, capsys):
+    """SIGINT while the second object loads: the first one's entry is printed, then the interruption."""
+    import signal
+
+    from mjcodesign.cli import grasp as cg
+    from mjcodesign.cli.main import main
+
+    folder = tmp_path / "objects"
+    folder.mkdir()
+    for name in ("a_box.stl", "b_box.stl", "c_box.stl"):
+        _mesh(folder, name, trimesh.creation.box(extents=(0.05, 0.05, 0.05)))
+    prepare = cg._Runner.prepare
+
+    def interrupted_at_b(self, source):
+        if source.endswith("b_box.stl"):
+            signal.raise_signal(signal.SIGINT)  # Python's own handler: KeyboardInterrupt right here
+        return prepare(self, source)
+
+    monkeypatch.setattr(cg._Runner, "prepare", interrupted_at_b)
+    monkeypatch.setattr(cg, "user_cache_dir", lambda: tmp_path / "cache")
+    code = main(["grasp", "--object", str(folder), "--density", "heavy", "--impulse", "0", "--json"])
+    captured = capsys.readouterr()
+    assert code == 130
+    out = json.loads(captured.out)
+    assert [o["object"] for o in out] == ["a_box"] and out[0]["success"], out
+    assert captured.err.strip().splitlines()[-1] == "error: interrupted", captured.err
 
 
 def test_mjwarp_flex_is_refused_with_one_line(tmp_path):

@@ -15,6 +15,7 @@ from mjcodesign.errors import PoseError
 from mjcodesign.objects import box_object
 from mjcodesign.poses import (
     ANYGRASP_DEPTH,
+    FILE_FORMAT,
     MAX_PENETRATION,
     NOISE_TRANSLATION,
     RigidGripper,
@@ -22,10 +23,14 @@ from mjcodesign.poses import (
     anygrasp_to_world,
     augment_poses,
     load_external,
+    read_candidates,
     refine,
+    refine_and_rank,
     sample_poses,
     scene_offset,
 )
+from mjcodesign.poses.candidates import rank_order
+from mjcodesign.poses.grid import ObjectSDF
 
 _ROOT = Path(__file__).resolve().parents[1]
 _BOX = (0.04, 0.05, 0.06)  # full sides [m]
@@ -54,8 +59,13 @@ def box():
 
 
 @pytest.fixture(scope="module")
-def box_poses(box):
-    return sample_poses(box, 4, seed=0, options=SamplerOptions(augment=1, candidates_per_pose=3))
+def sdf_cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("cache")
+
+
+@pytest.fixture(scope="module")
+def box_poses(box, sdf_cache):
+    return sample_poses(box, 4, seed=0, options=SamplerOptions(augment=1), cache_dir=sdf_cache)
 
 
 def test_import_does_not_load_warp():
@@ -108,29 +118,38 @@ def test_closing_axis_across_the_object(box, box_poses):
         assert proj.max() > 0 and proj.min() < 0
 
 
-def test_deterministic_per_seed(box):
+def test_deterministic_per_seed(box, sdf_cache):
     opts = SamplerOptions(augment=0, candidates_per_pose=2)
-    a = sample_poses(box, 2, seed=3, options=opts)
-    b = sample_poses(box, 2, seed=3, options=opts)
+    a = sample_poses(box, 2, seed=3, options=opts, cache_dir=sdf_cache)
+    b = sample_poses(box, 2, seed=3, options=opts, cache_dir=sdf_cache)
     np.testing.assert_array_equal(a.matrices, b.matrices)
     np.testing.assert_array_equal(a.openings, b.openings)
-    c = sample_poses(box, 2, seed=4, options=opts)
+    np.testing.assert_array_equal(a.source_index, b.source_index)
+    c = sample_poses(box, 2, seed=4, options=opts, cache_dir=sdf_cache)
     assert not np.array_equal(a.matrices, c.matrices)
+    with pytest.raises(PoseError, match=">= 0"):
+        sample_poses(box, 2, seed=-1)
 
 
-def test_top_fraction_controls_the_approach(box):
-    top = sample_poses(box, 3, seed=1, options=SamplerOptions(top_fraction=1.0, augment=0))
+def test_top_fraction_controls_the_approach(sdf_cache):
+    # A 200-mm column: the contacts, drawn near the COM, sit high enough for a top approach with the
+    # contact 35 mm from the fingertips, and clear the ground for a side approach.
+    column = box_object((0.04, 0.05, 0.2), 100.0)
+    opts = SamplerOptions(top_fraction=1.0)
+    top = sample_poses(column, 3, seed=1, options=opts, cache_dir=sdf_cache)
     # From above: the approach points down (tilted at most 25° plus the closing axis' slope).
-    assert np.all(top.approaches()[:, 2] < -0.5)
+    assert len(top) == 3 and np.all(top.approaches()[:, 2] < -0.5)
+    side = sample_poses(column, 3, seed=1, options=SamplerOptions(top_fraction=0.0), cache_dir=sdf_cache)
+    assert len(side) == 3 and np.all(np.abs(side.approaches()[:, 2]) < 0.5)
 
 
-def test_refinement_pushes_out_and_closes_in(box):
+def test_refinement_pushes_out_and_closes_in(box, sdf_cache):
     # A top-down pose at the box's centre, fingers once inside the box and once 15 mm outside.
     off = scene_offset(box)
     T = np.tile(np.eye(4), (2, 1, 1))
     T[:, :3, 3] = off + [0.0, 0.0, 0.03 + FingerDesign().length - 0.04]
     s0 = np.array([[0.01, 0.01], [0.04, 0.04]])
-    r = refine(box, T, s0)
+    r = refine(box, T, s0, sdf=ObjectSDF(box.mesh, cache_dir=sdf_cache))
     g = RigidGripper.build(FingerDesign(), 0.002)
     x = g.world(r.matrices[:, :3, :3], r.matrices[:, :3, 3], r.openings)
     d = _box_sdf(x - off, 0.5 * np.array(_BOX))
@@ -156,7 +175,7 @@ def test_noise_augmentation_sigma():
 
 
 def test_too_large_object_raises():
-    with pytest.raises(PoseError, match="opening"):
+    with pytest.raises(PoseError, match="too wide for the stroke"):
         sample_poses(box_object((0.2, 0.2, 0.2), 100.0), 2, seed=0)
 
 
@@ -168,10 +187,10 @@ def test_no_candidate_is_a_pose_error():
         to_gripper_pose(empty)
 
 
-def test_point_cloud_input(box):
+def test_point_cloud_input(box, sdf_cache):
     pts, face = trimesh.sample.sample_surface(box.mesh, 300, seed=0)
     normals = box.mesh.face_normals[face]
-    c = sample_poses(box, 2, seed=0, points=pts, normals=normals, options=SamplerOptions(augment=0))
+    c = sample_poses(box, 2, seed=0, points=pts, normals=normals, cache_dir=sdf_cache)
     assert len(c) >= 1 and np.all(c.min_signed_distance >= -MAX_PENETRATION)
     with pytest.raises(PoseError, match="at least two points"):
         sample_poses(box, 2, points=np.zeros((0, 3)), normals=np.zeros((0, 3)))
@@ -214,7 +233,7 @@ def test_anygrasp_mapping_matches_the_authors_frames():
 def test_anygrasp_reference_poses_cross_the_object(reference_dir):
     from mjcodesign.objects import load_mesh, load_object
     from mjcodesign.poses import MeshSDF
-    from mjcodesign.poses.candidates import _slab_openings
+    from mjcodesign.poses.accept import _slab_openings
 
     name = "012_strawberry"
     obj = load_object(name, 100.0)
@@ -238,7 +257,17 @@ def test_anygrasp_reference_poses_cross_the_object(reference_dir):
 
 
 def _cli(tmp_path, *args, timeout=180):
-    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "PYTHONPATH": str(_ROOT)}
+    # A fresh cache for our files (hulls, repairs, distance grids); Warp's compiled kernels (content-
+    # hashed) stay in the user's cache, or each subprocess compiles them again (about 10 s).
+    warp_cache = os.environ.get("WARP_CACHE_PATH") or str(
+        Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "warp"
+    )
+    env = {
+        **os.environ,
+        "XDG_CACHE_HOME": str(tmp_path / "cache"),
+        "WARP_CACHE_PATH": warp_cache,
+        "PYTHONPATH": str(_ROOT),
+    }
     return subprocess.run(
         [sys.executable, "-m", "mjcodesign.cli", *args],
         capture_output=True,
@@ -261,7 +290,14 @@ def test_cli_poses_json_then_grasp(tmp_path):
     assert set(res) == {"object", "poses", "rejected"}
     assert len(res["poses"]) == 2
     for p in res["poses"]:
-        assert set(p) == {"matrix", "openings", "score", "min_signed_distance_m"}
+        assert set(p) == {
+            "matrix",
+            "openings",
+            "score",
+            "min_signed_distance_m",
+            "source_index",
+            "copy_index",
+        }
         assert np.array(p["matrix"]).shape == (4, 4)
         assert p["min_signed_distance_m"] >= -MAX_PENETRATION
     r = _cli(tmp_path, "grasp", "--object", str(box), "--pose", str(out), "--impulse", "0", "--json")
@@ -305,8 +341,172 @@ def test_start_openings_are_relative_to_the_palm(box):
     from mjcodesign.models.types import GripperPose
     from mjcodesign.scenarios.grasp import _START_CLEARANCE, start_openings
 
-    # The box spans y in ±25 mm; a palm 10 mm towards +y sees 15 mm on A's side and 35 mm on B's.
-    pose = GripperPose((0.0, 0.01, 0.2), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0))
+    # The box spans y in ±25 mm; a palm 10 mm towards +y sees 15 mm on A's side and 35 mm on B's
+    # (palm 30 mm above the box: the box lies in the fingers' sweep).
+    pose = GripperPose((0.0, 0.01, 0.09), (1.0, 0.0, 0.0, 0.0), (0.0, 0.0))
     np.testing.assert_allclose(
         start_openings(box, pose), (0.015 + _START_CLEARANCE, 0.035 + _START_CLEARANCE), atol=1e-9
     )
+
+
+# --- #17: grid distance, ray pairs, provenance, candidate files, bad files ------------------------
+
+
+def test_grid_distance_within_its_bound_of_the_sphere(tmp_path):
+    # Sphere: d = |p| − r. The interpolant of a 1-Lipschitz function is within one cell diagonal of it.
+    r = 0.03
+    sdf = ObjectSDF(trimesh.creation.icosphere(subdivisions=4, radius=r), cache_dir=tmp_path)
+    p = np.random.default_rng(1).uniform(-0.045, 0.045, size=(4000, 3))
+    d, g = sdf.query(p)
+    exact = np.linalg.norm(p, axis=1) - r
+    # The grid samples MeshSDF, which gives its 3-cm bound beyond 3 cm outside the bounding box.
+    inside = exact < 0.03 - sdf.grid.error_bound
+    assert np.all(np.abs(d - exact)[inside] <= sdf.grid.error_bound + _TOL_SPHERE)
+    near = np.abs(exact) < 0.005  # near the surface, where refinement works, far tighter
+    assert np.abs(d - exact)[near].max() < 5e-4
+    ok = (np.linalg.norm(p, axis=1) > 0.01) & inside
+    np.testing.assert_allclose(g[ok], p[ok] / np.linalg.norm(p[ok], axis=1, keepdims=True), atol=0.1)
+    # exact_near: exact (faceting only) below the band.
+    de = sdf.exact_near(p, 0.002)
+    band = de < 0.002
+    np.testing.assert_allclose(de[band], exact[band], atol=_TOL_SPHERE)
+    assert len(list((tmp_path / "sdf").glob("*.npz"))) == 1
+
+
+def test_ray_pairs_find_a_thin_wall():
+    from mjcodesign.poses import MeshSDF, ray_pairs
+
+    # A 1-mm plate: all-pairs sampling rarely finds two points straight across; rays do, 1 mm wide.
+    plate = trimesh.creation.box(extents=(0.04, 0.04, 0.001))
+    pts, face = trimesh.sample.sample_surface(plate, 200, seed=0)
+    n = plate.face_normals[face]
+    a, b, w, align = ray_pairs(MeshSDF.from_trimesh(plate), pts, n, plate.face_normals)
+    on_faces = np.abs(n[:, 2]) > 0.5
+    assert len(a) >= on_faces.sum()
+    big = np.abs(pts[:, 2]) > 0.0004
+    np.testing.assert_allclose(w[: big.sum()].min(), 0.001, atol=1e-5)
+    assert np.all(align > 0.9)
+
+
+def test_rank_order_puts_distinct_sources_first():
+    scores = np.array([0.9, 0.8, 0.7, 0.6])
+    source = np.array([0, 0, 1, 2])
+    np.testing.assert_array_equal(rank_order(scores, source), [0, 2, 3, 1])
+
+
+def _top_down(box, lift: float) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, 3] = scene_offset(box) + [0.0, 0.0, 0.03 + FingerDesign().length - 0.04 + lift]
+    return T
+
+
+def test_refusals_keep_their_source_rows(box, sdf_cache):
+    # Row 0: a top-down pose over the box; row 1: 0.3 m higher (the fingers cannot reach it);
+    # row 2: 0.2 m lower (the gripper under the ground).
+    T = np.stack([_top_down(box, 0.0), _top_down(box, 0.3), _top_down(box, -0.2)])
+    c = refine_and_rank(
+        box,
+        T,
+        np.ones(3),
+        FingerDesign(),
+        {},
+        source_index=np.array([10, 11, 12]),
+        sdf=ObjectSDF(box.mesh, cache_dir=sdf_cache),
+    )
+    assert list(c.source_index) == [10]
+    reasons = {i: r for i, _, r in c.refused}
+    assert set(reasons) == {11, 12}
+    assert reasons[11] in ("finger does not reach the object", "loss above threshold")
+    assert reasons[12] == "ground collision"
+    assert sum(c.rejected.values()) == 2
+
+
+def test_candidate_file_round_trip_and_rows(box, box_poses, tmp_path):
+    from mjcodesign.jobs import resolve_pose
+
+    path = tmp_path / "c.npz"
+    box_poses.save(path, box.name)
+    with np.load(path) as z:
+        assert int(z["format"]) == FILE_FORMAT and str(z["object"]) == box.name
+        assert {"source", "source_index", "copy_index", "refused_reason", "loss"} <= set(z.files)
+    back = read_candidates(path)
+    np.testing.assert_array_equal(back.matrices, box_poses.matrices)
+    np.testing.assert_array_equal(back.source_index, box_poses.source_index)
+    last = len(box_poses) - 1
+    pose = resolve_pose(f"{path}:{last}", box)
+    np.testing.assert_allclose(pose.openings, box_poses.openings[last])
+    np.testing.assert_allclose(pose.position, box_poses.matrices[last, :3, 3])
+    with pytest.raises(PoseError, match="no grasp candidate"):
+        resolve_pose(f"{path}:{len(box_poses)}", box)
+    with pytest.raises(PoseError, match="ROW an integer"):
+        resolve_pose(f"{path}:-1", box)
+
+
+@pytest.mark.parametrize("kind", ["empty", "noise"])
+@pytest.mark.parametrize("suffix", [".npz", ".npy"])
+def test_bad_numpy_files_are_one_line_pose_errors(tmp_path, kind, suffix):
+    path = tmp_path / f"bad{suffix}"
+    path.write_bytes(b"" if kind == "empty" else np.random.default_rng(0).bytes(500))
+    for read in (read_candidates, load_external):
+        with pytest.raises(PoseError) as err:
+            read(path)
+        assert "\n" not in str(err.value) and str(path) in str(err.value)
+
+
+def test_a_part_that_fits_is_grasped_on_an_object_that_does_not(tmp_path, sdf_cache):
+    from mjcodesign.objects import load_object
+
+    # A 150-mm plate (wider than the 2 x 60 mm stroke) with a 60 x 10 mm fin standing on it: every pose
+    # closes on the fin (across it or along it), level, above the plate, and the sweep-slab start
+    # openings fit the stroke.
+    plate = trimesh.creation.box(extents=(0.15, 0.15, 0.01))
+    fin = trimesh.creation.box(extents=(0.06, 0.01, 0.06))
+    fin.apply_translation([0.0, 0.0, 0.035])
+    path = tmp_path / "finned.ply"
+    trimesh.util.concatenate([plate, fin]).export(path)
+    obj = load_object(path, 100.0)
+    c = sample_poses(obj, 3, seed=0, cache_dir=sdf_cache)
+    assert len(c) == 3 and np.all(c.min_signed_distance >= -MAX_PENETRATION)
+    assert np.all(np.abs(c.matrices[:, 2, 1]) < 0.25)  # a level closing axis: on the fin, not the plate
+    assert np.all(c.openings.sum(axis=1) < 0.065)  # the fin's 10 or 60 mm, not the 150-mm plate
+
+
+def test_every_accepted_pose_starts_in_the_grasp_scene(box, box_poses):
+    # One rule: a pose the sampler accepts is one the grasp scene takes (start openings from the
+    # sweep slab, no fingertip or palm under the ground), at the openings the sampler checked.
+    from mjcodesign.design.stiffness import Stiffness
+    from mjcodesign.models.types import FingerModel
+    from mjcodesign.objects import FingerSweep, sweep_starts
+    from mjcodesign.poses import to_gripper_pose
+    from mjcodesign.scenarios.grasp import compile_scene, scene_at_pose
+
+    base = compile_scene(box, FingerDesign(), Stiffness.preset("semi-rigid"), FingerModel.CHAIN)
+    v, f = box.collision_mesh()
+    T = box_poses.matrices
+    want, _, _ = sweep_starts(
+        v + scene_offset(box),
+        f,
+        T[:, :3, :3],
+        T[:, :3, 3],
+        box_poses.openings,
+        FingerSweep.of(FingerDesign()),
+    )
+    for i in range(len(box_poses)):
+        scene = scene_at_pose(base, to_gripper_pose(box_poses, i))  # raises PoseError if refused
+        np.testing.assert_allclose(scene.start_openings, want[i], atol=1e-9)
+
+
+def test_fresh_samples_when_every_pair_was_tried(box, sdf_cache, monkeypatch):
+    # 8 surface samples give fewer box pairs than 12 poses need: the sampler draws a second seeded
+    # set (seed + _POOL_SEED_STEP) instead of stopping short, and stays deterministic.
+    import mjcodesign.poses.sampler as sampler
+
+    opts = SamplerOptions(surface_samples=8)
+    seeds = []
+    surface = sampler._surface
+    monkeypatch.setattr(sampler, "_surface", lambda o, k, s: (seeds.append(s), surface(o, k, s))[1])
+    a = sample_poses(box, 12, seed=0, options=opts, cache_dir=sdf_cache)
+    assert len(a) == 12 and seeds[:2] == [0, sampler._POOL_SEED_STEP]
+    assert np.all(a.min_signed_distance >= -MAX_PENETRATION)
+    b = sample_poses(box, 12, seed=0, options=opts, cache_dir=sdf_cache)
+    np.testing.assert_array_equal(a.matrices, b.matrices)

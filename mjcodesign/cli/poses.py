@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
-from mjcodesign.cli.common import user_cache_dir
+from mjcodesign.cli.common import int_at_least, path_text, user_cache_dir
 
 __all__ = ["add_parser", "add_bench_parser", "run", "run_bench", "poses"]
 
@@ -23,23 +24,35 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "poses", help="antipodal grasp candidates, refined on the rigid counterpart of the fingers"
     )
     p.add_argument(
-        "--object", required=True, help="YCB name (e.g. 025_mug), egad-like:N, or an OBJ/STL/PLY file"
+        "--object",
+        required=True,
+        type=path_text,
+        help="YCB name (e.g. 025_mug), egad-like:N, or an OBJ/STL/PLY file",
     )
-    p.add_argument("--n", type=int, default=10, help="poses to return (best first)")
+    p.add_argument("--n", type=int_at_least(1), default=10, help="poses to return (best first)")
     p.add_argument("--seed", type=int, default=0, help="seeds the surface samples, picks, tilts and noise")
     p.add_argument(
-        "--top-fraction", type=float, default=0.5, help="share of candidates approached from above"
+        "--top-fraction",
+        type=float,
+        default=0.0,
+        help="share of the candidates that a side approach could take approached from above instead (top "
+        "grasps rarely hold through the disturbance); pairs no side approach fits are always approached "
+        "from above",
     )
-    p.add_argument("--augment", type=int, default=2, help="noisy copies per candidate (σ 3 mm, 5e-3 rad)")
+    p.add_argument(
+        "--augment", type=int_at_least(0), default=0, help="noisy copies per candidate (σ 3 mm, 5e-3 rad)"
+    )
     p.add_argument(
         "--import",
         dest="import_file",
+        type=path_text,
         default=None,
         help="refine external candidates instead of sampling: AnyGrasp .npz (T_pose, N×4×4), .npy 4×4 / "
         "N×4×4 / N×17, or text rows of 17 GraspNet floats, in the authors' camera frame",
     )
     p.add_argument(
         "--point-cloud",
+        type=path_text,
         default=None,
         help="sample contacts from a .npy of shape (n, 6): points [m] and outward normals, object COM frame",
     )
@@ -47,7 +60,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         "--allow-open", action="store_true", help="use the convex hull of a mesh that cannot be repaired"
     )
     p.add_argument("--json", action="store_true")
-    p.add_argument("--out", default=None, help="write the poses to FILE.npz (grasp --pose FILE reads it)")
+    p.add_argument(
+        "--out",
+        type=path_text,
+        default=None,
+        help="write the poses to FILE.npz (grasp --pose FILE reads it); says so on stderr",
+    )
     p.set_defaults(func=run)
     return p
 
@@ -60,9 +78,9 @@ def add_bench_parser(bench_subparsers) -> argparse.ArgumentParser:
     p.add_argument(
         "--objects",
         default=_DEFAULT_BENCH_OBJECTS,
-        help="comma-separated names, or 'ycb-in-domain' for the paper's 46 training objects",
+        help="comma-separated names, or a named set: ycb-in-domain (46), ycb-ood (32), egad-like (25), ood (42)",
     )
-    p.add_argument("--per-object", type=int, default=4, help="poses per object")
+    p.add_argument("--per-object", type=int_at_least(1), default=4, help="poses per object")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--density", default="light", help="object density [kg/m³] or light / heavy")
     p.add_argument(
@@ -71,11 +89,20 @@ def add_bench_parser(bench_subparsers) -> argparse.ArgumentParser:
         default=None,
         help="disturbance impulse [N s] of the grasp motion (default: the grasp scenario's, 0.0179)",
     )
-    p.add_argument("--top-fraction", type=float, default=0.5)
+    p.add_argument("--top-fraction", type=float, default=0.0)
     p.add_argument(
         "--anygrasp", default=None, help="folder of the authors' pose_info/*.npz, imported beside the sampler"
     )
     p.add_argument("--no-sim", action="store_true", help="skip the MuJoCo grasps")
+    p.add_argument(  # #17: does any design of a fixed set hold each pose?
+        "--designs",
+        default="semi-rigid",
+        help="designs to grasp with, comma-separated presets or random:N (the first is reported), or "
+        "fixed11: semi-rigid, soft, paper-optimized, random:0..7 (counts the poses every design lets fall)",
+    )
+    p.add_argument(  # #17: the convex hull is an explicit choice
+        "--allow-open", action="store_true", help="use the convex hull of a mesh that no repair can close"
+    )
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run_bench)
     return p
@@ -86,8 +113,8 @@ def poses(
     n: int = 10,
     seed: int = 0,
     *,
-    top_fraction: float = 0.5,
-    augment: int = 2,
+    top_fraction: float = 0.0,
+    augment: int = 0,
     import_file: str | None = None,
     point_cloud: str | None = None,
     allow_open: bool = False,
@@ -96,26 +123,40 @@ def poses(
     import numpy as np
 
     from mjcodesign.errors import PoseError
-    from mjcodesign.objects import load_mesh, load_object
+    from mjcodesign.jobs import load_grasp_object
+    from mjcodesign.objects import load_mesh
     from mjcodesign.poses import SamplerOptions, import_anygrasp, load_external, sample_poses
 
-    obj = load_object(source, 100.0, allow_open=allow_open, seed=seed)
-    if import_file is not None:
-        cands = import_anygrasp(
-            obj, load_external(import_file), load_mesh(source).vertices, seed=seed, augment=augment
-        )
-        return obj, cands.head(n)
+    T = load_external(import_file) if import_file is not None else None  # a bad file fails first
     points = normals = None
     if point_cloud is not None:
         try:
             cloud = np.load(point_cloud)
         except (OSError, ValueError, EOFError) as exc:  # EOFError: an empty file
             raise PoseError(f"{point_cloud}: cannot read the point cloud ({type(exc).__name__})") from exc
+        if not isinstance(cloud, np.ndarray):
+            raise PoseError(f"{point_cloud}: a point cloud is one .npy array of shape (n, 6), not an .npz")
         if cloud.ndim != 2 or cloud.shape[1] != 6:
             raise PoseError(f"{point_cloud}: point cloud must have shape (n, 6), got {cloud.shape}")
         points, normals = cloud[:, :3], cloud[:, 3:]
+    # #17: the object with its convex pieces (cached), so that the candidates' start-opening check
+    # sees the geometry the grasp scene collides with.
+    obj = load_grasp_object(source, 100.0, seed=seed, allow_open=allow_open, cache_dir=user_cache_dir())
+    if T is not None:
+        cands = import_anygrasp(
+            obj,
+            T,
+            load_mesh(source).vertices,
+            seed=seed,
+            augment=augment,
+            source=Path(import_file).name,
+            cache_dir=user_cache_dir(),
+        )
+        return obj, cands.head(n)
     options = SamplerOptions(top_fraction=top_fraction, augment=augment)
-    return obj, sample_poses(obj, n, seed=seed, options=options, points=points, normals=normals)
+    return obj, sample_poses(
+        obj, n, seed=seed, options=options, points=points, normals=normals, cache_dir=user_cache_dir()
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -147,7 +188,11 @@ def run(args: argparse.Namespace) -> int:
             cands.save(out, obj.name)
         except OSError as exc:
             raise OutputError(f"cannot write {out}: {exc}") from exc
+        # On stderr: with --json, stdout holds the JSON alone.
+        print(f"wrote {len(cands.as_dicts())} poses of {obj.name} to {out}", file=sys.stderr)
     result = {"object": obj.name, "poses": cands.as_dicts(), "rejected": cands.rejected}
+    if cands.source != "sampler":  # #17: an import names its file and every row it refused
+        result.update(source=cands.source, refused=cands.refused_dicts())
     if args.json:
         print(json.dumps(result))
     elif args.out is None:
@@ -159,12 +204,23 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_designs(text: str) -> tuple[str, ...]:
+    """``--designs``: ``fixed11`` or comma-separated designs, each checked by ``Stiffness.parse``."""
+    from mjcodesign.bench.poses import FIXED_DESIGNS
+    from mjcodesign.design.stiffness import Stiffness
+
+    designs = FIXED_DESIGNS if text == "fixed11" else tuple(d.strip() for d in text.split(","))
+    for d in designs:
+        Stiffness.parse(d)  # a bad name exits 2 before any object loads
+    return designs
+
+
 def run_bench(args: argparse.Namespace) -> int:
     """Run ``bench poses``."""
     from mjcodesign.bench import run_benchmark
-    from mjcodesign.objects import named_set, parse_density
+    from mjcodesign.objects import OBJECT_SETS, named_set, parse_density
 
-    names = list(named_set(args.objects)) if args.objects == "ycb-in-domain" else args.objects.split(",")
+    names = list(named_set(args.objects)) if args.objects in OBJECT_SETS else args.objects.split(",")
     res = run_benchmark(
         "poses",
         objects=names,
@@ -175,8 +231,18 @@ def run_bench(args: argparse.Namespace) -> int:
         top_fraction=args.top_fraction,
         anygrasp_dir=args.anygrasp,
         simulate=not args.no_sim,
+        allow_open=args.allow_open,
+        designs=_bench_designs(args.designs),
         cache_dir=user_cache_dir(),
     )
+    failed = [r for r in res["objects"] if "error" in r]
+    if failed and len(failed) == len(res["objects"]):  # a benchmark of nothing is a refusal
+        from mjcodesign.errors import MjcodesignError
+
+        more = f"; {len(failed) - 1} more failed" if len(failed) > 1 else ""
+        raise MjcodesignError(
+            f"bench poses: no object could be used ({failed[0]['object']}: {failed[0]['error']}{more})"
+        )
     if args.json:
         print(json.dumps(res))
     else:

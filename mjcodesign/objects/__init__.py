@@ -4,6 +4,8 @@ Import from here (``from mjcodesign.objects import load_object``): each name has
 
 - :mod:`~mjcodesign.objects.mesh`: :class:`GraspObject`, loading (YCB names, OBJ/STL/PLY files,
   ``egad-like:N``), watertight repair, densities;
+- :mod:`~mjcodesign.objects.repair`: watertight repair (manifold3d, pymeshfix), cached on disk;
+- :mod:`~mjcodesign.objects.sweep`: the object in the fingers' sweep and the start openings it allows;
 - :mod:`~mjcodesign.objects.sets`: the paper's YCB splits and the procedural ``egad-like`` shapes;
 - :mod:`~mjcodesign.objects.decomposition`: CoACD convex pieces, cached on disk.
 """
@@ -18,19 +20,52 @@ from mjcodesign.objects.mesh import (
     load_folder,
     load_mesh,
     load_object,
+    object_name,
     parse_density,
 )
-from mjcodesign.objects.sets import OBJECT_SETS, YCB_IN_DOMAIN, YCB_OOD, egad_like_mesh, named_set
+from mjcodesign.objects.repair import (
+    MAX_REPAIR_DEVIATION,
+    REPAIR_CHAIN,
+    RepairMethod,
+    repair_deviation,
+    repair_mesh,
+    repair_metrics,
+    watertight,
+)
+from mjcodesign.objects.sets import (
+    OBJECT_SETS,
+    YCB_IN_DOMAIN,
+    YCB_OOD,
+    check_seed,
+    egad_like_mesh,
+    named_set,
+    parse_egad_index,
+)
+from mjcodesign.objects.sweep import (
+    START_CLEARANCE,
+    FingerSweep,
+    SweepStatus,
+    slab_y_ranges,
+    sweep_failure,
+    sweep_starts,
+)
 
 __all__ = [
     "DENSITY_PRESETS",
+    "MAX_REPAIR_DEVIATION",
     "MESH_SUFFIXES",
     "OBJECT_SETS",
+    "REPAIR_CHAIN",
+    "START_CLEARANCE",
     "YCB_IN_DOMAIN",
     "YCB_OOD",
     "CoacdSettings",
+    "FingerSweep",
     "GraspObject",
+    "RepairMethod",
+    "SweepStatus",
     "box_object",
+    "check_seed",
     "convex_decomposition",
     "egad_like",
     "egad_like_mesh",
@@ -38,5 +73,14 @@ __all__ = [
     "load_mesh",
     "load_object",
     "named_set",
+    "object_name",
     "parse_density",
+    "parse_egad_index",
+    "repair_deviation",
+    "repair_mesh",
+    "repair_metrics",
+    "slab_y_ranges",
+    "sweep_failure",
+    "sweep_starts",
+    "watertight",
 ]

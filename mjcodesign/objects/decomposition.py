@@ -15,6 +15,7 @@ import numpy as np
 
 from mjcodesign.errors import MeshError
 from mjcodesign.objects.mesh import GraspObject
+from mjcodesign.objects.sets import check_seed
 
 __all__ = ["CoacdSettings", "convex_decomposition"]
 
@@ -39,6 +40,7 @@ class CoacdSettings:
             raise MeshError(f"coacd threshold must be in [0.01, 1], got {self.threshold}")
         if self.max_convex_hull < 1 or self.max_ch_vertex < 4:
             raise MeshError("coacd needs max_convex_hull >= 1 and max_ch_vertex >= 4")
+        check_seed(self.seed)
 
 
 def _mesh_key(mesh, settings: CoacdSettings) -> str:

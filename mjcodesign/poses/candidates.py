@@ -1,39 +1,46 @@
-"""Ranked grasp candidates: the :class:`Candidates` type, its file, and the checks every pose passes.
+"""Ranked grasp candidates: the :class:`Candidates` type, its file and its provenance.
 
-Whatever proposes the poses (the antipodal sampler, an AnyGrasp import), :func:`refine_and_rank` gives
-each its start openings, refines it (:func:`mjcodesign.poses.refine.refine`), drops it with the reason
-when it collides, cannot reach the object or starts under the ground, and ranks the rest. A pose that
-still penetrates more than ``MAX_PENETRATION`` on the dense point set is dropped.
+The file (``mjcodesign poses --out FILE.npz``, read by ``grasp --pose FILE.npz[:ROW]`` and data
+generation) is an ``.npz`` with these keys, one row per pose, best first (README, Grasp candidates):
+
+- ``matrices`` (n, 4, 4): palm poses in the grasp scene's world [m] (:mod:`mjcodesign.poses.gripper`);
+- ``openings`` (n, 2): target openings of fingers A and B [m];
+- ``scores`` (n,), ``min_signed_distance`` (n,) [m], ``loss`` (n,);
+- ``source`` (str): ``sampler``, or the imported file's name; ``source_index`` (n,): the row of the
+  imported file (the sampler's candidate number for sampled poses); ``copy_index`` (n,): 0 for the
+  pose itself, k for its k-th noisy copy;
+- ``refused_source_index``, ``refused_copy_index`` (m,) and ``refused_reason`` (m,): every dropped
+  pose and why;
+- ``object`` (str), ``format`` (int, ``FILE_FORMAT``).
 """
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from mjcodesign.design.finger import FingerDesign
 from mjcodesign.errors import PoseError
-from mjcodesign.models.types import MAX_OPENING, GripperPose
-from mjcodesign.objects import GraspObject
-from mjcodesign.poses.gripper import COARSE_EDGE, DENSE_EDGE, RigidGripper, rotvec, scene_offset
-from mjcodesign.poses.refine import LOSS_THRESHOLD, MAX_FINGER_GAP, T_RANGE, refine
-from mjcodesign.scenarios.grasp import start_openings
+from mjcodesign.models.types import GripperPose
+from mjcodesign.poses.gripper import rotvec
 
 __all__ = [
+    "FILE_FORMAT",
     "MAX_PENETRATION",
     "NOISE_ROTATION",
     "NOISE_TRANSLATION",
-    "OPEN_CLEARANCE",
     "Candidates",
     "approach_spread_deg",
     "augment_poses",
+    "load_numpy",
+    "rank_order",
     "read_candidates",
-    "refine_and_rank",
     "to_gripper_pose",
 ]
+
+FILE_FORMAT = 2
+"""Version of the candidate file (1: matrices, openings, scores, min_signed_distance, object)."""
 
 MAX_PENETRATION = 1e-3
 """Accepted poses penetrate the object or the ground by at most this much [m] (dense point set)."""
@@ -41,15 +48,11 @@ NOISE_TRANSLATION = 3e-3
 """Augmentation noise σ on the palm position [m] (paper, NOTES.md)."""
 NOISE_ROTATION = 5e-3
 """Augmentation noise σ on each component of the rotation vector [rad] (paper, NOTES.md)."""
-OPEN_CLEARANCE = 0.004
-"""Refinement starts each inner face this far outside the object [m]."""
-
-_MAX_OBJECT_SAMPLES = 4000  # caps the object points of the opening initialisation
 
 
 @dataclass
 class Candidates:
-    """Ranked palm poses [m] in the scene's world, best first."""
+    """Ranked palm poses [m] in the scene's world, best first, with where each came from."""
 
     matrices: np.ndarray
     """Palm poses, shape (n, 4, 4)."""
@@ -62,12 +65,28 @@ class Candidates:
     loss: np.ndarray
     """Refinement loss, shape (n,)."""
     rejected: dict[str, int] = field(default_factory=dict)
+    """Dropped poses per reason."""
+    source_index: np.ndarray | None = None
+    """Row of the source each pose came from (imported file row, or sampler candidate), shape (n,)."""
+    copy_index: np.ndarray | None = None
+    """0 for a source pose itself, k for its k-th noisy copy, shape (n,)."""
+    source: str = "sampler"
+    """``sampler``, or the imported file's name."""
+    refused: list[tuple[int, int, str]] = field(default_factory=list)
+    """(source_index, copy_index, reason) of every dropped pose."""
+
+    def __post_init__(self) -> None:
+        n = len(self.scores)
+        if self.source_index is None:
+            self.source_index = np.arange(n, dtype=np.int64)
+        if self.copy_index is None:
+            self.copy_index = np.zeros(n, dtype=np.int64)
 
     def __len__(self) -> int:
         return len(self.scores)
 
     def head(self, n: int) -> Candidates:
-        """The best ``n``."""
+        """The best ``n`` (the refusals are kept whole)."""
         return Candidates(
             self.matrices[:n],
             self.openings[:n],
@@ -75,6 +94,22 @@ class Candidates:
             self.min_signed_distance[:n],
             self.loss[:n],
             dict(self.rejected),
+            source_index=self.source_index[:n],
+            copy_index=self.copy_index[:n],
+            source=self.source,
+            refused=list(self.refused),
+        )
+
+    @classmethod
+    def concat(cls, parts: list[Candidates]) -> Candidates:
+        """One ranked set from several (:func:`rank_order`); ``rejected`` is the last part's dict."""
+        cat = {k: np.concatenate([getattr(c, k) for c in parts]) for k in _ARRAYS}
+        order = rank_order(cat["scores"], cat["source_index"])
+        return cls(
+            **{k: v[order] for k, v in cat.items()},
+            rejected=dict(parts[-1].rejected),
+            source=parts[0].source,
+            refused=[r for c in parts for r in c.refused],
         )
 
     def approaches(self) -> np.ndarray:
@@ -89,36 +124,98 @@ class Candidates:
                 "openings": self.openings[i].tolist(),
                 "score": float(self.scores[i]),
                 "min_signed_distance_m": float(self.min_signed_distance[i]),
+                "source_index": int(self.source_index[i]),
+                "copy_index": int(self.copy_index[i]),
             }
             for i in range(len(self))
         ]
 
+    def refused_dicts(self) -> list[dict]:
+        """JSON-ready refusals: ``source_index``, ``copy_index``, ``reason``."""
+        return [{"source_index": i, "copy_index": c, "reason": r} for i, c, r in self.refused]
+
     def save(self, path: str | Path, object_name: str) -> None:
-        """An ``.npz`` that ``mjcodesign grasp --pose FILE`` reads (first row = best)."""
+        """The candidate file (module docstring) that ``mjcodesign grasp --pose FILE[:ROW]`` reads."""
+        refused = self.refused or [(0, 0, "")][:0]
         np.savez(
             Path(path),
             matrices=self.matrices,
             openings=self.openings,
             scores=self.scores,
             min_signed_distance=self.min_signed_distance,
+            loss=self.loss,
+            source=np.array(self.source),
+            source_index=np.asarray(self.source_index, dtype=np.int64),
+            copy_index=np.asarray(self.copy_index, dtype=np.int64),
+            refused_source_index=np.array([r[0] for r in refused], dtype=np.int64),
+            refused_copy_index=np.array([r[1] for r in refused], dtype=np.int64),
+            refused_reason=np.array([r[2] for r in refused], dtype=str),
             object=np.array(object_name),
+            format=np.array(FILE_FORMAT),
         )
 
 
-def read_candidates(path: str | Path) -> Candidates:
-    """Candidates saved by :meth:`Candidates.save` (``mjcodesign poses --out``)."""
+_ARRAYS = ("matrices", "openings", "scores", "min_signed_distance", "loss", "source_index", "copy_index")
+
+
+def rank_order(scores: np.ndarray, source_index: np.ndarray) -> np.ndarray:
+    """Best first, one pose per source before any second copy of a source: the order (n,).
+
+    Sorted by (how many better poses share the source, −score), so the first rows are distinct grasps
+    and noisy copies come after them.
+    """
+    by_score = np.argsort(-np.asarray(scores), kind="stable")
+    seen: dict[int, int] = {}
+    rank = np.empty(len(by_score), dtype=np.int64)
+    for k in by_score:
+        s = int(source_index[k])
+        rank[k] = seen.get(s, 0)
+        seen[s] = rank[k] + 1
+    return np.lexsort((np.arange(len(scores)), -np.asarray(scores), rank))
+
+
+def load_numpy(path: str | Path, what: str):
+    """``np.load`` of an ``.npy``/``.npz`` (no pickles); :class:`PoseError` with one line if unreadable.
+
+    ``what`` names the expected content in the message (e.g. "poses file").
+    """
     path = Path(path)
+    if not path.is_file():
+        raise PoseError(f"{what} not found: {path}")
+    if path.stat().st_size == 0:
+        raise PoseError(f"{path}: not a {what} (the file is empty)")
     try:
-        with np.load(path) as z:
+        data = np.load(path, allow_pickle=False)
+    except Exception as exc:  # numpy raises ValueError, EOFError, BadZipFile, OSError... on bad bytes
+        raise PoseError(f"{path}: not a {what} (not a NumPy .npy/.npz file: {type(exc).__name__})") from exc
+    return data
+
+
+def read_candidates(path: str | Path) -> Candidates:
+    """Candidates saved by :meth:`Candidates.save` (``mjcodesign poses --out``); older files too."""
+    path = Path(path)
+    z = load_numpy(path, "poses file")
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise PoseError(f"{path}: not a poses file (an .npy array, not an .npz of named arrays)")
+    try:
+        with z:
             M, s = np.asarray(z["matrices"], dtype=float), np.asarray(z["openings"], dtype=float)
             sc, sd = np.asarray(z["scores"], dtype=float), np.asarray(z["min_signed_distance"], dtype=float)
-    except (OSError, ValueError, KeyError) as exc:
+            src = np.asarray(z["source_index"], dtype=np.int64) if "source_index" in z.files else None
+            cpy = np.asarray(z["copy_index"], dtype=np.int64) if "copy_index" in z.files else None
+            source = str(z["source"]) if "source" in z.files else "sampler"
+    except (KeyError, ValueError, TypeError) as exc:
         raise PoseError(f"{path}: not a poses file ({type(exc).__name__}: {exc})") from exc
     if M.ndim != 3 or M.shape[1:] != (4, 4) or s.shape != (len(M), 2) or len(M) == 0:
         raise PoseError(f"{path}: expected matrices (n, 4, 4) and openings (n, 2), n >= 1")
+    if sc.shape != (len(M),) or sd.shape != (len(M),):
+        raise PoseError(f"{path}: scores and min_signed_distance must have one value per pose")
+    for name, a in (("source_index", src), ("copy_index", cpy)):
+        if a is not None and a.shape != (len(M),):
+            raise PoseError(f"{path}: {name} must have one value per pose")
     if not (np.all(np.isfinite(M)) and np.all(np.isfinite(s))):
         raise PoseError(f"{path}: poses file contains NaN or inf")
-    return Candidates(M, s, sc, sd, np.zeros(len(M)))
+    return Candidates(M, s, sc, sd, np.zeros(len(M)), source_index=src, copy_index=cpy, source=source)
 
 
 def to_gripper_pose(c: Candidates, index: int = 0) -> GripperPose:
@@ -150,110 +247,3 @@ def augment_poses(T: np.ndarray, copies: int, rng: np.random.Generator) -> np.nd
     rep[:, :3, :3] = noise_r @ rep[:, :3, :3]
     rep[:, :3, 3] += rng.normal(0.0, NOISE_TRANSLATION, size=(len(rep), 3))
     return np.concatenate([T[:, None], rep.reshape(len(T), copies, 4, 4)], axis=1).reshape(-1, 4, 4)
-
-
-def _object_points(obj: GraspObject) -> np.ndarray:
-    """Seeded surface samples, one per ``DENSE_EDGE``² up to a cap (COM frame) [m]."""
-    import trimesh
-
-    count = int(min(_MAX_OBJECT_SAMPLES, np.ceil(obj.mesh.area / DENSE_EDGE**2)))
-    samples, _ = trimesh.sample.sample_surface(obj.mesh, count, seed=0)
-    return samples
-
-
-def _slab_openings(obj: GraspObject, T: np.ndarray, design: FingerDesign) -> np.ndarray:
-    """Per pose, each finger's opening that clears the object's vertices in its sweep slab (P, 2) [m].
-
-    The slab is the finger's width (palm |x| ≤ w/2) and length (−L ≤ palm z ≤ 0); the finger closes
-    from there during refinement. NaN where no vertex lies on that side (nothing to clear).
-    """
-    v = _object_points(obj) + scene_offset(obj)
-    R, p = T[:, :3, :3], T[:, :3, 3]
-    local = np.matmul(v[None] - p[:, None], R)  # palm coordinates (P, V, 3)
-    in_slab = (
-        (np.abs(local[..., 0]) <= 0.5 * design.width)
-        & (local[..., 2] <= 0)
-        & (local[..., 2] >= -design.length)
-    )
-    y = np.where(in_slab, local[..., 1], np.nan)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: nothing on that side
-        a = np.nanmax(np.where(y > 0, y, np.nan), axis=1)
-        b = np.nanmax(np.where(y < 0, -y, np.nan), axis=1)
-    return np.c_[a, b]
-
-
-def _initial_openings(obj, T, design) -> tuple[np.ndarray, np.ndarray]:
-    """Start openings (P, 2) and whether the object fits the stroke on both sides (P,)."""
-    ext = _slab_openings(obj, T, design)
-    fits = ~np.any(ext + OPEN_CLEARANCE > MAX_OPENING, axis=1)
-    s = np.clip(np.nan_to_num(ext, nan=0.0) + OPEN_CLEARANCE, 0.0, MAX_OPENING)
-    return s, fits
-
-
-def _below_ground(T, s, design) -> np.ndarray:
-    """Poses whose gripper stays below the ground wherever the approach offset t moves it (P,)."""
-    g = RigidGripper.build(design, COARSE_EDGE)
-    z = g.world(T[:, :3, :3], T[:, :3, 3], s)[..., 2].min(axis=1)
-    return z + T_RANGE * np.abs(T[:, 2, 2]) < -MAX_PENETRATION
-
-
-def _start_below_ground(obj, T, s, design) -> np.ndarray:
-    """Poses that the grasp motion cannot open: too wide, or a finger under the ground (P,).
-
-    The scene starts each finger outside the object (:func:`mjcodesign.scenarios.grasp.start_openings`).
-    """
-    starts = np.zeros_like(s)
-    bad = np.zeros(len(T), bool)
-    for k in range(len(T)):
-        try:
-            starts[k] = start_openings(obj, GripperPose.from_matrix(T[k], tuple(s[k])))
-        except PoseError:
-            bad[k] = True
-    g = RigidGripper.build(design, COARSE_EDGE)
-    z = g.world(T[:, :3, :3], T[:, :3, 3], starts)[..., 2].min(axis=1)
-    return bad | (z < -MAX_PENETRATION)
-
-
-def _count(rejected: dict[str, int], reason: str, mask: np.ndarray) -> None:
-    if np.any(mask):
-        rejected[reason] = rejected.get(reason, 0) + int(np.sum(mask))
-
-
-def refine_and_rank(
-    obj: GraspObject, T: np.ndarray, scores: np.ndarray, design: FingerDesign, rejected: dict[str, int]
-) -> Candidates:
-    """Refine palm poses (P, 4, 4) with prior scores (P,), drop the failures and rank the rest.
-
-    Each drop is counted in ``rejected`` (reason -> count), which the result carries.
-    """
-    s0, fits = _initial_openings(obj, T, design)
-    if not np.any(fits):
-        raise PoseError(
-            f"object {obj.name} is too large for every opening (stroke {1000 * MAX_OPENING:.0f} mm per finger)"
-        )
-    _count(rejected, "object wider than the opening", ~fits)
-    low = fits & _below_ground(T, s0, design)
-    _count(rejected, "ground collision", low)
-    fits &= ~low
-    T, scores, s0 = T[fits], scores[fits], s0[fits]
-    r = refine(obj, T, s0, design=design)
-    ground = r.min_ground < -MAX_PENETRATION
-    collide = ~ground & (r.min_object < -MAX_PENETRATION)
-    high = ~(ground | collide) & (r.loss > LOSS_THRESHOLD)
-    reach = high & (r.gap.max(axis=1) > MAX_FINGER_GAP)
-    _count(rejected, "ground collision", ground)
-    _count(rejected, "object collision", collide)
-    _count(rejected, "finger does not reach the object", reach)
-    _count(rejected, "loss above threshold", high & ~reach)
-    keep = ~(ground | collide | high)
-    start_bad = np.zeros(len(keep), bool)
-    start_bad[keep] = _start_below_ground(obj, r.matrices[keep], r.openings[keep], design)
-    _count(rejected, "below the ground at the start opening", start_bad)
-    keep &= ~start_bad
-    final = scores[keep] / (1.0 + r.loss[keep])
-    order = np.argsort(-final, kind="stable")
-    idx = np.flatnonzero(keep)[order]
-    return Candidates(
-        r.matrices[idx], r.openings[idx], final[order], r.min_signed_distance[idx], r.loss[idx], rejected
-    )

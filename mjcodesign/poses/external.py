@@ -2,7 +2,8 @@
 
 The authors' poses come in their camera frame; :func:`anygrasp_to_world` maps them to palm poses of
 :mod:`mjcodesign.poses.gripper`'s frames and :func:`import_anygrasp` refines and ranks them like
-sampled ones (:func:`mjcodesign.poses.candidates.refine_and_rank`).
+sampled ones (:func:`mjcodesign.poses.accept.refine_and_rank`), keeping each row's index in the file
+(``source_index``) and the reason for every row it drops.
 """
 
 from __future__ import annotations
@@ -13,8 +14,11 @@ import numpy as np
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.errors import MeshError, PoseError
-from mjcodesign.objects import GraspObject
-from mjcodesign.poses.candidates import Candidates, augment_poses, refine_and_rank
+from mjcodesign.models.types import ROTATION_TOL
+from mjcodesign.objects import GraspObject, check_seed
+from mjcodesign.poses.accept import refine_and_rank
+from mjcodesign.poses.candidates import Candidates, augment_poses, load_numpy
+from mjcodesign.poses.grid import ObjectSDF
 from mjcodesign.poses.gripper import scene_offset
 
 __all__ = ["ANYGRASP_DEPTH", "anygrasp_to_world", "import_anygrasp", "load_external"]
@@ -60,18 +64,25 @@ def anygrasp_to_world(
 
 
 def _read_array(path: Path) -> np.ndarray:
-    """The raw array of a grasp file (any shape); :class:`PoseError` if it cannot be read."""
+    """The raw array of a grasp file (any shape); :class:`PoseError` with one line if it cannot be read."""
+    if path.suffix in (".npz", ".npy"):
+        data = load_numpy(path, "grasp file")
+        if path.suffix == ".npz" or isinstance(data, np.lib.npyio.NpzFile):
+            if not isinstance(data, np.lib.npyio.NpzFile):
+                raise PoseError(f"{path}: not a grasp file (an .npy array named .npz)")
+            with data:
+                if "T_pose" not in data.files:
+                    keys = ", ".join(data.files) or "none"
+                    raise PoseError(f"{path}: not a grasp file (no T_pose array; keys: {keys})")
+                data = data["T_pose"]
+        try:
+            return np.asarray(data, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise PoseError(f"{path}: not a grasp file (its array is not numeric)") from exc
     try:
-        if path.suffix == ".npz":
-            with np.load(path) as z:
-                if "T_pose" not in z.files:
-                    raise PoseError(f"{path}: no T_pose array (keys: {', '.join(z.files)})")
-                return np.asarray(z["T_pose"], dtype=float)
-        if path.suffix == ".npy":
-            return np.asarray(np.load(path), dtype=float)
         return np.atleast_2d(np.loadtxt(path, dtype=float, delimiter="," if path.suffix == ".csv" else None))
-    except (OSError, ValueError) as exc:
-        raise PoseError(f"{path}: not a grasp file ({type(exc).__name__}: {exc})") from exc
+    except (OSError, ValueError, UnicodeDecodeError) as exc:
+        raise PoseError(f"{path}: not a grasp file (not rows of numbers: {type(exc).__name__})") from exc
 
 
 def load_external(path: str | Path) -> np.ndarray:
@@ -99,7 +110,7 @@ def load_external(path: str | Path) -> np.ndarray:
     if not np.all(np.isfinite(a)):
         raise PoseError(f"{path}: grasp file contains NaN or inf")
     R = a[:, :3, :3]
-    if np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max() > 1e-3:
+    if np.abs(np.einsum("nji,njk->nik", R, R) - np.eye(3)).max() > ROTATION_TOL:
         raise PoseError(f"{path}: rotation blocks are not orthonormal")
     return a
 
@@ -112,10 +123,29 @@ def import_anygrasp(
     seed: int = 0,
     augment: int = 0,
     depth: float | None = None,
+    source: str = "anygrasp",
+    cache_dir: str | Path | None = None,
 ) -> Candidates:
-    """AnyGrasp poses mapped (:func:`anygrasp_to_world`), optionally augmented, refined and ranked."""
+    """AnyGrasp poses mapped (:func:`anygrasp_to_world`), optionally augmented, refined and ranked.
+
+    ``source_index`` of each candidate is its row in ``T_pose``; ``source`` names the file (``source``).
+    ``cache_dir`` keeps the object's signed-distance grid (:class:`~mjcodesign.poses.grid.ObjectSDF`).
+    """
     if len(source_vertices) == 0:
         raise MeshError("source mesh has no vertices")
+    seed = check_seed(seed, error=PoseError)
     T = anygrasp_to_world(T_pose, obj, source_vertices, depth=depth)
     T = augment_poses(T, augment, np.random.default_rng(seed))
-    return refine_and_rank(obj, T, np.ones(len(T)), FingerDesign(), {})
+    rows = np.repeat(np.arange(len(T_pose)), augment + 1)
+    copies = np.tile(np.arange(augment + 1), len(T_pose))
+    return refine_and_rank(
+        obj,
+        T,
+        np.ones(len(T)),
+        FingerDesign(),
+        {},
+        source_index=rows,
+        copy_index=copies,
+        source=source,
+        sdf=ObjectSDF(obj.mesh, cache_dir=cache_dir),
+    )

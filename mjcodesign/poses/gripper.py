@@ -9,6 +9,7 @@ at ``+y``), fingers hang to ``z = -L``.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -96,7 +97,11 @@ class RigidGripper:
 
     @classmethod
     def build(cls, design: FingerDesign, edge: float) -> RigidGripper:
-        """Points spaced about ``edge`` [m]."""
+        """Points spaced about ``edge`` [m]; built once per (design, edge), its arrays read-only."""
+        return _built(cls, design, float(edge))
+
+    @classmethod
+    def _make(cls, design: FingerDesign, edge: float) -> RigidGripper:
         q, inner = _block_points(design, edge)
         parts, sides = [], []
         for s in (1.0, -1.0):
@@ -114,3 +119,15 @@ class RigidGripper:
         shift = np.where(self.side > 0, s[:, :1], 0.0) + np.where(self.side < 0, s[:, 1:], 0.0)  # (P, n)
         local = self.points[None] + (self.side * shift)[..., None] * np.array([0.0, 1.0, 0.0])
         return np.matmul(local, R.transpose(0, 2, 1)) + p[:, None, :]
+
+
+@functools.lru_cache(maxsize=16)
+def _built(cls, design: FingerDesign, edge: float) -> RigidGripper:
+    """:meth:`RigidGripper.build`'s cache (sampling the hulls costs 0.3 s a call).
+
+    Every refinement round and check asks for the same two point sets.
+    """
+    g = cls._make(design, edge)
+    for a in (g.points, g.side, g.inner):
+        a.flags.writeable = False
+    return g

