@@ -1,4 +1,11 @@
-"""``bench fem``: the Warp FEM's speed on this machine (explicit steps, static solve, dynamic grasp)."""
+"""``bench fem``: the Warp FEM's speed on this machine (explicit steps, static solve, dynamic grasps).
+
+The two-finger grasp (`_bench_gripper`) times one whole grasp of the paper's scenario
+(`mjcodesign.sim.fem.gripper_grasp.FemGrasp`, 0.70 s at 2.5 µs: 280,800 substeps) forward and forward
+plus the L_opt gradient (`mjcodesign.sim.fem.grasp_adjoint.loss_gradient`), wall and process CPU time,
+on a mesh given by name (`GRIPPER_MESHES`). Throughput is vertices × substeps per second; the authors'
+simulator ran 0.17 M/s here (shared/NOTES.md).
+"""
 
 from __future__ import annotations
 
@@ -8,12 +15,28 @@ import numpy as np
 
 __all__ = ["bench_fem"]
 
+GRIPPER_MESHES = {
+    "coarse": {"h": 10e-3, "h_flexure": 8e-3, "spine_layers": 2},
+    "default": {"h": 4e-3, "spine_layers": 2},
+    "fine": {"h": 3e-3, "spine_layers": 4},
+}
+"""Meshes of the two-finger grasp benchmark: ``coarse`` 396 vertices a finger (the authors' whole mesh had
+432 particles), ``default`` `GRASP_OPTIONS` (1,431), ``fine`` 3,339 (cantilever 0.73 of beam theory on
+the soft finger, docs/benchmarks.md)."""
 _GRASP_MESH_H = 4e-3
 """Cell size [m] of the grasp benchmark's FEM mesh (2 spine layers, 1,431 vertices)."""
 
 
 def bench_fem(
-    *, h: float = 3e-3, spine_layers: int = 4, dyn_steps: int = 2000, grasp_horizon: float = 0.2
+    *,
+    h: float = 3e-3,
+    spine_layers: int = 4,
+    dyn_steps: int = 2000,
+    grasp_horizon: float = 0.2,
+    gripper: str | None = "coarse",
+    gradient: bool = True,
+    gripper_only: bool = False,
+    gripper_dt: float | None = None,
 ) -> dict:
     """FEM speed on this machine: explicit steps/s, a static curl and its gradient, a dynamic grasp.
 
@@ -25,7 +48,13 @@ def bench_fem(
     The grasp (`mjcodesign.sim.fem.grasp.grasp_scene`) runs the paper's 2.5 µs on a 4 mm mesh without
     waypoint layers, with selective mass scaling; its loss is the time-averaged normal force on the box
     and the gradient is with respect to the 22 ln E (checkpointed ``wp.Tape``).
+
+    ``gripper`` names the mesh (`GRIPPER_MESHES`) of the two-finger grasp to time, or None to skip it;
+    ``gradient`` also times its forward plus gradient; ``gripper_dt`` [s] its substep (default the
+    paper's 2.5 µs); ``gripper_only`` skips the single-finger benches.
     """
+    if gripper_only:
+        return {} if gripper is None else _bench_gripper(gripper, gradient=gradient, dt=gripper_dt)
     from mjcodesign.design.finger import FingerDesign
     from mjcodesign.design.stiffness import Stiffness
     from mjcodesign.sim.fem import FemDynamics, FemFinger, FemOptions
@@ -48,6 +77,7 @@ def bench_fem(
     fem.static_gradient(x, load, g)
     t2 = time.perf_counter()
     grasp = _bench_grasp(design, grasp_horizon)
+    two = {} if gripper is None else _bench_gripper(gripper, gradient=gradient, dt=gripper_dt)
     return {
         "device": fem.options.device,
         "n_tets": fem.mesh.n_tets,
@@ -58,6 +88,7 @@ def bench_fem(
         "static_curl_s": t1 - t0,
         "static_gradient_s": t2 - t1,
         **grasp,
+        **two,
     }
 
 
@@ -92,3 +123,54 @@ def _bench_grasp(design, horizon: float) -> dict:
         "grasp_forward_backward_s": t2 - t1,
         "grasp_gradient_norm": float(np.linalg.norm(grad)),
     }
+
+
+def _bench_gripper(mesh: str, *, gradient: bool, dt: float | None = None) -> dict:
+    """Times of one whole two-finger grasp (forward; forward + L_opt gradient) on the mesh ``mesh``."""
+    from mjcodesign.design.finger import FingerDesign
+    from mjcodesign.design.stiffness import Stiffness
+    from mjcodesign.errors import DesignError
+    from mjcodesign.models.types import FingerModel
+    from mjcodesign.objects import box_object
+    from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
+    from mjcodesign.sim.fem import FemDynamics, FemOptions
+    from mjcodesign.sim.fem.grasp_adjoint import loss_gradient
+    from mjcodesign.sim.fem.gripper_grasp import GRASP_TENSION, FemGrasp
+
+    if mesh not in GRIPPER_MESHES:
+        raise DesignError(f"unknown gripper mesh {mesh!r}: choose from {', '.join(GRIPPER_MESHES)}")
+    obj = box_object((0.04, 0.04, 0.06), 100.0)
+    design = FingerDesign()
+    scene = build_scene(
+        obj, design, Stiffness.preset("semi-rigid"), FingerModel.CHAIN, auto_pose(obj, design)
+    )
+    options = FemOptions(waypoint_layers=False, **GRIPPER_MESHES[mesh])
+    dynamics = FemDynamics() if dt is None else FemDynamics(dt=dt)
+    grasp = FemGrasp(scene, GraspScenario(tension=GRASP_TENSION), options=options, dynamics=dynamics)
+    grasp.run(steps=10)  # compile and warm up
+    c0, t0 = time.process_time(), time.perf_counter()
+    run = grasp.run()
+    c1, t1 = time.process_time(), time.perf_counter()
+    out = {
+        "gripper_mesh": mesh,
+        "gripper_n_vertices": run.n_vertices,
+        "gripper_n_tets": grasp.gripper.n_tets,
+        "gripper_dt_s": run.dt,
+        "gripper_substeps": run.substeps,
+        "gripper_added_mass_fraction": run.added_mass_fraction,
+        "gripper_outcome": run.outcome.reason,
+        "gripper_forward_s": t1 - t0,
+        "gripper_forward_cpu_s": c1 - c0,
+        "gripper_vertex_substeps_per_s": run.n_vertices * run.substeps / (t1 - t0),
+        "gripper_vertex_substeps_per_cpu_s": run.n_vertices * run.substeps / (c1 - c0),
+    }
+    if gradient:
+        loss, grad, _ = loss_gradient(grasp)
+        c2, t2 = time.process_time(), time.perf_counter()
+        out.update(
+            gripper_forward_gradient_s=t2 - t1,
+            gripper_forward_gradient_cpu_s=c2 - c1,
+            gripper_l_opt=loss,
+            gripper_gradient_norm=float(np.linalg.norm(grad)),
+        )
+    return out

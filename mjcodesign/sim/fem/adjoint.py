@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SEGMENT", "mean_force_gradient"]
+__all__ = ["SEGMENT", "mean_force_gradient", "end_segment", "log_e_gradient"]
 
 SEGMENT = 200
 """Steps per taped segment of the adjoint (memory ~ segment × a few state arrays)."""
@@ -53,17 +53,29 @@ def mean_force_gradient(contact, duration: float, *, segment: int = SEGMENT) -> 
         )
         adj_x = x_start.grad.numpy().copy()
         adj_v = v_start.grad.numpy().copy()
-        g_mu += fem.mu.grad.numpy()
-        g_lam += fem.lam.grad.numpy()
-        tape.zero()
-        fem.mu.grad.zero_()
-        fem.lam.grad.zero_()
-        tape.reset()
-    return fwd.mean_normal_force, _log_e_gradient(fem, g_mu, g_lam)
+        end_segment(tape, fem, g_mu, g_lam)
+    return fwd.mean_normal_force, log_e_gradient(fem, g_mu, g_lam)
 
 
-def _log_e_gradient(fem, g_mu: np.ndarray, g_lam: np.ndarray) -> np.ndarray:
-    """Gradient w.r.t. the 22 ln E from the per-tet gradients w.r.t. μ' and λ' (through the material)."""
+def end_segment(tape, body, g_mu: np.ndarray, g_lam: np.ndarray) -> None:
+    """After a taped segment's backward: collect the material gradients and release the tape.
+
+    Adds ``body``'s per-tet μ', λ' gradients to ``g_mu``, ``g_lam`` (in place) and zeroes them. ``body`` has Warp arrays ``mu`` and ``lam`` (a `FemBody`, or the two-finger `FemGripper`).
+    """
+    g_mu += body.mu.grad.numpy()
+    g_lam += body.lam.grad.numpy()
+    tape.zero()
+    body.mu.grad.zero_()
+    body.lam.grad.zero_()
+    tape.reset()
+
+
+def log_e_gradient(fem, g_mu: np.ndarray, g_lam: np.ndarray) -> np.ndarray:
+    """Gradient w.r.t. the 22 ln E from the per-tet gradients w.r.t. μ' and λ' (through the material).
+
+    ``fem`` has ``log_e``, ``mu``, ``lam``, ``update_material`` and ``options.device`` (a `FemBody`, or
+    the two-finger `FemGripper`).
+    """
     wp = fem.wp
     dev = fem.options.device
     fem.log_e.grad.zero_()

@@ -274,6 +274,30 @@ class FemBody:
             out.append(np.arctan2(-n[0], n[2]))
         return np.unwrap(np.array(out))
 
+    def stable_mass(self, dt: float, extra: np.ndarray | None = None) -> np.ndarray:
+        """Vertex masses [kg] that keep an explicit step ``dt`` [s] stable: m_v ≥ k_v dt² / 4.
+
+        k_v is the largest of the vertex's three row sums Σ_j |K_ij| of the rest stiffness, plus
+        ``extra`` [N/m] (n_vertices,), a bound on other springs at the vertex (contact): a Gershgorin
+        bound on the largest eigenvalue of M⁻¹K, so ω_max dt ≤ 2 (selective mass scaling).
+        """
+        K = self.tangent(self.mesh.vertices)
+        k_v = np.asarray(abs(K).sum(axis=1)).ravel().reshape(-1, 3).max(axis=1)
+        if extra is not None:
+            k_v = k_v + extra
+        return np.maximum(self.mass, k_v * dt**2 / 4.0)
+
+    def waypoint_table(self) -> tuple[np.ndarray, np.ndarray]:
+        """The waypoint rows as padded tables: vertex indices (int32) and weights, (n_blocks, k)."""
+        W = self.mesh.waypoint_weights
+        k = max(int(np.count_nonzero(r)) for r in W)
+        idx = np.zeros((len(W), k), dtype=np.int32)
+        w = np.zeros((len(W), k))
+        for b, row in enumerate(W):
+            nz = np.flatnonzero(row)
+            idx[b, : len(nz)], w[b, : len(nz)] = nz, row[nz]
+        return idx, w
+
     def stable_dt(self) -> float:
         """CFL estimate of the largest stable explicit step [s]: min over tets of altitude / P-wave speed."""
         x = self.mesh.vertices[self.mesh.tets]

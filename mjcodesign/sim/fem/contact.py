@@ -101,27 +101,13 @@ class FemContact:
     # -- setup ------------------------------------------------------------------------------------
     def _set_waypoints(self) -> None:
         """Waypoint rows as padded (index, weight) tables ``wp_idx``, ``wp_w`` (n_blocks, k)."""
-        wp = self.wp
-        W = self.fem.mesh.waypoint_weights
-        k = max(int(np.count_nonzero(r)) for r in W)
-        idx = np.zeros((len(W), k), dtype=np.int32)
-        w = np.zeros((len(W), k))
-        for b, row in enumerate(W):
-            nz = np.flatnonzero(row)
-            idx[b, : len(nz)], w[b, : len(nz)] = nz, row[nz]
-        self.wp_idx = wp.array(idx, dtype=wp.int32, device=self.dev)
-        self.wp_w = wp.array(w, dtype=wp.float64, device=self.dev)
+        idx, w = self.fem.waypoint_table()
+        self.wp_idx = self.wp.array(idx, dtype=self.wp.int32, device=self.dev)
+        self.wp_w = self.wp.array(w, dtype=self.wp.float64, device=self.dev)
 
     def _scaled_mass(self) -> np.ndarray:
-        """Vertex masses [kg] that keep the explicit step stable: m_v ≥ k_v dt² / 4.
-
-        k_v is the largest of the vertex's three row sums Σ_j |K_ij| of the rest stiffness: a Gershgorin
-        bound on the largest eigenvalue of M⁻¹K, so ω_max dt ≤ 2.
-        """
-        fem = self.fem
-        K = fem.tangent(fem.mesh.vertices)
-        k_v = np.asarray(abs(K).sum(axis=1)).ravel().reshape(-1, 3).max(axis=1)
-        return np.maximum(fem.mass, k_v * self.dyn.dt**2 / 4.0)
+        """Vertex masses [kg] that keep the explicit step stable (`FemBody.stable_mass`)."""
+        return self.fem.stable_mass(self.dyn.dt)
 
     def _tension(self, t: float) -> float:
         return self.tension * (1.0 if self.ramp <= 0 else min(1.0, t / self.ramp))

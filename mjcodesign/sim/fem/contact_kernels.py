@@ -32,7 +32,8 @@ def waypoints(
 
 
 @wp.func
-def _unit(v: wp.vec3d) -> wp.vec3d:
+def unit(v: wp.vec3d) -> wp.vec3d:
+    """``v / |v|``, or ``v / 1e-15`` for a null vector (no division by zero, also in the adjoint)."""
     return v / wp.max(wp.length(v), _f64(1e-15))
 
 
@@ -51,9 +52,9 @@ def tendon_forces(
     if i > 0:
         prev = p_in[i - 1]
     if i == n - 1:
-        f_out[i] = tension_in * _unit(prev - p)
+        f_out[i] = tension_in * unit(prev - p)
     else:
-        f_out[i] = tension_in * (_unit(prev - p) + _unit(p_in[i + 1] - p))
+        f_out[i] = tension_in * (unit(prev - p) + unit(p_in[i + 1] - p))
 
 
 @wp.kernel
@@ -90,7 +91,7 @@ def closest_face(
 
 
 @wp.func
-def _object_depth(
+def face_depth(
     points_in: wp.array(dtype=wp.vec3d),
     faces_in: wp.array(dtype=wp.vec3i),
     face: int,
@@ -99,12 +100,12 @@ def _object_depth(
     """(outward normal, depth) [m] of ``x`` against the plane of object face ``face`` (float64)."""
     tri = faces_in[face]
     a = points_in[tri[0]]
-    n = _unit(wp.cross(points_in[tri[1]] - a, points_in[tri[2]] - a))
+    n = unit(wp.cross(points_in[tri[1]] - a, points_in[tri[2]] - a))
     return wp.vec4d(n[0], n[1], n[2], wp.dot(a - x, n))
 
 
 @wp.func
-def _penalty(
+def penalty(
     v: wp.vec3d,
     n: wp.vec3d,
     depth: wp.float64,
@@ -113,12 +114,14 @@ def _penalty(
     kd: wp.float64,
     mu: wp.float64,
     m: wp.float64,
+    extra: wp.float64,
     dt: wp.float64,
 ) -> wp.vec3d:
     """Penalty contact force [N] on a vertex of mass ``m``.
 
     Normal: area·(ke·depth + kd·approach speed) along n. Coulomb friction μ·fn, viscous below the speed
-    v_s = max(1 mm/s, 2 μ fn dt / m).
+    v_s = max(1 mm/s, 2 μ dt (fn / m + extra)); ``extra`` [m/s²] is the acceleration that the other
+    contacts of a free body give it (0 against the ground or a static body).
 
     The viscous branch has rate μ fn / (v_s m) ≤ 1 / (2 dt), so one explicit step never reverses the
     sliding velocity (no stick–slip chatter, and a bounded adjoint).
@@ -126,7 +129,8 @@ def _penalty(
     vn = wp.dot(v, n)
     fn = wp.max(area * (ke * depth - kd * wp.min(vn, _f64(0.0))), _f64(0.0))
     vt = v - vn * n
-    v_s = wp.max(_f64(1e-3), _f64(2.0) * mu * fn * dt / m)
+    two = _f64(2.0)
+    v_s = wp.max(_f64(1e-3), two * mu * fn * dt / m + two * mu * dt * extra)
     # |vt| from its square, floored first: the adjoint of a length at zero would divide by zero.
     speed = wp.sqrt(wp.max(wp.dot(vt, vt), v_s * v_s))
     return fn * n - vt * (mu * fn / speed)
@@ -161,7 +165,7 @@ def integrate(
     Gravity is ``weight_in`` [N] (the true mass). Contact is against the ground z = 0 and, where a vertex
     has one, a static rigid object: depth below the plane of the closest face ``face_in`` found by
     `closest_face` (−1 outside, or everywhere when there is no object). Both use the penalty of
-    :func:`_penalty` (pressure ke·depth + kd·approach speed on the vertex's lumped area ``area_in``,
+    :func:`penalty` (pressure ke·depth + kd·approach speed on the vertex's lumped area ``area_in``,
     Coulomb friction μ, viscous below a speed that keeps one explicit step from reversing the sliding
     velocity).
 
@@ -184,13 +188,13 @@ def integrate(
     f = f_in[i] + weight_in[i] - alpha_in * m * v
     if x[2] < zero:
         up = wp.vec3d(zero, zero, _f64(1.0))
-        f = f + _penalty(v, up, -x[2], area_in[i], ke_in, kd_in, friction_in, m, dt_in)
+        f = f + penalty(v, up, -x[2], area_in[i], ke_in, kd_in, friction_in, m, zero, dt_in)
     fo = wp.vec3d(zero, zero, zero)
     if face_in[i] >= 0:
-        nd = _object_depth(points_in, faces_in, face_in[i], x)
+        nd = face_depth(points_in, faces_in, face_in[i], x)
         if nd[3] > zero:
             n = wp.vec3d(nd[0], nd[1], nd[2])
-            fo = _penalty(v, n, nd[3], area_in[i], ke_in, kd_in, friction_in, m, dt_in)
+            fo = penalty(v, n, nd[3], area_in[i], ke_in, kd_in, friction_in, m, zero, dt_in)
             wp.atomic_add(impulse_out, 0, dt_in * wp.dot(fo, n))
     f_object_out[i] = fo
     v_new = v + dt_in * (f + fo) / m
@@ -220,7 +224,7 @@ def object_contact_static(
     k_out[i] = wp.mat33d()
     if pinned_in[i] != 0 or face_in[i] < 0:
         return
-    nd = _object_depth(points_in, faces_in, face_in[i], x_in[i])
+    nd = face_depth(points_in, faces_in, face_in[i], x_in[i])
     if nd[3] > zero:
         n = wp.vec3d(nd[0], nd[1], nd[2])
         k = area_in[i] * ke_in
