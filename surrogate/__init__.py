@@ -1,1 +1,79 @@
-"""PointNet + MLP surrogate of grasp outcomes (to come; nothing is implemented yet)."""
+"""The neural surrogate: a PointNet + MLP trained on generated grasps (the paper's "neural physics").
+
+Importing this package imports torch (``pip install 'mjcodesign[torch]'``); nothing else in mjcodesign
+does. Import from here (``from mjcodesign.surrogate import Surrogate``): each name has this one path.
+
+- :mod:`~mjcodesign.surrogate.data`: the dataset as arrays, splits, normalisation, a torch ``Dataset``;
+- :mod:`~mjcodesign.surrogate.model`: :class:`GraspNet` and its :class:`ModelConfig` (the paper's);
+- :mod:`~mjcodesign.surrogate.train`: :func:`train` and :class:`TrainConfig`;
+- :mod:`~mjcodesign.surrogate.inference`: :class:`Surrogate` (``predict``, ``loss_and_grad``);
+- :mod:`~mjcodesign.surrogate.checkpoint`: :func:`save_checkpoint`, :func:`load_surrogate`;
+- :mod:`~mjcodesign.surrogate.metrics`, :mod:`~mjcodesign.surrogate.smoothness`: held-out metrics,
+  baselines, lines in design space;
+- :mod:`~mjcodesign.surrogate.report`: :func:`train_and_report` (``mjcodesign train``);
+- :mod:`~mjcodesign.surrogate.grasp`: :func:`predict_grasp` (``mjcodesign predict``).
+"""
+
+from mjcodesign.surrogate.checkpoint import (
+    CHECKPOINT_FORMAT,
+    CHECKPOINT_VERSION,
+    load_surrogate,
+    save_checkpoint,
+)
+from mjcodesign.surrogate.data import (
+    OUTPUT_NAMES,
+    SPLITS,
+    GraspData,
+    GraspDataset,
+    Normalizer,
+    Split,
+    load_grasp_data,
+    normalize_clouds,
+    split,
+)
+from mjcodesign.surrogate.grasp import predict_grasp
+from mjcodesign.surrogate.inference import (
+    DesignGradient,
+    DesignLoss,
+    GraspBatch,
+    Poses,
+    Prediction,
+    Surrogate,
+    success_score,
+)
+from mjcodesign.surrogate.model import GraspNet, ModelConfig
+from mjcodesign.surrogate.report import TensorBoardLog, train_and_report
+from mjcodesign.surrogate.train import EpochLog, OptimizerConfig, TrainConfig, TrainResult, train
+
+__all__ = [
+    "CHECKPOINT_FORMAT",
+    "CHECKPOINT_VERSION",
+    "OUTPUT_NAMES",
+    "SPLITS",
+    "DesignGradient",
+    "DesignLoss",
+    "EpochLog",
+    "GraspBatch",
+    "GraspData",
+    "GraspDataset",
+    "GraspNet",
+    "ModelConfig",
+    "Normalizer",
+    "OptimizerConfig",
+    "Poses",
+    "Prediction",
+    "Split",
+    "Surrogate",
+    "TensorBoardLog",
+    "TrainConfig",
+    "TrainResult",
+    "load_grasp_data",
+    "load_surrogate",
+    "normalize_clouds",
+    "predict_grasp",
+    "save_checkpoint",
+    "split",
+    "success_score",
+    "train",
+    "train_and_report",
+]

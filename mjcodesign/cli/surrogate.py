@@ -1,0 +1,230 @@
+"""``mjcodesign train``, ``mjcodesign predict`` and ``mjcodesign bench surrogate``.
+
+Wire them into the main CLI with ``cli_surrogate.add_parser(subparsers)`` and
+``cli_surrogate.add_bench_parser(bench_subparsers)``. torch is imported inside the handlers only, so
+that ``import mjcodesign.cli`` stays light.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from mjcodesign.cli.common import emit, finite_float, int_at_least, parse_design, path_text, user_cache_dir
+
+__all__ = ["add_bench_parser", "add_parser", "run_bench", "run_predict", "run_train"]
+
+_SPLITS = ("object", "random")  # mjcodesign.surrogate.SPLITS, without importing torch here
+
+
+def _fraction(text: str) -> float:
+    value = finite_float(0.0)(text)
+    if value >= 1.0:
+        raise argparse.ArgumentTypeError(f"must be in [0, 1), got {value:g}")
+    return value
+
+
+def _widths(text: str) -> tuple[int, ...]:
+    try:
+        widths = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        widths = ()
+    if not widths or min(widths) < 1:
+        raise argparse.ArgumentTypeError(f"must be comma-separated integers >= 1, got {text!r}")
+    return widths
+
+
+# Flags of ``train`` that set a TrainConfig or ModelConfig field: (flag, field, type, default, help).
+_TRAIN_OPTIONS = (
+    ("--epochs", "epochs", int_at_least(1), 200, "most epochs (early stopping ends sooner)"),
+    ("--seed", "seed", int_at_least(0), 0, "seeds the split, weights and shuffles"),
+    ("--batch-size", "batch_size", int_at_least(2), 512, "samples per step (paper: 512)"),
+    ("--patience", "early_stop_patience", int_at_least(1), 20, "early stopping [epochs]"),
+    ("--pose-group", "pose_group", int_at_least(0), 0, "samples of a pose kept together in a batch (0: all)"),
+)
+_OPTIMIZER_OPTIONS = (
+    ("--lr", "lr", finite_float(0.0, strict=True), 1e-3, "AdamW learning rate (PointNet: half)"),
+    ("--plateau-patience", "plateau_patience", int_at_least(1), 5, "epochs before the LR drops by 0.8"),
+)
+_MODEL_OPTIONS = (
+    ("--hidden", "hidden", int_at_least(1), 1024, "MLP width (paper: 1024)"),
+    ("--depth", "depth", int_at_least(1), 5, "MLP layers of --hidden (paper: 5)"),
+    ("--penultimate", "penultimate", int_at_least(1), 512, "width before the output (paper: 512)"),
+    ("--point-widths", "point_widths", _widths, (64, 128, 128), "PointNet channels (paper: 64,128,128)"),
+    ("--dropout", "dropout", _fraction, 0.3, "dropout after every hidden layer (paper: 0.3)"),
+)
+
+
+def _fields(args: argparse.Namespace, options) -> dict:
+    return {dest: getattr(args, dest) for _, dest, *_ in options}
+
+
+def add_parser(subparsers) -> None:
+    """Register ``train`` and ``predict`` on an ``argparse`` subparsers object."""
+    t = subparsers.add_parser("train", help="train the PointNet + MLP surrogate on a dataset; write a report")
+    t.add_argument("--data", required=True, type=path_text, help="dataset folder (mjcodesign datagen)")
+    t.add_argument("--out", required=True, type=path_text, help="checkpoint and report folder (created)")
+    t.add_argument(
+        "--split", choices=_SPLITS, default="object", help="held-out objects, or the paper's 80/20"
+    )
+    for flag, dest, kind, default, text in _TRAIN_OPTIONS + _OPTIMIZER_OPTIONS + _MODEL_OPTIONS:
+        t.add_argument(flag, dest=dest, type=kind, default=default, help=text)
+    t.add_argument(
+        "--no-frame-inputs",
+        action="store_true",
+        help="the paper's inputs: no vertical, cloud centre and radius beside the PointNet feature (ablation)",
+    )
+    t.add_argument(
+        "--efficiency",
+        type=_fraction,
+        default=0.25,
+        help="share of the training rows of a second run (0: none)",
+    )
+    t.add_argument(
+        "--smoothness-poses",
+        type=int_at_least(0),
+        default=2,
+        help="test poses re-simulated along design lines",
+    )
+    t.add_argument(
+        "--threads", type=int_at_least(1), default=None, help="torch CPU threads (default: torch's)"
+    )
+    t.add_argument("--tensorboard", type=path_text, default=None, help="also write TensorBoard events to DIR")
+    t.add_argument("--json", action="store_true")
+    t.set_defaults(func=run_train)
+
+    p = subparsers.add_parser("predict", help="the surrogate's outputs for one object, pose and design")
+    p.add_argument("--ckpt", required=True, type=path_text, help="checkpoint folder (mjcodesign train --out)")
+    p.add_argument("--object", required=True, type=path_text, help="YCB name, egad-like:N or a mesh file")
+    p.add_argument(
+        "--pose",
+        required=True,
+        help="FILE.npz[:ROW] (mjcodesign poses --out), a JSON pose file, auto or best",
+    )
+    p.add_argument("--design", required=True, help="preset, random:SEED, or 11/22 comma-separated ln E")
+    p.add_argument(
+        "--density", default=None, help="kg/m³ or light/heavy (default: the middle of the training range)"
+    )
+    p.add_argument("--seed", type=int_at_least(0), default=0, help="seeds the point cloud's draw")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=run_predict)
+
+
+def add_bench_parser(bench_subparsers) -> None:
+    """Register ``surrogate`` on the ``bench`` command's subparsers object."""
+    b = bench_subparsers.add_parser(
+        "surrogate",
+        help="surrogate speed: MLP inference, training step, PointNet, cached inference, loss+grad",
+    )
+    b.add_argument("--repeats", type=int_at_least(1), default=5, help="timed repeats per case (fastest kept)")
+    b.add_argument(
+        "--threads", type=int_at_least(1), default=None, help="torch CPU threads (default: torch's)"
+    )
+    b.add_argument("--out", type=path_text, default=None, help="also write the JSON to this file")
+    b.add_argument("--json", action="store_true")
+    b.set_defaults(func=run_bench)
+
+
+def run_train(args: argparse.Namespace) -> int:
+    """Run ``train``: the summary on stdout; library errors propagate (exit 2 there)."""
+    import torch
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from mjcodesign.surrogate import (
+        ModelConfig,
+        OptimizerConfig,
+        TensorBoardLog,
+        TrainConfig,
+        train_and_report,
+    )
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    cfg = TrainConfig(
+        **_fields(args, _TRAIN_OPTIONS), optimizer=OptimizerConfig(**_fields(args, _OPTIMIZER_OPTIONS))
+    )
+    mcfg = ModelConfig(**_fields(args, _MODEL_OPTIONS), frame_inputs=not args.no_frame_inputs)
+    if args.tensorboard:
+        TensorBoardLog.check()  # a missing package is refused before any work
+    boards: list = []  # the event writer, made at the first epoch (bad input leaves no file behind)
+    console = Console(stderr=True)
+    bars: dict[str, int] = {}
+    try:
+        with Progress(console=console, transient=True, disable=not console.is_terminal) as progress:
+
+            def on_epoch(run, log):
+                if run not in bars:
+                    bars[run] = progress.add_task(f"train {run}", total=args.epochs)
+                text = f"train {run}: loss {log.train_loss:.4f}, validation {log.val_loss:.4f}"
+                progress.update(bars[run], completed=log.epoch + 1, description=text)
+                if args.tensorboard and run == "full":
+                    if not boards:
+                        boards.append(TensorBoardLog(args.tensorboard))
+                    boards[0](log)
+
+            m = train_and_report(
+                args.data,
+                args.out,
+                split_mode=args.split,
+                config=cfg,
+                model_config=mcfg,
+                efficiency=args.efficiency,
+                smoothness_poses=args.smoothness_poses,
+                cache_dir=user_cache_dir(),
+                on_epoch=on_epoch,
+            )
+    finally:
+        for board in boards:
+            board.close()
+    net = m["test"]["surrogate"]
+    res = {
+        "out": args.out,
+        "split": m["split"],
+        "epochs": m["training"]["epochs"],
+        "best_epoch": m["training"]["best_epoch"],
+        "wall_s": m["training"]["wall_s"],
+        "test_loss": {k: v["loss"] for k, v in m["test"].items()},
+        "mae": net["mae"],
+        "success": {k: net["success"][k] for k in ("accuracy", "roc_auc", "rate", "predicted_rate")},
+        "verdict": m["verdict"],
+    }
+    if "efficiency" in m:
+        res["efficiency_test_loss"] = m["efficiency"]["test"]["loss"]
+    emit(res, args.json)
+    return 0
+
+
+def run_predict(args: argparse.Namespace) -> int:
+    """Run ``predict``."""
+    from mjcodesign.objects import parse_density
+
+    design = parse_design(args.design)  # a wrong length exits 2 before torch is imported
+    density = None if args.density is None else parse_density(args.density)
+
+    from mjcodesign.surrogate import predict_grasp
+
+    res = predict_grasp(
+        args.ckpt, args.object, args.pose, design, density, seed=args.seed, cache_dir=user_cache_dir()
+    )
+    emit(res if args.json else {k: v for k, v in res.items() if k not in ("pose", "design")}, args.json)
+    return 0
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    """Run ``bench surrogate``."""
+    import torch
+
+    from mjcodesign.bench import run_benchmark
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    res = run_benchmark("surrogate", out=args.out, repeats=args.repeats)
+    if args.json:
+        print(json.dumps(res))
+    else:
+        emit([{"case": k, **v} for k, v in res["cases"].items()], False)
+        emit({k: v for k, v in res.items() if k != "cases"}, False)
+    sys.stdout.flush()
+    return 0

@@ -1,0 +1,139 @@
+"""A surrogate checkpoint: a folder with the weights (safetensors) and a JSON record.
+
+Layout::
+
+    DIR/model.safetensors   the network's state (weights and BatchNorm statistics)
+    DIR/config.json         format and version, the architecture, the normalisation statistics, the
+                            scenario's success constants, the dataset's manifest hash, the split, the
+                            training settings and the metrics
+
+:func:`load_surrogate` needs only the model and these two files (no training code runs). Saving
+removes the JSON record first and writes it last (by a rename), so a folder whose weights were
+being replaced reads as no checkpoint rather than as a record with the wrong weights.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import uuid
+from pathlib import Path
+
+from mjcodesign.surrogate.data import OUTPUT_NAMES, Normalizer
+from mjcodesign.surrogate.inference import Surrogate
+from mjcodesign.surrogate.model import GraspNet, ModelConfig
+
+from mjcodesign.errors import MjcodesignError, OutputError
+
+__all__ = [
+    "CHECKPOINT_FORMAT",
+    "CHECKPOINT_VERSION",
+    "CONFIG",
+    "WEIGHTS",
+    "load_surrogate",
+    "read_record",
+    "save_checkpoint",
+    "write_text",
+]
+
+CHECKPOINT_FORMAT = "mjcodesign-surrogate"
+CHECKPOINT_VERSION = 1
+"""Bumped when a reader must change (inputs, outputs, file layout)."""
+CONFIG = "config.json"
+WEIGHTS = "model.safetensors"
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    """Write ``text`` to ``path`` through a temporary file and a rename (a reader never sees half of it).
+
+    Raises :class:`OutputError` when it cannot be written; a failed write leaves ``path`` as it was.
+    """
+    out = Path(path)
+    tmp = out.with_name(f".{out.name}.{uuid.uuid4().hex[:12]}.tmp")
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        os.replace(tmp, out)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from exc
+    return out
+
+
+def save_checkpoint(out: str | Path, surrogate: Surrogate) -> Path:
+    """Write ``surrogate`` (its model, normalisation and :attr:`Surrogate.meta`) into folder ``out``."""
+    from safetensors.torch import save_file
+
+    root = Path(out)
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"cannot write {root}: {exc.strerror or exc}") from exc
+    state = {k: v.detach().contiguous().cpu() for k, v in surrogate.model.state_dict().items()}
+    record = {
+        "format": CHECKPOINT_FORMAT,
+        "version": CHECKPOINT_VERSION,
+        "model": surrogate.config.as_dict(),
+        "normalizer": surrogate.normalizer.as_dict(),
+        "outputs": list(OUTPUT_NAMES),
+        "scenario": {"lift": surrogate.lift, "lifted_fraction": surrogate.lifted_fraction},
+        **surrogate.meta,
+    }
+    try:
+        (root / CONFIG).unlink(missing_ok=True)
+        save_file(state, str(root / WEIGHTS))
+    except OSError as exc:
+        raise OutputError(f"cannot write {root / WEIGHTS}: {exc.strerror or exc}") from exc
+    write_text(root / CONFIG, json.dumps(record, indent=1))
+    return root
+
+
+def read_record(path: str | Path) -> dict:
+    """The checkpoint's JSON record; :class:`OutputError` if ``path`` holds no checkpoint of this version."""
+    root = Path(path)
+    try:
+        record = json.loads((root / CONFIG).read_text(encoding="utf-8"))
+    except (FileNotFoundError, NotADirectoryError):
+        raise OutputError(f"{root}: not a surrogate checkpoint ({CONFIG} missing)") from None
+    except (OSError, ValueError) as exc:
+        raise OutputError(f"{root / CONFIG}: unreadable checkpoint record ({type(exc).__name__})") from exc
+    head = record if isinstance(record, dict) else {}
+    if head.get("format") != CHECKPOINT_FORMAT:
+        raise OutputError(f"{root}: not an mjcodesign surrogate checkpoint")
+    if (head.get("version"), head.get("outputs")) != (CHECKPOINT_VERSION, list(OUTPUT_NAMES)):
+        theirs = head.get("version")
+        raise OutputError(
+            f"{root}: a surrogate checkpoint of another schema (v{theirs}; this is v{CHECKPOINT_VERSION})"
+        )
+    return head
+
+
+def load_surrogate(path: str | Path) -> Surrogate:
+    """The :class:`Surrogate` saved in folder ``path`` (eval mode, float32).
+
+    Raises :class:`OutputError` for a missing, unreadable or other-schema checkpoint.
+    """
+    from safetensors import SafetensorError
+    from safetensors.torch import load_file
+
+    root = Path(path)
+    record = read_record(root)
+    weights = root / WEIGHTS
+    if not weights.is_file():
+        raise OutputError(f"{root}: checkpoint without weights ({WEIGHTS} missing)")
+    try:
+        model = GraspNet(ModelConfig.from_dict(record["model"]))
+        model.load_state_dict(load_file(str(weights)), strict=True)
+        norm = Normalizer.from_dict(record["normalizer"])
+        scenario = record["scenario"]
+    except (KeyError, TypeError, ValueError, RuntimeError, SafetensorError, MjcodesignError) as exc:
+        raise OutputError(
+            f"{root}: broken checkpoint ({type(exc).__name__}: {str(exc).splitlines()[0]})"
+        ) from exc
+    meta = {
+        k: v
+        for k, v in record.items()
+        if k not in ("format", "version", "model", "normalizer", "outputs", "scenario")
+    }
+    return Surrogate(
+        model, norm, lift=scenario["lift"], lifted_fraction=scenario["lifted_fraction"], meta=meta
+    )

@@ -1,0 +1,307 @@
+"""The trained surrogate as a library: batched predictions and the co-design loss with its gradient.
+
+A :class:`GraspBatch` is B rows over P poses: each row names its pose, the object's density and
+(for :meth:`Surrogate.predict`) a design. :meth:`Surrogate.prepare` computes each pose's PointNet
+feature once; a prepared batch then costs one MLP pass per call, which is what a co-design step
+repeats (:meth:`Surrogate.loss_and_grad`).
+
+**Success from the outputs.** The simulator's rule (``mjcodesign.scenarios.outcome``) is: lifted
+(the COM rose at least ``lifted_fraction · lift``), no ground contact at the end, a finger touching
+the object, and a non-zero finger force during the hold. From the predicted outputs:
+
+* lifted: the displacement is relative to the palm from the start of the lift to the end, so the
+  object's rise over the lift is ``lift + up · Δq``: lifted when ``up · Δq ≥ −(1 − lifted_fraction)
+  · lift``;
+* no ground contact: its predicted probability is below 0.5;
+* finger force: a held object's hold force equals its weight (CV 0.005–0.11, shared/NOTES.md), and a
+  regression never predicts an exact zero, so the force must reach half the weight.
+
+:func:`success_score` is the smallest of the three margins, each scaled to O(1): success is a score
+above 0. The same rule on the simulator's own outputs shows how far it agrees with the simulator's
+flag (the train report gives that ceiling).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from mjcodesign.surrogate.data import (
+    N_LOG_E,
+    N_REGRESSION,
+    GraspData,
+    Normalizer,
+    frame_inputs,
+    normalize_clouds,
+)
+from mjcodesign.surrogate.model import GraspNet
+
+from mjcodesign.errors import DesignError, StiffnessError
+
+__all__ = ["DesignLoss", "DesignGradient", "GraspBatch", "Poses", "Prediction", "Surrogate", "success_score"]
+
+G = 9.81  # [m/s²]
+_CONTACT_THRESHOLD = 0.5  # predicted ground-contact probability above which the grasp fails
+_FORCE_FRACTION = 0.5  # of the weight: a held object's hold force equals its weight (NOTES)
+_ENCODE_CHUNK = 256  # poses per PointNet call when preparing (memory: ~1.3 MB of activations per pose)
+
+
+def success_score(
+    body_force, displacement, p_contact, up, mass, lift: float, lifted_fraction: float
+) -> np.ndarray:
+    """The smallest margin of the success rule (module docstring); success where it is > 0.
+
+    ``body_force`` (B, 6) [N m, N], ``displacement`` (B, 3) [m], ``p_contact`` (B,) in [0, 1], ``up``
+    (B, 3) the world vertical in the gripper frame, ``mass`` (B,) [kg], ``lift`` [m].
+    """
+    rise = np.einsum("bk,bk->b", np.asarray(displacement, dtype=float), np.asarray(up, dtype=float))
+    lifted = (rise + (1.0 - lifted_fraction) * lift) / lift
+    free = (_CONTACT_THRESHOLD - np.asarray(p_contact, dtype=float)) / _CONTACT_THRESHOLD
+    weight = np.asarray(mass, dtype=float) * G
+    force = (
+        np.linalg.norm(np.asarray(body_force, dtype=float)[:, 3:], axis=1) / weight - _FORCE_FRACTION
+    ) / _FORCE_FRACTION
+    return np.minimum(np.minimum(lifted, free), force)
+
+
+@dataclass(frozen=True, eq=False)
+class Poses:
+    """P grasp poses as the surrogate sees them, in the gripper frame."""
+
+    clouds: np.ndarray
+    """Partial point clouds [m], shape (P, N, 3) (:func:`mjcodesign.data.partial_cloud`)."""
+    com: np.ndarray
+    """Object COM [m], shape (P, 3)."""
+    up: np.ndarray
+    """World vertical (unit), shape (P, 3): row 2 of the palm's rotation."""
+    volume: np.ndarray
+    """Object volume [m³], shape (P,) (mass = density · volume)."""
+
+    def __post_init__(self) -> None:
+        c = np.asarray(self.clouds)
+        p = len(c)
+        if c.ndim != 3 or c.shape[2] != 3 or any(np.shape(a) != (p, 3) for a in (self.com, self.up)):
+            raise DesignError("poses need clouds (P, N, 3), com (P, 3) and up (P, 3)")
+        if np.shape(self.volume) != (p,):
+            raise DesignError("poses need a volume per pose, shape (P,)")
+
+    @classmethod
+    def from_data(cls, data: GraspData, rows: np.ndarray | None = None) -> Poses:
+        """Pose ``rows`` of a dataset (all when None)."""
+        r = np.arange(len(data.clouds)) if rows is None else np.asarray(rows)
+        return cls(data.clouds[r], data.com[r], data.up[r], data.mass[r] / data.pose_density[r])
+
+    def __len__(self) -> int:
+        return len(self.clouds)
+
+
+@dataclass(frozen=True, eq=False)
+class PoseFeatures:
+    """What the network needs per pose, computed once: the cloud feature and the moved COM."""
+
+    features: torch.Tensor
+    """(P, F)."""
+    com: torch.Tensor
+    """COM after the cloud's centring and scaling, (P, 3)."""
+    up: torch.Tensor
+    """(P, 3)."""
+    frame: torch.Tensor
+    """:func:`~mjcodesign.surrogate.data.frame_inputs`, z-scored, (P, 7)."""
+
+
+@dataclass(frozen=True, eq=False)
+class GraspBatch:
+    """B rows over :attr:`poses`: each a pose, a density and (for predictions) a design."""
+
+    poses: Poses
+    pose: np.ndarray
+    """Pose of each row, shape (B,), int."""
+    density: np.ndarray
+    """Object density [kg/m³], shape (B,)."""
+    log_e: np.ndarray | None = None
+    """ln(E / Pa) of each row, shape (B, 22); None for :meth:`Surrogate.loss_and_grad` (one design)."""
+    features: PoseFeatures | None = None
+    """Set by :meth:`Surrogate.prepare`."""
+
+    def __post_init__(self) -> None:
+        pose = np.asarray(self.pose, dtype=np.int64).ravel()
+        object.__setattr__(self, "pose", pose)
+        object.__setattr__(self, "density", np.asarray(self.density, dtype=float).ravel())
+        if len(self.density) != len(pose):
+            raise DesignError(f"{len(pose)} rows but {len(self.density)} densities")
+        if len(pose) and (pose.min() < 0 or pose.max() >= len(self.poses)):
+            raise DesignError(f"a row's pose is outside 0..{len(self.poses) - 1}")
+        if self.log_e is not None:
+            log_e = np.asarray(self.log_e, dtype=float)
+            if log_e.shape != (len(pose), N_LOG_E):
+                raise StiffnessError(f"log_e must have shape ({len(pose)}, {N_LOG_E}), got {log_e.shape}")
+            object.__setattr__(self, "log_e", log_e)
+
+    @property
+    def mass(self) -> np.ndarray:
+        """Object mass of each row [kg]."""
+        return self.density * self.poses.volume[self.pose]
+
+    def __len__(self) -> int:
+        return len(self.pose)
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """The surrogate's outputs for B rows, physical units, gripper frame."""
+
+    body_force: np.ndarray
+    """Torque about the COM [N m] (3), force [N] (3), shape (B, 6)."""
+    displacement: np.ndarray
+    """Object displacement relative to the palm [m], shape (B, 3)."""
+    ground_contact: np.ndarray
+    """Probability of ground contact at the end, shape (B,)."""
+    success_score: np.ndarray
+    """:func:`success_score`, shape (B,)."""
+
+    @property
+    def success(self) -> np.ndarray:
+        """The success the outputs imply (score > 0), shape (B,)."""
+        return self.success_score > 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class DesignLoss:
+    """The paper's L_opt: ``base · Σ|y|`` over the 9 outputs, plus ``penalty`` times each failure sign.
+
+    The authors (``optimize.py``) weight every output's magnitude by 1e-3 and by 1e3 a negative
+    vertical force, a negative vertical displacement and a positive contact. Our outputs are in the
+    gripper frame, so "vertical" is along ``up``: per row, ``base · Σ_i |y_i| + penalty · (relu(−up·F)
+    [N] + relu(−up·Δq) [m] + p_contact)``; the loss is the sum over rows.
+    """
+
+    base_weight: float = 1e-3
+    penalty_weight: float = 1e3
+
+    def rows(
+        self, body_force: torch.Tensor, displacement: torch.Tensor, p_contact: torch.Tensor, up: torch.Tensor
+    ):
+        """Per-row loss (B,) from physical outputs (torch, differentiable)."""
+        base = body_force.abs().sum(dim=1) + displacement.abs().sum(dim=1)
+        f_up = (body_force[:, 3:] * up).sum(dim=1)
+        d_up = (displacement * up).sum(dim=1)
+        bad = torch.relu(-f_up) + torch.relu(-d_up) + p_contact
+        return self.base_weight * base + self.penalty_weight * bad
+
+
+@dataclass(frozen=True)
+class DesignGradient:
+    """L_opt of one design over a batch, and its gradient."""
+
+    loss: float
+    grad: np.ndarray
+    """d loss / d ln E, shape (22,)."""
+    rows: np.ndarray
+    """Per-row loss, shape (B,)."""
+
+
+class Surrogate:
+    """A trained :class:`GraspNet` with its normalisation and the scenario's success constants."""
+
+    def __init__(
+        self,
+        model: GraspNet,
+        normalizer: Normalizer,
+        *,
+        lift: float,
+        lifted_fraction: float,
+        meta: dict | None = None,
+    ):
+        self.model = model.eval()
+        self.normalizer = normalizer
+        self.lift = float(lift)
+        self.lifted_fraction = float(lifted_fraction)
+        self.meta = dict(meta or {})
+        """The checkpoint's record: dataset hash, split, training settings, metrics."""
+        self._stats: tuple = ()
+        self._stats_dtype = None
+
+    @property
+    def dtype(self) -> torch.dtype:
+        """The network's float type (float32 unless the model was converted, e.g. ``model.double()``)."""
+        return self.model.pc_scale.dtype
+
+    def _normalisation(self) -> tuple:
+        """(ln E mean, std, output mean, std) as tensors of :attr:`dtype`, made once per dtype."""
+        if self._stats_dtype != self.dtype:
+            n = self.normalizer
+            with torch.inference_mode(False):  # usable by autograd whichever call makes them first
+                self._stats = tuple(
+                    torch.tensor(v, dtype=self.dtype)
+                    for v in (n.log_e_mean, n.log_e_std, n.out_mean, n.out_std)
+                )
+            self._stats_dtype = self.dtype
+        return self._stats
+
+    @property
+    def config(self):
+        """The network's :class:`~mjcodesign.surrogate.model.ModelConfig`."""
+        return self.model.config
+
+    @torch.no_grad()
+    def features(self, poses: Poses) -> PoseFeatures:
+        """Each pose's cloud feature and moved COM (the PointNet runs once per pose)."""
+        clouds, com = normalize_clouds(poses.clouds, poses.com)
+        n = self.normalizer
+        frame = (frame_inputs(poses.clouds, poses.up) - n.frame_mean) / n.frame_std
+        t = torch.from_numpy(np.ascontiguousarray(clouds.transpose(0, 2, 1))).to(self.dtype)
+        feats = [self.model.encode(t[i : i + _ENCODE_CHUNK]) for i in range(0, len(t), _ENCODE_CHUNK)]
+        return PoseFeatures(
+            torch.cat(feats) if feats else torch.zeros(0, self.config.feature_size, dtype=self.dtype),
+            torch.from_numpy(com).to(self.dtype),
+            torch.as_tensor(np.asarray(poses.up), dtype=self.dtype),
+            torch.as_tensor(frame, dtype=self.dtype),
+        )
+
+    def prepare(self, batch: GraspBatch) -> GraspBatch:
+        """``batch`` with its poses' features computed (a no-op when they are)."""
+        if batch.features is not None:
+            return batch
+        return dataclasses.replace(batch, features=self.features(batch.poses))
+
+    def _outputs(self, batch: GraspBatch, log_e: torch.Tensor):
+        """Physical outputs (body force, displacement, p_contact) and ``up`` per row, torch."""
+        f = batch.features
+        mean_e, std_e, mean_y, std_y = self._normalisation()
+        pose = torch.from_numpy(batch.pose)
+        dens = torch.from_numpy((batch.density - self.normalizer.density_mean) / self.normalizer.density_std)
+        cols = [(log_e - mean_e) / std_e, f.com[pose], dens.to(self.dtype)[:, None]]
+        up = f.up[pose]
+        if self.config.frame_inputs:
+            cols.append(f.frame[pose])
+        raw = self.model.head(f.features[pose], torch.cat(cols, dim=1))
+        y = raw[:, :N_REGRESSION] * std_y + mean_y
+        return y[:, :6], y[:, 6:N_REGRESSION], torch.sigmoid(raw[:, N_REGRESSION]), up
+
+    def predict(self, batch: GraspBatch) -> Prediction:
+        """The outputs of every row of ``batch`` (which needs ``log_e``)."""
+        if batch.log_e is None:
+            raise DesignError("predict needs a design per row (GraspBatch.log_e)")
+        batch = self.prepare(batch)
+        with torch.inference_mode():
+            force, disp, p, _ = self._outputs(batch, torch.tensor(batch.log_e, dtype=self.dtype))
+        force, disp, p = force.numpy().astype(float), disp.numpy().astype(float), p.numpy().astype(float)
+        up = np.asarray(batch.poses.up, dtype=float)[batch.pose]
+        score = success_score(force, disp, p, up, batch.mass, self.lift, self.lifted_fraction)
+        return Prediction(force, disp, p, score)
+
+    def loss_and_grad(self, design, batch: GraspBatch, loss: DesignLoss | None = None) -> DesignGradient:
+        """L_opt (:class:`DesignLoss`) of one design (22 ln E) over every row, and d L / d ln E."""
+        d = np.asarray(design, dtype=float).ravel()
+        if d.shape != (N_LOG_E,) or not np.all(np.isfinite(d)):
+            raise StiffnessError(f"a design is {N_LOG_E} finite values of ln E, got shape {d.shape}")
+        batch = self.prepare(batch)
+        x = torch.tensor(d, dtype=self.dtype, requires_grad=True)
+        with torch.enable_grad():
+            force, disp, p, up = self._outputs(batch, x.expand(len(batch), N_LOG_E))
+            rows = (loss or DesignLoss()).rows(force, disp, p, up)
+            total = rows.sum()
+            (grad,) = torch.autograd.grad(total, x)
+        return DesignGradient(total.item(), grad.numpy().astype(float), rows.detach().numpy().astype(float))
