@@ -1,0 +1,212 @@
+"""``mjcodesign optimize`` (co-design through the surrogate) and ``mjcodesign bench optimize``.
+
+Wire them in with ``cli_optimize.add_parser(subparsers)`` and ``cli_optimize.add_bench_parser(bench)``.
+torch, matplotlib and rerun are imported inside the handlers only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+from pathlib import Path
+
+from mjcodesign.cli.common import emit, int_at_least, path_text, user_cache_dir
+
+__all__ = ["add_bench_parser", "add_parser", "run", "run_bench"]
+
+_MODES = ("joint", "individual")
+
+
+def add_parser(subparsers) -> None:
+    """Register ``optimize`` on the main subparsers object."""
+    p = subparsers.add_parser(
+        "optimize", help="co-design the 22 block stiffnesses and a grasp pose per object (surrogate)"
+    )
+    p.add_argument(
+        "--ckpt", type=path_text, required=True, help="surrogate checkpoint folder (`train --out`)"
+    )
+    p.add_argument(
+        "--objects", required=True, help="a named set (ycb-in-domain, …) or comma-separated object names"
+    )
+    p.add_argument(
+        "--poses",
+        type=path_text,
+        required=True,
+        help="a grasp-candidate .npz (`poses --out`), a folder of them, or a dataset folder (its poses)",
+    )
+    p.add_argument(
+        "--poses-per-object",
+        type=int_at_least(1),
+        default=10,
+        help="first N candidates per object (paper: 10)",
+    )
+    p.add_argument("--mode", choices=_MODES, default="joint", help="one design for all objects, or one each")
+    p.add_argument("--density", default="light", help="object density [kg/m³] or light (100) / heavy (400)")
+    p.add_argument("--seed", type=int_at_least(0), default=0, help="draws candidate clouds")
+    p.add_argument("--out", type=path_text, required=True, help="output folder (written when the run ends)")
+    p.add_argument("--rrd", type=path_text, default=None, help="also log the loss curves to this Rerun file")
+    p.add_argument("--max-iterations", type=int_at_least(1), default=2000, help="N of Algorithm 1")
+    p.add_argument("--patience", type=int_at_least(1), default=100, help="T_p of Algorithm 1 (paper: 100)")
+    p.add_argument("--top-b", type=int_at_least(1), default=5, help="B of Algorithm 1 (paper: 5)")
+    p.add_argument("--no-ground-truth", action="store_true", help="skip re-simulating the designs in MuJoCo")
+    p.add_argument(
+        "--threads",
+        type=int_at_least(0),
+        default=0,
+        help="torch threads (0: torch's default; 1 suits a shared host)",
+    )
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``optimize``; library errors propagate to the main CLI (exit 2, one line)."""
+    from rich.console import Console
+    from rich.progress import Progress
+
+    from mjcodesign.codesign import Mode, OptimizeConfig
+    from mjcodesign.codesign.run import run_codesign
+    from mjcodesign.data import resolve_objects
+    from mjcodesign.objects import parse_density
+
+    density = parse_density(args.density)
+    objects = _objects(args.objects, resolve_objects)
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
+    cfg = OptimizeConfig(
+        mode=Mode(args.mode), top_b=args.top_b, patience=args.patience, max_iterations=args.max_iterations
+    )
+    with contextlib.ExitStack() as stack:
+        bar: list = []  # the progress bar, started at the first iteration: a refusal before it is one line
+
+        def on_step(s) -> None:
+            if not bar:
+                bar.append(stack.enter_context(Progress(console=Console(stderr=True), transient=True)))
+                bar.append(bar[0].add_task("optimize", total=cfg.max_iterations))
+            text = f"optimize: loss {s.total:.4g}, {s.converged}/{len(objects)} converged"
+            bar[0].update(bar[1], completed=s.iteration, description=text)
+
+        def say(msg: str) -> None:
+            if bar:
+                bar[0].update(bar[1], description=msg)
+
+        record, result = run_codesign(
+            checkpoint=args.ckpt,
+            objects=objects,
+            poses=args.poses,
+            per_object=args.poses_per_object,
+            density=density,
+            out=args.out,
+            config=cfg,
+            seed=args.seed,
+            ground_truth=not args.no_ground_truth,
+            cache_dir=user_cache_dir(),
+            on_step=on_step,
+            progress=say,
+        )
+    if args.rrd:
+        _log_rerun(Path(args.rrd), result)
+        record["rrd"] = args.rrd
+    if args.json:
+        print(json.dumps(record))
+    else:
+        emit({k: v for k, v in record.items() if k not in ("ground_truth", "best_pose")}, False)
+        if record["ground_truth"]:
+            emit(record["ground_truth"]["rates"], False)
+    return 0
+
+
+def _objects(text: str, resolve) -> tuple[str, ...]:
+    """``--objects``: a named set through ``resolve_objects``, else names as given (not files here)."""
+    from mjcodesign.errors import MeshError
+    from mjcodesign.objects import OBJECT_SETS
+
+    if text.strip() in OBJECT_SETS:
+        return tuple(resolve(text))
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise MeshError("--objects is empty")
+    if len(set(names)) != len(names):
+        raise MeshError(f"--objects lists an object twice: {text}")
+    return names
+
+
+def _log_rerun(path: Path, result) -> None:
+    """The loss curves as Rerun scalars: ``loss/total`` and ``loss/OBJECT`` against ``iteration``."""
+    from mjcodesign.errors import OutputError
+
+    try:
+        import rerun as rr
+    except ImportError:
+        from mjcodesign.errors import UnsupportedError
+
+        raise UnsupportedError("--rrd needs rerun-sdk (pip install 'mjcodesign[viz]')") from None
+    rec = rr.RecordingStream("mjcodesign-optimize")
+    try:
+        rec.save(str(path))
+    except Exception as exc:  # rerun raises its own error types for a bad path
+        raise OutputError(f"cannot write {path}: {exc}") from exc
+    it = list(range(1, result.iterations + 1))
+    rec.send_columns(
+        "loss/total",
+        indexes=[rr.TimeColumn("iteration", sequence=it)],
+        columns=rr.Scalars.columns(scalars=result.total_curve),
+    )
+    for k, name in enumerate(result.objects):
+        rec.send_columns(
+            f"loss/{name}",
+            indexes=[rr.TimeColumn("iteration", sequence=it)],
+            columns=rr.Scalars.columns(scalars=result.curves[:, k]),
+        )
+    rec.flush()
+
+
+def add_bench_parser(bench_subparsers) -> None:
+    """Register ``optimize`` on the ``bench`` command's subparsers object."""
+    p = bench_subparsers.add_parser(
+        "optimize", help="one joint co-design iteration (46 objects x 10 poses) vs the bare MLP; a whole run"
+    )
+    p.add_argument(
+        "--ckpt", type=path_text, default=None, help="a checkpoint (default: the paper's net, random)"
+    )
+    p.add_argument("--poses", type=path_text, default=None, help="a dataset folder for the whole run")
+    p.add_argument("--objects", default=None, help="comma-separated objects of the whole run (default: all)")
+    p.add_argument("--repeats", type=int_at_least(1), default=20, help="timed iterations")
+    p.add_argument("--whole-run", action="store_true", help="also time a whole joint optimisation")
+    p.add_argument(
+        "--cma-budget", type=int_at_least(0), default=0, help="rollouts of the CMA-ES baseline (0: skip)"
+    )
+    p.add_argument("--fem", action="store_true", help="also time one FEM grasp gradient (minutes on a CPU)")
+    p.add_argument("--seed", type=int_at_least(0), default=0)
+    p.add_argument("--threads", type=int_at_least(0), default=0, help="torch threads (0: torch's default)")
+    p.add_argument("--out", type=path_text, default=None, help="also write the JSON to this file")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=run_bench)
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    """Run ``bench optimize``."""
+    from mjcodesign.bench import run_benchmark
+
+    objects = None if args.objects is None else tuple(n.strip() for n in args.objects.split(",") if n.strip())
+    res = run_benchmark(
+        "optimize",
+        out=args.out,
+        checkpoint=args.ckpt,
+        poses=args.poses,
+        objects=objects,
+        repeats=args.repeats,
+        whole_run=args.whole_run,
+        cma_budget=args.cma_budget,
+        fem=args.fem,
+        seed=args.seed,
+        threads=args.threads,
+    )
+    if args.json:
+        print(json.dumps(res))
+    else:
+        emit({k: v for k, v in res.items() if not isinstance(v, dict)}, False)
+    return 0

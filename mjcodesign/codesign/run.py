@@ -1,0 +1,158 @@
+"""One co-design run, end to end: candidate poses, the surrogate, Algorithm 1, files, ground truth.
+
+:func:`run_codesign` is what ``mjcodesign optimize`` runs. It checks every input before it writes
+anything (an object without poses, a checkpoint of another schema), then writes into ``out``:
+
+- ``design.txt`` (joint) or ``designs/OBJECT.txt`` (individual): the ``--design`` text of the design;
+- ``poses/OBJECT.json``: each object's chosen pose, the ``grasp --pose`` JSON;
+- ``curves.png``: counted L_opt per object and in total;
+- ``result.json``: everything the command prints with ``--json``, and the loss curves.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+
+from mjcodesign.codesign.optimize import Mode, OptimizeConfig, OptimizeResult, Step, optimize
+from mjcodesign.codesign.problem import PoseSet, load_pose_set, object_key
+from mjcodesign.codesign.report import (
+    design_text,
+    plot_curves,
+    pose_record,
+    write_design,
+    write_json,
+    write_pose,
+)
+from mjcodesign.codesign.verify import verify
+from mjcodesign.errors import OutputError
+
+__all__ = ["held_out_objects", "run_codesign"]
+
+
+def held_out_objects(meta: dict, available: tuple[str, ...], optimised: tuple[str, ...]) -> tuple[str, ...]:
+    """The checkpoint's test objects (never trained on) that have poses here and were not optimised for."""
+    test = (meta.get("split") or {}).get("test_objects") or []
+    return tuple(n for n in test if n in available and n not in optimised)
+
+
+def run_codesign(
+    *,
+    checkpoint: str | Path,
+    objects: tuple[str, ...],
+    poses: str | Path,
+    per_object: int,
+    density: float,
+    out: str | Path,
+    config: OptimizeConfig,
+    seed: int = 0,
+    ground_truth: bool = True,
+    cache_dir: str | Path | None = None,
+    on_step: Callable[[Step], None] | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[dict, OptimizeResult]:
+    """Optimise, re-simulate and write the files (module docstring); returns the JSON and the result."""
+    from mjcodesign.surrogate import load_surrogate
+
+    say = progress or (lambda _msg: None)
+    surrogate = load_surrogate(checkpoint)  # first: a checkpoint of another schema is refused in ~1 s
+    say("reading poses")
+    everything = load_pose_set(poses, seed=seed, cache_dir=cache_dir)
+    chosen_set = everything.select([object_key(o) for o in objects], per_object)
+    held = held_out_objects(surrogate.meta, everything.objects, chosen_set.objects)
+    held_set = everything.select(held, per_object) if held else None
+    root = Path(out)
+    _check_out(root)
+    say(f"optimising {len(chosen_set.objects)} objects ({config.mode.value})")
+    result = optimize(surrogate, chosen_set, density, config, on_step=on_step)
+    truth = None
+    if ground_truth:
+        say("re-simulating in MuJoCo")
+        object_seed = int((surrogate.meta.get("dataset") or {}).get("object_seed", 0))
+        designs = [result.design_of(k) for k in range(len(chosen_set.objects))]
+        sets = {"optimised": (chosen_set, designs, result.chosen)}
+        if held_set is not None:
+            joint = [result.designs[0]] * len(held_set.objects) if config.mode is Mode.JOINT else None
+            sets["held_out"] = (held_set, joint, None)
+        truth = verify(surrogate, sets, density, object_seed=object_seed, cache_dir=cache_dir, progress=say)
+    record = _record(result, chosen_set, held, truth, checkpoint, poses, density, seed, root)
+    _write(root, result, chosen_set, record)
+    return record, result
+
+
+def _check_out(root: Path) -> None:
+    if root.exists() and not root.is_dir():
+        raise OutputError(f"--out {root} exists and is not a folder")
+
+
+def _record(result, poses: PoseSet, held, truth, checkpoint, source, density, seed, root) -> dict:
+    joint = result.mode is Mode.JOINT
+    designs = {n: result.design_of(k).tolist() for k, n in enumerate(result.objects)}
+    return {
+        "design": result.designs[0].tolist() if joint else designs,
+        "design_text": design_text(result.designs[0]) if joint else None,
+        "design_file": str(root / "design.txt") if joint else str(root / "designs"),
+        "mode": result.mode.value,
+        "objects": list(result.objects),
+        "held_out_objects": list(held),
+        "best_pose": {
+            n: {
+                "row": int(result.chosen[k]),
+                **pose_record(poses, int(result.chosen[k])),
+                "file": str(root / "poses" / f"{n}.json"),
+            }
+            for k, n in enumerate(result.objects)
+        },  # fmt: skip
+        "iterations": result.iterations,
+        "stopped": result.stopped,
+        "phases": dict(zip(result.objects, result.phases, strict=True)),
+        "loss": {"start": float(result.total_curve[0]), "end": float(result.total_curve[-1])},
+        "wall_s": result.wall_s,
+        "s_per_iteration": result.wall_s / max(1, result.iterations),
+        "ground_truth": truth,
+        "density_kg_m3": float(density),
+        "seed": int(seed),
+        "checkpoint": str(checkpoint),
+        "poses": str(source),
+        "poses_per_object": int(max(len(poses.rows(k)) for k in range(len(poses.objects)))),
+        "config": result.config,
+        "curves_png": str(root / "curves.png"),
+    }
+
+
+def _write(root: Path, result: OptimizeResult, poses: PoseSet, record: dict) -> None:
+    """Every file into a temporary folder beside ``root``, then moved in: a failure leaves nothing."""
+    parent = root.parent if str(root.parent) else Path(".")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.", dir=parent))
+    except OSError as exc:
+        raise OutputError(f"cannot write {root}: {exc.strerror or exc}") from exc
+    try:
+        if result.mode is Mode.JOINT:
+            write_design(tmp / "design.txt", result.designs[0])
+        else:
+            (tmp / "designs").mkdir()
+            for k, n in enumerate(result.objects):
+                write_design(tmp / "designs" / f"{n}.txt", result.design_of(k))
+        (tmp / "poses").mkdir()
+        for k, n in enumerate(result.objects):
+            write_pose(tmp / "poses" / f"{n}.json", poses, int(result.chosen[k]))
+        plot_curves(result, tmp / "curves.png")
+        full = dict(record, curves={"objects": list(result.objects), "loss": result.curves.tolist()})
+        write_json(tmp / "result.json", full)
+        root.mkdir(parents=True, exist_ok=True)
+        for item in tmp.iterdir():
+            target = root / item.name
+            if target.is_dir():
+                shutil.rmtree(target)
+            os.replace(item, target)
+    except OSError as exc:
+        raise OutputError(f"cannot write {root}: {exc.strerror or exc}") from exc
+    finally:
+        with contextlib.suppress(OSError):
+            shutil.rmtree(tmp)

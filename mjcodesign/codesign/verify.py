@@ -1,0 +1,144 @@
+"""Ground truth for a co-design: the designs re-simulated in MuJoCo at the poses the surrogate picks.
+
+For each object and each design compared (the optimised one, and the soft and semi-rigid presets):
+
+* the pose: the optimised design's chosen pose on the objects it was optimised for; otherwise the
+  candidate pose of lowest L_opt for that design (what the surrogate would pick for it);
+* the surrogate's predicted success there (:meth:`~mjcodesign.surrogate.Surrogate.predict`);
+* the simulated outcome (:class:`~mjcodesign.jobs.GraspJob` on MuJoCo C through
+  :func:`~mjcodesign.jobs.run_jobs`), with the dataset's scenario (:class:`GraspScenario` defaults).
+
+:func:`verify` returns rows and success rates per (object set, design), predicted beside simulated.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from mjcodesign.codesign.problem import PoseSet
+from mjcodesign.design.stiffness import PRESETS, Stiffness
+from mjcodesign.jobs import GraspJob, load_grasp_object, run_jobs
+from mjcodesign.scenarios.grasp import GraspScenario
+from mjcodesign.sim.mujoco_c import MujocoBackend
+
+__all__ = ["BASELINES", "pick_poses", "verify"]
+
+BASELINES = ("soft", "semi-rigid")
+"""Presets the optimised design is compared with."""
+
+
+def _surrogate_inputs(poses: PoseSet):
+    from mjcodesign.surrogate import Poses
+
+    return Poses(poses.clouds, poses.com, poses.up, poses.volume)
+
+
+def pick_poses(surrogate, poses: PoseSet, design, density: float, loss=None) -> np.ndarray:
+    """Per object, the pose row of lowest L_opt for ``design`` (22 ln E), shape (K,)."""
+    from mjcodesign.surrogate import GraspBatch
+
+    rows = np.arange(len(poses))
+    batch = GraspBatch(_surrogate_inputs(poses), rows, np.full(len(rows), float(density)))
+    per_row = surrogate.loss_and_grad(np.asarray(design, dtype=float), batch, loss=loss).rows
+    return np.array([poses.rows(k)[np.argmin(per_row[poses.rows(k)])] for k in range(len(poses.objects))])
+
+
+def predicted_success(surrogate, poses: PoseSet, rows, designs, density: float):
+    """The surrogate's success and score at pose ``rows`` with ``designs`` (one per row, (n, 22))."""
+    from mjcodesign.surrogate import GraspBatch
+
+    rows = np.asarray(rows, dtype=np.int64)
+    batch = GraspBatch(
+        _surrogate_inputs(poses), rows, np.full(len(rows), float(density)), np.asarray(designs, dtype=float)
+    )
+    pred = surrogate.predict(batch)
+    return pred.success, pred.success_score
+
+
+def verify(
+    surrogate,
+    sets: dict[str, tuple[PoseSet, list | None, np.ndarray | None]],
+    density: float,
+    *,
+    object_seed: int = 0,
+    cache_dir=None,
+    scenario: GraspScenario | None = None,
+    loss=None,
+    progress=None,
+) -> dict:
+    """Simulate each set's objects with the optimised design(s) and the presets.
+
+    ``sets``: name -> (poses, the optimised design of each object (22 ln E; None: only the presets),
+    the optimised design's chosen pose rows (None: the surrogate picks them here)). Returns JSON-ready
+    rows and rates per (set, design).
+    """
+    t0 = time.perf_counter()
+    scenario = scenario or GraspScenario()
+    jobs, meta = [], []
+    for set_name, (poses, designs, chosen) in sets.items():
+        objs = {}
+        variants = [("optimised", designs)] + [(b, [PRESETS[b]] * len(poses.objects)) for b in BASELINES]
+        for label, per_object in variants:
+            if per_object is None or any(d is None for d in per_object):
+                continue
+            if label == "optimised" and chosen is not None:
+                rows = np.asarray(chosen)
+            else:
+                rows = _pick_each(surrogate, poses, per_object, density, loss)
+            ok, score = predicted_success(surrogate, poses, rows, np.array(per_object), density)
+            for k, name in enumerate(poses.objects):
+                if name not in objs:
+                    objs[name] = load_grasp_object(name, density, seed=object_seed, cache_dir=cache_dir)
+                design = Stiffness(per_object[k])
+                jobs.append(
+                    GraspJob(obj=objs[name], pose=poses.gripper_pose(int(rows[k])), design=design,
+                             scenario=scenario, density=float(density), seed=object_seed,
+                             label=f"{set_name}/{label}/{name}")
+                )  # fmt: skip
+                meta.append((set_name, label, name, int(rows[k]), bool(ok[k]), float(score[k])))
+    if progress is not None:
+        progress(f"simulating {len(jobs)} grasps")
+    outs = run_jobs(jobs, MujocoBackend())
+    rows_out = [
+        {
+            "set": s,
+            "design": label,
+            "object": name,
+            "pose_row": row,
+            "predicted_success": pred,
+            "predicted_score": score,
+            "simulated_success": bool(o.success),
+            "reason": o.reason,
+        }
+        for (s, label, name, row, pred, score), o in zip(meta, outs, strict=True)
+    ]
+    rates = []
+    for s in dict.fromkeys(r["set"] for r in rows_out):
+        for label in dict.fromkeys(r["design"] for r in rows_out if r["set"] == s):
+            sel = [r for r in rows_out if r["set"] == s and r["design"] == label]
+            rates.append(
+                {
+                    "set": s,
+                    "design": label,
+                    "objects": len(sel),
+                    "simulated_success": float(np.mean([r["simulated_success"] for r in sel])),
+                    "predicted_success": float(np.mean([r["predicted_success"] for r in sel])),
+                    "agreement": float(
+                        np.mean([r["simulated_success"] == r["predicted_success"] for r in sel])
+                    ),
+                }
+            )
+    return {"rates": rates, "rows": rows_out, "rollouts": len(jobs), "wall_s": time.perf_counter() - t0}
+
+
+def _pick_each(surrogate, poses: PoseSet, per_object, density, loss) -> np.ndarray:
+    """The surrogate's pose for each object with its own design (one pass when all designs are equal)."""
+    designs = np.asarray(per_object, dtype=float)
+    if np.all(designs == designs[0]):
+        return pick_poses(surrogate, poses, designs[0], density, loss)
+    return np.array(
+        [pick_poses(surrogate, poses.select([n], len(poses.rows(k))), designs[k], density, loss)[0]
+         + poses.rows(k)[0] for k, n in enumerate(poses.objects)]
+    )  # fmt: skip

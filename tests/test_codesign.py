@@ -1,0 +1,258 @@
+"""Co-design (Algorithm 1): the top-B / patience bookkeeping, a planted optimum, determinism, bad input.
+
+The network here is a planted function behind the real :class:`~mjcodesign.surrogate.Surrogate`: a
+torch module with the network's ``encode`` / ``head`` whose contact logit is a quadratic in ln E, so
+``Surrogate.loss_and_grad``, the paper's loss and the optimiser all run their real code. Nothing here
+simulates except the bad-input cases' argument checks.
+"""
+
+import importlib
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+from mjcodesign.surrogate import GraspBatch, Normalizer, Poses, Surrogate
+from numpy.testing import assert_array_equal
+from torch import nn
+
+from mjcodesign.codesign import Mode, OptimizeConfig, Phase, PoseSelection, PoseSet, log_e_of, optimize, z_of
+
+cli_main = importlib.import_module("mjcodesign.cli.main")
+
+# The planted landscape: row loss = 1e-3 · 1 N + 1e3 · sigmoid(q), q = A · mean_i (ln E_i − c_{k,i})² + b_p
+# (DesignLoss with force 1 N along up, no displacement): minimal at ln E = c_k, with pose p ranked by b_p.
+_A = 4.0
+_C = (14.6, 16.0)  # [ln Pa] each object's optimum (the pattern below is added per block)
+_PATTERN = 0.3 * np.sin(np.arange(22))
+_B = np.array([[-2.0, -3.0, -1.0, -2.5], [-1.5, -0.5, -3.0, -2.8]])  # b_p of each object's 4 poses
+# After convergence Adam at lr 0.1 has stopped within this of the planted optimum [ln Pa]; the
+# joint optimum of two symmetric objects (equal best b) is the midpoint of their optima.
+_TOL_OPTIMUM = 0.02
+_CONFIG = OptimizeConfig(top_b=2, patience=20, max_iterations=3000, weight_decay=0.0)
+
+
+class _Config:
+    frame_inputs = False
+    feature_size = 1
+
+
+class PlantedNet(nn.Module):
+    """The network's interface (``encode``, ``head``, ``pc_scale``, ``config``) over a planted quadratic.
+
+    Inputs per row (``Surrogate._outputs``, identity normalisation): ln E (22), the COM (3) — here the
+    planted constants: x = object's optimum offset, y = b_p — and z(density).
+    """
+
+    config = _Config()
+
+    def __init__(self):
+        super().__init__()
+        self.pc_scale = nn.Parameter(torch.ones(1, dtype=torch.float64))
+
+    def encode(self, clouds):
+        return torch.zeros(len(clouds), 1, dtype=torch.float64)
+
+    def head(self, features, x):
+        c = x[:, 22:23] + torch.from_numpy(_PATTERN)
+        q = _A * ((x[:, :22] - c) ** 2).mean(dim=1) + x[:, 23]
+        zero = torch.zeros(len(x), dtype=x.dtype)
+        one = torch.ones(len(x), dtype=x.dtype)
+        return torch.stack([zero] * 5 + [one] + [zero] * 3 + [q], dim=1)
+
+
+def _surrogate() -> Surrogate:
+    norm = Normalizer(np.zeros(22), np.ones(22), 0.0, 1.0, np.zeros(9), np.ones(9), np.zeros(7), np.ones(7))
+    return Surrogate(PlantedNet(), norm, lift=0.03, lifted_fraction=0.5)
+
+
+def _poses(objects=(0, 1)) -> PoseSet:
+    """Two objects x 4 poses; a unit-sphere cloud so the normalised COM equals the COM given."""
+    rng = np.random.default_rng(0)
+    pts = rng.normal(size=(64, 3))
+    pts /= np.linalg.norm(pts, axis=1, keepdims=True)
+    rows = [(k, _C[k], b) for k in objects for b in _B[k]]
+    n = len(rows)
+    cloud = pts - pts.mean(axis=0)
+    cloud /= np.linalg.norm(cloud, axis=1).max()
+    palms = np.tile(np.eye(4), (n, 1, 1))  # up = +z: the planted 1 N force is along up
+    return PoseSet(
+        tuple(f"obj{k}" for k in objects),
+        np.repeat(np.arange(len(objects)), len(_B[0])),
+        np.tile(cloud.astype(np.float32), (n, 1, 1)),
+        np.array([[c, b, 0.0] for _, c, b in rows]),
+        palms,
+        np.full((n, 2), 0.04),
+        np.full(n, 1e-4),
+    )
+
+
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
+def test_selection_follows_algorithm_1_step_by_step():
+    s = PoseSelection(4, top_b=2, patience=3, tol=1e-3)
+    # iteration 1: the two lowest are poses 2 and 3; a first set counts as a change (counter 0)
+    assert_array_equal(s.select([4.0, 3.0, 2.0, 1.0]), [2, 3])
+    assert (s.phase, s.unchanged) == (Phase.TOP_B, 0)
+    # iteration 2: same set (order within it does not matter), counter 1
+    assert_array_equal(s.select([4.0, 3.0, 1.0, 2.0]), [2, 3])
+    assert s.unchanged == 1
+    # iteration 3: the set changes to {0, 2}: the counter resets (the authors' global counter would not)
+    assert_array_equal(s.select([1.0, 3.0, 2.0, 4.0]), [0, 2])
+    assert s.unchanged == 0
+    # iterations 4, 5: unchanged, counter 1, 2; still top-B
+    for expected in (1, 2):
+        assert_array_equal(s.select([1.0, 3.0, 0.5, 4.0]), [0, 2])
+        assert (s.unchanged, s.phase) == (expected, Phase.TOP_B)
+    # iteration 6: the 3rd unchanged iteration fixes the set; only its best (pose 2 now) counts
+    assert_array_equal(s.select([1.0, 3.0, 0.5, 4.0]), [2])
+    assert (s.phase, s.best_pose, s.best_loss) == (Phase.TOP_1, 2, 0.5)
+    # top-1: pose 2 stays chosen even when another pose becomes lower
+    assert_array_equal(s.select([0.1, 0.0, 0.4, 4.0]), [2])
+    assert (s.best_loss, s.stalled) == (0.4, 0)  # fell by more than tol: new reference
+    # a rise out of the tol band also resets (Adam's overshoot is not convergence)
+    s.select([0.1, 0.0, 0.41, 4.0])
+    assert (s.best_loss, s.stalled) == (0.41, 0)
+    # changes within tol (relative) do not reset: after `patience` of them the object has converged
+    for i, v in enumerate((0.40999, 0.4101, 0.40985)):
+        s.select([0.1, 0.0, v, 4.0])
+        assert s.stalled == i + 1
+    assert s.converged and s.chosen([0.0, 0.0, 9.0, 0.0]) == 2
+
+
+def test_selection_ties_and_bad_input():
+    s = PoseSelection(3, top_b=2, patience=1)
+    assert_array_equal(s.select([1.0, 1.0, 1.0]), [0, 1])  # ties: lower index first
+    assert_array_equal(s.select([1.0, 1.0, 1.0]), [0])  # fixed at once (patience 1), best = first of equal
+    with pytest.raises(Exception, match="finite"):
+        PoseSelection(2, 1, 1).select([np.nan, 1.0])
+    with pytest.raises(Exception, match=">= 1"):
+        PoseSelection(2, 0, 1)
+
+
+def test_z_and_log_e_are_inverse_and_printable():
+    z = np.linspace(-30, 30, 61)
+    assert np.all((log_e_of(z) >= 13.5) & (log_e_of(z) <= 17.0))
+    x = np.linspace(13.6, 16.9, 12)
+    np.testing.assert_allclose(log_e_of(z_of(x)), x, rtol=0, atol=1e-12)
+
+
+def test_first_iteration_counts_the_b_lowest_poses():
+    sur, poses = _surrogate(), _poses()
+    res = optimize(sur, poses, 200.0, OptimizeConfig(top_b=2, max_iterations=2))  # designs: after one step
+    batch = GraspBatch(
+        Poses(poses.clouds, poses.com, poses.up, poses.volume), np.arange(8), np.full(8, 200.0)
+    )
+    x0 = np.full(22, 15.6)
+    rows = sur.loss_and_grad(x0, batch).rows
+    for k in range(2):
+        r = rows[poses.rows(k)]
+        assert res.curves[0, k] == pytest.approx(np.sort(r)[:2].sum(), rel=1e-12)
+    # the first AdamW step moves every z against the gradient of the counted rows only
+    top = np.concatenate([poses.rows(k)[np.argsort(rows[poses.rows(k)])[:2]] for k in range(2)])
+    sub = GraspBatch(batch.poses, top, np.full(len(top), 200.0))
+    g = sur.loss_and_grad(x0, sub).grad
+    assert_array_equal(np.sign(z_of(res.designs[0]) - z_of(x0)), -np.sign(g))
+
+
+def test_planted_optimum_individual_and_joint():
+    sur, poses = _surrogate(), _poses()
+    ind = optimize(sur, poses, 200.0, OptimizeConfig(**{**_CONFIG.as_dict(), "mode": Mode.INDIVIDUAL}))
+    assert ind.stopped == "converged" and all(p == "converged" for p in ind.phases)
+    for k in range(2):
+        np.testing.assert_allclose(ind.designs[k], _C[k] + _PATTERN, atol=_TOL_OPTIMUM)
+        assert ind.chosen[k] == poses.rows(k)[np.argmin(_B[k])]  # the pose of lowest b_p
+    joint = optimize(sur, poses, 200.0, _CONFIG)
+    assert joint.stopped == "converged" and joint.designs.shape == (1, 22)
+    np.testing.assert_allclose(joint.designs[0], np.mean(_C) + _PATTERN, atol=_TOL_OPTIMUM)
+    assert list(joint.chosen) == list(ind.chosen)
+    assert joint.total_curve[-1] < joint.total_curve[0]
+
+
+def test_deterministic():
+    sur, poses = _surrogate(), _poses()
+    cfg = OptimizeConfig(top_b=2, patience=5, max_iterations=200)
+    a, b = optimize(sur, poses, 150.0, cfg), optimize(sur, poses, 150.0, cfg)
+    assert_array_equal(a.designs, b.designs)
+    assert_array_equal(a.curves, b.curves)
+    assert_array_equal(a.chosen, b.chosen)
+
+
+def _run(*args, tmp_path):
+    return subprocess.run(
+        [sys.executable, "-m", "mjcodesign.cli", "optimize", *args],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
+
+
+@pytest.fixture(scope="module")
+def candidates(tmp_path_factory):
+    """A candidate file of one box (the top-down auto pose, twice)."""
+    import trimesh
+    from mjcodesign.surrogate.grasp import pose_matrix
+
+    from mjcodesign.objects import load_object
+    from mjcodesign.poses import Candidates
+    from mjcodesign.scenarios.grasp import auto_pose
+
+    d = tmp_path_factory.mktemp("codesign")
+    trimesh.creation.box(extents=(0.05, 0.04, 0.06)).export(d / "box.stl")
+    gp = auto_pose(load_object(str(d / "box.stl"), 100.0))
+    T = np.stack([pose_matrix(gp)] * 2)
+    Candidates(T, np.array([gp.openings] * 2), np.ones(2), np.zeros(2), np.zeros(2)).save(
+        d / "box.npz", str(d / "box.stl")
+    )
+    return d
+
+
+@pytest.mark.parametrize(
+    "case, expect",
+    [("per_object_0", "--poses-per-object"), ("schema", "another schema"), ("no_poses", "no poses for")],
+)
+def test_cli_bad_input_exits_2_with_one_line(case, expect, candidates, tmp_path):
+    from mjcodesign.surrogate import GraspNet, ModelConfig, save_checkpoint
+
+    ckpt = tmp_path / "ckpt"
+    if case == "schema":
+        ckpt.mkdir()
+        record = {"format": "mjcodesign-surrogate", "version": 999, "outputs": []}
+        (ckpt / "config.json").write_text(json.dumps(record))
+    else:  # a valid checkpoint of a tiny network (untrained: these cases stop before it runs)
+        norm = _surrogate().normalizer
+        net = GraspNet(ModelConfig(point_widths=(4,), hidden=4, depth=1, penultimate=4, dropout=0.0))
+        save_checkpoint(ckpt, Surrogate(net, norm, lift=0.03, lifted_fraction=0.5))
+    args = ["--ckpt", str(ckpt), "--objects", "box", "--poses", str(candidates / "box.npz"),
+            "--out", str(tmp_path / "out"), "--json"]  # fmt: skip
+    if case == "per_object_0":
+        args += ["--poses-per-object", "0"]
+    if case == "no_poses":
+        args[3] = "box,025_mug"
+    r = _run(*args, tmp_path=tmp_path)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1 and expect in r.stderr, r.stderr
+    assert r.stdout == "" and not (tmp_path / "out").exists()
+
+
+def test_simulated_loss_is_the_paper_loss_and_unusable_rollouts_fail():
+    from mjcodesign.codesign.search import simulated_losses
+    from mjcodesign.scenarios.outcome import Failure, Outcome, failed_outcome
+
+    up = np.array([[0.0, 0.0, 1.0]] * 3)
+    held = Outcome(True, (0, 0, 0, 0.1, 0.0, 2.0), (0.0, 0.0, 0.004), False, "ok")
+    dropped = Outcome(False, (0, 0, 0, 0, 0, -0.5), (0.0, 0.0, -0.02), True, "x", (Failure.GROUND_CONTACT,))
+    diverged = failed_outcome(Failure.DIVERGED, "x")  # zeros: would look perfect if scored as is
+    rows = simulated_losses([held, dropped, diverged], up)
+    # 1e-3 Σ|f, Δq| + 1e3 (relu(−up·f) + relu(−up·Δq) + c_g)
+    np.testing.assert_allclose(rows[0], 1e-3 * (2.1 + 0.004), rtol=1e-12)
+    np.testing.assert_allclose(rows[1], 1e-3 * (0.5 + 0.02) + 1e3 * (0.5 + 0.02 + 1.0), rtol=1e-12)
+    assert rows[2] == 1e3
