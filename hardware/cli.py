@@ -12,18 +12,27 @@ import json
 import time
 from pathlib import Path
 
+from mjcodesign.cli.common import finite_float, parse_design, path_text
 from mjcodesign.errors import HardwareError
 
 __all__ = ["add_parser", "run"]
 
 _EXIT_REFUSED = 2
+_MAX_ID = 252  # Dynamixel protocol 2.0: 253..255 are reserved (254 is the broadcast ID)
 
 
 def _ids(text: str) -> tuple[int, ...]:
     try:
-        return tuple(int(t) for t in text.split(",") if t.strip())
+        ids = tuple(int(t) for t in text.split(",") if t.strip())
     except ValueError:
         raise argparse.ArgumentTypeError(f"motor IDs must be integers, got {text!r}") from None
+    if not ids or any(not 0 <= i <= _MAX_ID for i in ids) or len(set(ids)) != len(ids):
+        raise argparse.ArgumentTypeError(f"motor IDs must be distinct and in 0..{_MAX_ID}, got {text!r}")
+    return ids
+
+
+def _path(text: str) -> Path:
+    return Path(path_text(text))
 
 
 def _box(text: str) -> tuple[float, ...]:
@@ -56,9 +65,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     g = sub.add_parser("grasp", help="plan and run one grasp on the robot")
     g.add_argument("--robot", help="Franka FCI host")
     g.add_argument("--dxl", help="serial port of the tendon motors")
-    g.add_argument("--pose", default="auto", help="pose file (.npz/.npy of 4x4) or 'auto'")
-    g.add_argument("--cloud", type=Path, help="point cloud file (.ply/.npz/.npy)")
-    g.add_argument("--calib", type=Path, help="camera-to-base calibration (.json/.npz/.npy)")
+    g.add_argument("--pose", type=path_text, default="auto", help="pose file (.npz/.npy of 4x4) or 'auto'")
+    g.add_argument("--cloud", type=_path, help="point cloud file (.ply/.npz/.npy)")
+    g.add_argument("--calib", type=_path, help="camera-to-base calibration (.json/.npz/.npy)")
     g.add_argument("--ticks", type=int, default=1000, help="tendon pull [ticks of 4096]")
     g.add_argument("--lift", type=float, default=0.10, help="lift height [m]")
     g.add_argument("--speed", type=float, default=0.1, help="franky speed factor (0, 1]")
@@ -66,13 +75,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     g.add_argument("--workspace", type=_box, help="xmin,ymin,zmin,xmax,ymax,zmax [m]")
     g.add_argument("--no-realtime", action="store_true", help="allow a non-realtime kernel")
     g.add_argument("--dry-run", action="store_true", help="print the plan, touch nothing")
+    g.add_argument(
+        "--surrogate", type=_path, default=None, help="surrogate checkpoint: run the candidate it predicts best"
+    )
+    g.add_argument("--design", default=None, help="the printed design (preset, 22 ln E or a design file)")
+    g.add_argument("--density", type=finite_float(0.0, strict=True), default=100.0, help="object density the surrogate assumes [kg/m³]")
     g.add_argument("--json", action="store_true", help="print the report as JSON")
     _add_motor_args(g)
 
     t = sub.add_parser("tendon", help="pull the tendons by N ticks from slack, then release")
     t.add_argument("--dxl", required=True, help="serial port of the tendon motors")
     t.add_argument("--ticks", type=int, required=True, help="pull from slack [ticks]")
-    t.add_argument("--hold", type=float, default=0.0, help="hold time before release [s]")
+    t.add_argument("--hold", type=finite_float(0.0), default=0.0, help="hold time before release [s]")
     _add_motor_args(t)
 
     s = sub.add_parser("status", help="report what answers: motors and/or robot")
@@ -83,8 +97,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
     e = sub.add_parser("emulate-dxl", help="run the XL330 emulator on a pty; prints the port")
     e.add_argument("--ids", type=_ids, default=(1, 2), help="emulated motor IDs")
-    e.add_argument("--speed", type=float, default=4000.0, help="follow speed [tick/s]")
-    e.add_argument("--seconds", type=float, default=0.0, help="stop after this long (0: never)")
+    e.add_argument(
+        "--speed", type=finite_float(0.0, strict=True), default=4000.0, help="follow speed [tick/s]"
+    )
+    e.add_argument(
+        "--seconds", type=finite_float(0.0), default=0.0, help="stop after this long [s] (0: never)"
+    )
 
     st = sub.add_parser("selftest", help="whole grasp against franky-sim and the emulator")
     st.add_argument("--json", action="store_true", help="print the result as JSON")
@@ -94,6 +112,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         default=150.0,
         help="watchdog: past this, print every thread's stack and exit 1 (a hang in a peer) [s]",
     )
+    st.add_argument("--surrogate", type=_path, default=None, help="surrogate checkpoint: choose the grasp with it")
+    st.add_argument("--design", default=None, help="the design the surrogate scores (preset, 22 ln E or a file)")
 
     hw.set_defaults(func=run)
     return hw
@@ -129,7 +149,12 @@ def _grasp(args: argparse.Namespace) -> int:
         grasp_force=args.force,
         realtime=not args.no_realtime,
         dry_run=args.dry_run,
+        surrogate=args.surrogate,
+        design=None if args.design is None else parse_design(args.design),
+        density=args.density,
     )
+    if job.surrogate is not None and not job.surrogate.is_dir():
+        raise HardwareError(f"--surrogate: {job.surrogate} is not a checkpoint folder")
     result = run_job(job, log=(lambda line: None) if args.json else print)
     if isinstance(result, GraspReport):
         if args.json:
@@ -138,7 +163,8 @@ def _grasp(args: argparse.Namespace) -> int:
             print(f"held: {result.held}, lift {result.lift_m:.3f} m, tendon {result.tendon_ticks}")
         return 0 if result.ok else 1
     if args.json:
-        print(json.dumps({"dry_run": True, "plan": result.lines()}))
+        extra = {"candidates": list(result.ranking), "selected": result.index} if result.ranking else {}
+        print(json.dumps({"dry_run": True, "plan": result.lines(), **extra}))
     return 0
 
 
@@ -196,11 +222,21 @@ def _selftest(args: argparse.Namespace) -> int:
 
     if not args.timeout_s > 0:
         raise HardwareError(f"--timeout-s must be positive, got {args.timeout_s}")
+    if (args.surrogate is None) != (args.design is None):
+        raise HardwareError("--surrogate and --design go together: the surrogate scores candidates for that design")
+    if args.surrogate is not None and not args.surrogate.is_dir():
+        raise HardwareError(f"--surrogate: {args.surrogate} is not a checkpoint folder")
+    if args.design is not None:
+        parse_design(args.design)  # refused before any process starts
     # franky's and the SDK's blocking calls cannot be interrupted from Python; if a peer hangs
     # in a way no motion or serial timeout catches, leave its stacks for the report, not a hang.
     faulthandler.dump_traceback_later(args.timeout_s, exit=True)
     try:
-        result = run_selftest(log=(lambda line: None) if args.json else print)
+        result = run_selftest(
+            log=(lambda line: None) if args.json else print,
+            surrogate=args.surrogate,
+            design=None if args.design is None else parse_design(args.design),
+        )
     finally:
         faulthandler.cancel_dump_traceback_later()
     print(json.dumps(result) if args.json else f"selftest ok: {result['ok']}")

@@ -51,6 +51,10 @@ class RobotGraspJob:
         realtime: Require a realtime kernel for the arm (False for franky-sim).
         motion_timeout_s: Longest an arm or hand motion may take (`ArmConfig.motion_timeout_s`).
         dry_run: Plan and report; connect to nothing.
+        surrogate: A surrogate checkpoint folder: score every candidate for ``design`` and run the
+            feasible one with the best predicted success (`surrogate_select`); None: most points.
+        design: The printed fingers' design (a `Stiffness`), needed with ``surrogate``.
+        density: Object density the surrogate assumes [kg/m³].
     """
 
     robot: str | None
@@ -68,10 +72,17 @@ class RobotGraspJob:
     realtime: bool = True
     motion_timeout_s: float = 60.0
     dry_run: bool = False
+    surrogate: Path | None = None
+    design: object | None = None
+    density: float = 100.0
 
     def __post_init__(self) -> None:
         if not self.dry_run and not (self.robot and self.dxl):
             raise HardwareError("a grasp needs --robot and --dxl (or --dry-run)")
+        if self.surrogate is not None and self.design is None:
+            raise HardwareError("--surrogate scores candidates for a design: give --design too")
+        if not (np.isfinite(self.density) and self.density > 0):
+            raise HardwareError(f"density must be a finite value > 0 kg/m³, got {self.density}")
         if self.cloud is None and self.calibration is None:
             raise HardwareError("give a point cloud file, or a calibration file for the camera")
 
@@ -118,7 +129,13 @@ def plan_job(job: RobotGraspJob) -> tuple[np.ndarray, GraspPlan]:
         candidates = load_candidates(job.pose, geometry)
     if not candidates:
         raise PoseError("no candidate poses")
-    return cloud, select_candidate(candidates, cloud, job.settings, tendon)
+    scores = None
+    if job.surrogate is not None:
+        from .surrogate_select import score_candidates
+
+        ranked, _ = score_candidates(job.surrogate, job.design, job.density, cloud, candidates, geometry)
+        scores = {s.index: s.as_dict() for s in ranked}
+    return cloud, select_candidate(candidates, cloud, job.settings, tendon, scores)
 
 
 def run_job(

@@ -15,6 +15,7 @@ width is s1 + s2.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -26,7 +27,7 @@ import numpy as np
 from mjcodesign.errors import HardwareError, MjcodesignError, PoseError
 
 from .arm import Workspace, check_transform
-from .camera import GripperGeometry, crop_to_gripper
+from .camera import ARRAY_FILE_ERRORS, GripperGeometry, crop_to_gripper
 from .tendon import PAPER_PULL_TICKS, TendonConfig
 
 __all__ = [
@@ -133,10 +134,16 @@ class GraspPlan:
     lift_m: float
     n_points: int
     steps: tuple[Step, ...]
+    ranking: tuple[dict, ...] = ()
+    """Every candidate considered: its index, whether it is feasible (else the reason), its points in the
+    gripper box and, when the surrogate scored it, its prediction (:func:`rank_candidates`)."""
 
     def lines(self) -> list[str]:
         """Human-readable plan, one line per step."""
         head = f"candidate {self.index}: {self.n_points} cloud points in the gripper box"
+        score = next((r.get("success_score") for r in self.ranking if r["index"] == self.index), None)
+        if score is not None:
+            head += f", surrogate success score {score:.3f} (best of {len(self.ranking)} candidates)"
         return [head] + [f"{k}. {s.action}: {s.detail}" for k, s in enumerate(self.steps, 1)]
 
 
@@ -150,10 +157,13 @@ class GraspReport:
     tendon_ticks: int
     width_m: float
     steps: list[dict] = field(default_factory=list)
+    candidates: list[dict] = field(default_factory=list)
+    """The plan's ranking (:attr:`GraspPlan.ranking`); empty when only one candidate was planned."""
+    selected: int | None = None
 
     def as_dict(self) -> dict:
         """JSON-ready summary."""
-        return {
+        out = {
             "ok": self.ok,
             "held": self.held,
             "lift_m": round(self.lift_m, 5),
@@ -161,6 +171,9 @@ class GraspReport:
             "width_m": round(self.width_m, 5),
             "steps": self.steps,
         }
+        if self.candidates:
+            out.update(candidates=self.candidates, selected=self.selected)
+        return out
 
 
 def _xyz(T: np.ndarray) -> str:
@@ -188,8 +201,8 @@ def load_candidates(path: str | Path, geometry: GripperGeometry) -> list[Candida
                     openings = np.asarray(z["openings"], dtype=float)
         else:
             poses = np.asarray(np.load(path, allow_pickle=False), dtype=float)
-    except (OSError, ValueError) as exc:
-        raise PoseError(f"{path}: cannot read poses: {exc}") from None
+    except ARRAY_FILE_ERRORS as exc:
+        raise PoseError(f"{path}: cannot read poses: {str(exc).strip() or type(exc).__name__}") from None
     if poses.shape == (4, 4):
         poses = poses[None]
     if poses.ndim != 3 or poses.shape[1:] != (4, 4) or len(poses) == 0:
@@ -279,22 +292,37 @@ def select_candidate(
     cloud: np.ndarray,
     settings: GraspSettings,
     tendon: TendonConfig | None = None,
+    scores: dict[int, dict] | None = None,
 ) -> GraspPlan:
-    """Plan every candidate; return the valid plan with the most points in the gripper box.
+    """Plan every candidate; return the valid plan with the best score (else most points in its box).
 
-    Raises the first candidate's error if none is valid.
+    ``scores`` maps a candidate's index to the surrogate's prediction (``success_score`` and the
+    outputs); a feasible candidate without one ranks below every scored one. The plan's ``ranking``
+    lists every candidate with its prediction, or the reason it is infeasible. Raises the first
+    candidate's error if none is valid.
     """
-    plans, errors = [], []
+    plans, errors, ranking = [], [], []
     for i, cand in enumerate(candidates):
+        row = {"index": i, **(scores or {}).get(i, {})}
         try:
-            plans.append(plan_grasp(cand, cloud, settings, tendon, i))
+            plan = plan_grasp(cand, cloud, settings, tendon, i)
         except MjcodesignError as exc:
             errors.append(exc)
+            ranking.append({**row, "feasible": False, "reason": str(exc)})
+            continue
+        plans.append(plan)
+        ranking.append({**row, "feasible": True, "points": plan.n_points})
     if not plans:
         if errors:
             raise errors[0]
         raise PoseError("no candidate poses")
-    return max(plans, key=lambda p: (p.n_points, -p.index))
+
+    def key(p: GraspPlan) -> tuple:
+        s = (scores or {}).get(p.index, {}).get("success_score")
+        return (s is not None, -np.inf if s is None else s, p.n_points, -p.index)
+
+    best = max(plans, key=key)
+    return dataclasses.replace(best, ranking=tuple(ranking) if scores is not None else ())
 
 
 def execute(
@@ -336,4 +364,5 @@ def execute(
     ticks = round(float(np.mean(list(pulled.values())))) if pulled else 0
     if abs(lift_m - plan.lift_m) > 0.01:
         raise HardwareError(f"arm lifted {lift_m:.3f} m instead of {plan.lift_m:.3f} m")
-    return GraspReport(held, held, lift_m, ticks, width, records)
+    ranked = list(plan.ranking)
+    return GraspReport(held, held, lift_m, ticks, width, records, ranked, plan.index if ranked else None)

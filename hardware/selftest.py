@@ -30,7 +30,7 @@ from .pipeline import GraspReport
 from .tendon import port_handler
 from .xl330 import ADDR
 
-__all__ = ["SimScene", "franka_sim", "run_selftest", "sample_box_surface"]
+__all__ = ["SimScene", "franka_sim", "run_selftest", "sample_box_surface", "surrogate_candidates"]
 
 LOOPBACK = "127.0.0.1"
 BOX_SIZE = (0.06, 0.04, 0.05)  # full extents x, y, z [m]: narrow along y, the closing axis
@@ -52,6 +52,7 @@ _SELFTEST_LATENCY_MS = 100.0
 _SELFTEST_MOTION_TIMEOUT_S = 20.0
 """Each selftest motion takes 0.4-1 s on franky-sim; 20 s leaves a stalled one time to be reported as an
 error (stop included) well inside the selftest's watchdog, instead of 60 s for the move, then its stop."""
+_CANDIDATE_SHIFTS_M = (0.0, -0.008, 0.008)  # surrogate_candidates: along the box's 60-mm side [m]
 # A camera 0.6 m above the table looking down at the box, rotated about its optical axis.
 _T_BASE_CAMERA = np.array(
     [
@@ -168,19 +169,50 @@ def torque_over_bus(port: str, ids: tuple[int, ...]) -> dict[int, bool]:
         handler.closePort()
 
 
-def run_selftest(log: Callable[[str], None] = lambda line: None) -> dict:
-    """The whole grasp against franky-sim and the XL330 emulator; a JSON-ready result."""
+def surrogate_candidates(cloud_base: np.ndarray, path: Path) -> Path:
+    """Candidates for the surrogate to choose among, written to ``path`` (npz).
+
+    The auto pose above the box and the same pose shifted along the box's long side (x) by
+    :data:`_CANDIDATE_SHIFTS_M`.
+    """
+    from .camera import GripperGeometry
+    from .pipeline import auto_candidate
+
+    c = auto_candidate(cloud_base, GripperGeometry())
+    poses = []
+    for dx in _CANDIDATE_SHIFTS_M:
+        T = c.pose.copy()
+        T[0, 3] += dx
+        poses.append(T)
+    np.savez(path, poses=np.stack(poses), openings=np.full((len(poses), 2), (c.s1, c.s2)))
+    return path
+
+
+def run_selftest(
+    log: Callable[[str], None] = lambda line: None,
+    *,
+    surrogate: Path | None = None,
+    design: Any = None,
+) -> dict:
+    """The whole grasp against franky-sim and the XL330 emulator; a JSON-ready result.
+
+    With ``surrogate`` (a checkpoint folder) and ``design`` (a Stiffness), the surrogate scores
+    :func:`surrogate_candidates` for the design and the best predicted one runs, as on the robot.
+    """
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="mjcodesign-selftest-") as tmp:
         cloud_base = sample_box_surface(BOX_SIZE, BOX_CENTRE, _CLOUD_POINTS)
         cloud_path, calib_path = Path(tmp) / "cloud.ply", Path(tmp) / "calib.json"
         save_point_cloud(cloud_path, transform_points(cloud_base, np.linalg.inv(_T_BASE_CAMERA)))
         calib_path.write_text(json.dumps({"T_base_camera": _T_BASE_CAMERA.tolist()}))
+        pose = "auto" if surrogate is None else str(surrogate_candidates(cloud_base, Path(tmp) / "cands.npz"))
         with emulator_process(ids=_IDS) as port, franka_sim() as scene:
             job = RobotGraspJob(
                 robot=scene.host,
                 dxl=port,
-                pose="auto",
+                pose=pose,
+                surrogate=surrogate,
+                design=design,
                 cloud=cloud_path,
                 calibration=calib_path,
                 speed_factor=SIM_SPEED_FACTOR,
