@@ -27,8 +27,10 @@ LAYERS = {
     "jobs": 7,
     "data": 8,
     "crosscheck": 8,
-    "bench": 9,
-    "cli": 10,
+    "codesign": 9,
+    "evaluation": 10,
+    "bench": 11,
+    "cli": 12,
 }
 
 
@@ -145,3 +147,17 @@ def test_every_package_lists_its_public_names():
             t.id for n in tree.body if isinstance(n, ast.Assign) for t in n.targets if isinstance(t, ast.Name)
         ]
         assert "__all__" in names, init
+
+
+def test_every_package_is_in_the_distribution():
+    """A wheel holds only the packages pyproject lists: a new folder must be listed, its data too."""
+    import tomllib
+
+    cfg = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
+    listed = set(cfg["packages"])
+    found = {".".join(f.parent.relative_to(ROOT).parts) for f in PKG.rglob("__init__.py")}
+    assert found <= listed, sorted(found - listed)
+    data = cfg.get("package-data", {})
+    for f in PKG.rglob("*.json"):
+        pkg = ".".join(f.parent.relative_to(ROOT).parts)
+        assert "*.json" in data.get(pkg, []), f"{f} is not package data of {pkg}"

@@ -28,7 +28,11 @@ BENCHMARKS: dict[str, str] = {
     "poses": "mjcodesign.bench.poses:bench_poses",
     "viz": "mjcodesign.bench.viz:bench_viz",
     "fem": "mjcodesign.bench.fem:bench_fem",
+    "landscape": "mjcodesign.bench.landscape:bench_landscape",
+    "calibration": "mjcodesign.bench.calibration:bench_calibration",
     "datagen": "mjcodesign.bench.datagen:bench_datagen",
+    "optimize": "mjcodesign.bench.optimize:bench_optimize",
+    "surrogate": "mjcodesign.bench.surrogate:bench_surrogate",
 }
 """Benchmark name -> ``"module:function"``; the function takes keyword arguments and returns a dict."""
 

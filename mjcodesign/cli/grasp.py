@@ -13,7 +13,7 @@ import json
 import sys
 from pathlib import Path
 
-from mjcodesign.cli.common import user_cache_dir
+from mjcodesign.cli.common import int_at_least, path_text, user_cache_dir
 
 __all__ = [
     "add_parser",
@@ -24,9 +24,11 @@ __all__ = [
     "grasp",
     "split_designs",
     "object_sources",
+    "check_pose_file",
 ]
 
-_MODELS = ("chain", "flex")
+_MODELS = ("chain", "flex", "fem")
+"""``fem``: the Warp FEM grasp (its own simulator; it reads the object, pose and design from a chain scene)."""
 _BACKENDS = ("mujoco", "mjwarp")
 
 
@@ -34,6 +36,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--object",
         required=True,
+        type=path_text,
         help="YCB name (e.g. 025_mug), egad-like:N or an OBJ/STL/PLY file; or several: a named set "
         "(ycb-in-domain, ycb-ood, egad-like) or a folder of OBJ/STL/PLY files, printed as a JSON list",
     )
@@ -49,8 +52,10 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--pose",
         default="auto",
+        type=path_text,
         help="auto (top-down), best (top-ranked of `mjcodesign poses`), an .npz from `poses --out` (its "
-        'first row) or a JSON file {"pose": 4x4 palm pose [m], "openings": [s1, s2] [m]}; the '
+        "first row, the best; FILE.npz:ROW for row ROW from 0) or a JSON file "
+        '{"pose": 4x4 palm pose [m], "openings": [s1, s2] [m]}; the '
         "object's COM is at world x = y = 0 with the object resting on the ground (z = 0)",
     )
     p.add_argument(
@@ -61,6 +66,13 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         "larger scene) mapped to real size (its 0.2 and 0.4 map to 0.036 and 0.072)",
     )
     p.add_argument("--tension", type=float, default=None, help="tendon tension per finger [N]")
+    # --tendon (issue 16): the tendon drive, parsed by mjcodesign.scenarios.parse_tendon.
+    p.add_argument(
+        "--tendon",
+        default=None,
+        help="force:N (tension per finger [N], the paper's simulator) or position:TICKS (the XL330 "
+        "servo's goal [ticks of 4096], the hardware; the paper pulls 1000); default force:10",
+    )
     p.add_argument("--lift", type=float, default=None, help="lift distance [m]")
     p.add_argument(
         "--backend",
@@ -71,7 +83,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         "--device",
         choices=("auto", "cpu", "cuda"),
         default="auto",
-        help="mjwarp: Warp device (auto: CUDA when present, else the CPU)",
+        help="mjwarp and --model fem: Warp device (auto: CUDA when present, else the CPU)",
     )
     p.add_argument(
         "--seed", type=int, default=0, help="seeds CoACD and egad-like shapes; MuJoCo is deterministic"
@@ -101,10 +113,18 @@ def add_bench_parser(bench_subparsers) -> argparse.ArgumentParser:
     p = bench_subparsers.add_parser(
         "grasp", help="grasp rollouts/s: raw mujoco.rollout and the full pipeline"
     )
-    p.add_argument("--model", choices=_MODELS, default="chain")
-    p.add_argument("--object", default="010_potted_meat_can", help="object (convex-decomposed, cached)")
+    p.add_argument("--model", choices=_MODELS[:2], default="chain")
     p.add_argument(
-        "--rollouts", type=int, default=None, help="rollouts per measurement (default 32 chain, 2 flex)"
+        "--object",
+        type=path_text,
+        default="010_potted_meat_can",
+        help="object (convex-decomposed, cached)",
+    )
+    p.add_argument(
+        "--rollouts",
+        type=int_at_least(1),
+        default=None,
+        help="rollouts per measurement (default 32 chain, 2 flex)",
     )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true")
@@ -121,6 +141,7 @@ def grasp(
     *,
     impulse: float | None = None,
     tension: float | None = None,
+    tendon: str | None = None,
     lift: float | None = None,
     backend: str = "mujoco",
     device: str = "auto",
@@ -147,7 +168,17 @@ def grasp(
     stiffness = Stiffness.parse(design)
     if backend not in _BACKENDS:
         raise DesignError(f"unknown backend {backend!r}: choose from {', '.join(_BACKENDS)}")
-    if backend == "mjwarp":
+    if model == "fem":
+        if backend != "mujoco":
+            raise DesignError("--model fem is a simulator of its own: leave --backend at mujoco")
+        from dataclasses import replace
+
+        from mjcodesign.sim.fem import GRASP_OPTIONS
+
+        # --device: the FEM's Warp device too (auto: CUDA when present, else the CPU)
+        options = replace(GRASP_OPTIONS, device=_warp_device(device, FingerModel.CHAIN))
+        sim, model = get_backend("fem", grasp_options=options), "chain"
+    elif backend == "mjwarp":
         sim = get_backend(backend, device=_warp_device(device, FingerModel(model)))
     else:
         sim = get_backend(backend)
@@ -157,6 +188,12 @@ def grasp(
         )
     obj, rho, gripper_pose = prepared
     kwargs = {k: v for k, v in (("tension", tension), ("lift", lift), ("impulse", impulse)) if v is not None}
+    if tendon is not None:  # --tendon (issue 16)
+        from mjcodesign.scenarios import parse_tendon
+
+        if tension is not None:
+            raise DesignError("give --tension or --tendon, not both")
+        kwargs["tendon"] = parse_tendon(tendon)
     job = GraspJob(
         obj=obj,
         pose=gripper_pose,
@@ -225,8 +262,37 @@ def prepare_object(
     """(object with its convex decomposition, density [kg/m³], gripper pose) for :func:`grasp`."""
     from mjcodesign.jobs import load_grasp_object, resolve_pose
 
+    check_pose_file(pose)
     obj = load_grasp_object(source, density, seed=seed, allow_open=allow_open, cache_dir=cache_dir)
     return obj, obj.density, resolve_pose(pose, obj, seed=seed)
+
+
+def check_pose_file(pose: str) -> None:
+    """Raise :class:`PoseError` if ``pose`` is a JSON pose file whose 4x4 ``pose`` has no rotation block.
+
+    :func:`mjcodesign.jobs.resolve_pose` turns the block into a quaternion with ``mju_mat2Quat``, which
+    normalises whatever it is given, so a zero or scaled block would run as some other pose. Everything
+    else about the file (missing, unreadable, wrong keys or shapes) is left to ``resolve_pose``.
+    """
+    import numpy as np
+
+    from mjcodesign.errors import PoseError
+    from mjcodesign.jobs import POSE_RULES
+    from mjcodesign.models.types import GripperPose
+
+    path = Path(pose)
+    if pose in POSE_RULES or path.suffix == ".npz" or not path.is_file():
+        return
+    try:
+        matrix = np.asarray(json.loads(path.read_text(encoding="utf-8"))["pose"], dtype=float)
+    except (OSError, ValueError, KeyError, TypeError):
+        return
+    if matrix.shape != (4, 4) or not np.all(np.isfinite(matrix)):
+        return
+    try:
+        GripperPose.from_matrix(matrix)
+    except PoseError as exc:
+        raise PoseError(f"{path}: {exc}") from None
 
 
 def split_designs(text: str) -> list[str]:
@@ -256,10 +322,21 @@ def object_sources(text: str) -> list[str] | None:
     return files
 
 
+def _source_name(source: str) -> str:
+    """An object's name in a multi-object run, as the library names it (:func:`~mjcodesign.objects.object_name`).
+
+    A file's stem, or its whole name when another mesh in its folder has the same stem (``empty.obj``
+    and ``empty.stl`` are two objects); a set's entry as it is (a YCB name, ``egad-like:N``).
+    """
+    from mjcodesign.objects import object_name
+
+    return object_name(source)
+
+
 def _failed_object(source: str, exc: Exception) -> dict:
     """The record of an object that could not be simulated in a multi-object run (never NaN)."""
     return {
-        "object": Path(source).stem if Path(source).suffix else source,
+        "object": _source_name(source),
         "success": False,
         "body_force": [0.0] * 6,
         "displacement": [0.0] * 3,
@@ -317,6 +394,7 @@ class _Runner:
             a.pose,
             impulse=a.impulse,
             tension=a.tension,
+            tendon=a.tendon,
             lift=a.lift,
             backend=backend,
             device=a.device,
@@ -339,7 +417,7 @@ class _Runner:
         with Progress(console=Console(stderr=True), transient=True) as bar:
             task = bar.add_task(f"grasp {self.args.object}", total=len(sources) * len(variants))
             for source in sources:
-                name = Path(source).stem if Path(source).suffix else source
+                name = _source_name(source)
                 bar.update(task, description=f"grasp {name} (loading)")
                 try:
                     prepared = self.prepare(source)
@@ -350,9 +428,10 @@ class _Runner:
                 for variant in variants:
                     bar.update(task, description=f"grasp {name} ({variant[2]})")
                     try:
-                        results.append(self.one(source, variant, prepared, f"{name}/"))
+                        out = self.one(source, variant, prepared, f"{name}/")
                     except MjcodesignError as exc:
-                        results.append({**variant[3], **_failed_object(source, exc)})
+                        out = {**variant[3], **_failed_object(source, exc)}
+                    results.append(out)
                     bar.advance(task)
 
 
@@ -361,30 +440,47 @@ def run(args: argparse.Namespace) -> int:
 
     Several designs run on the same object side by side. A named set or a folder runs every object
     (for every design) and prints a JSON list (one object per line); an object that fails to load,
-    decompose or pose is a failed entry with ``reason`` "error: ...".
+    decompose or pose is a failed entry with ``reason`` "error: ...". Interrupted (SIGINT) during a
+    set or folder, it prints the entries finished so far, then lets the interruption through.
+
+    A refused run leaves no recording behind (``--rrd``): the recorder is closed without writing.
     """
     from mjcodesign.cli.viz import open_recorder
 
     variants = _variants(args)
     sources = object_sources(args.object)
+    check_pose_file(args.pose)
     recorder = open_recorder(args)
     runner = _Runner(args, recorder)
     results: list[dict] = []
+    keep = False  # whether the recording holds what this run is reporting
     try:
         if sources is None:
             prepared = runner.prepare(args.object)
             outs = [runner.one(args.object, v, prepared) for v in variants]
+            keep = True
             _print_runs(outs, args.json, listed=len(outs) > 1)
             return 0
-        runner.many(sources, variants, results)
+        try:
+            runner.many(sources, variants, results)
+        except KeyboardInterrupt:
+            keep = True  # the recording holds the entries printed below
+            _print_many(results, args.json)
+            raise
+        keep = True
     finally:
         if recorder is not None:
-            recorder.close()
-    if args.json:
-        print("[\n" + ",\n".join(json.dumps(r) for r in results) + "\n]")
+            recorder.close(discard=not keep)
+    _print_many(results, args.json)
+    return 0
+
+
+def _print_many(results: list[dict], as_json: bool) -> None:
+    """The entries of a set or folder: a JSON list, one entry per line (``[]`` when none finished)."""
+    if as_json:
+        print("[\n" + ",\n".join(json.dumps(r) for r in results) + "\n]" if results else "[]", flush=True)
     else:
         _print_runs(results, False, listed=True)
-    return 0
 
 
 def _print_runs(outs: list[dict], as_json: bool, *, listed: bool) -> None:
