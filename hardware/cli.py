@@ -35,6 +35,10 @@ def _path(text: str) -> Path:
     return Path(path_text(text))
 
 
+def _paths(text: str) -> tuple[Path, ...]:
+    return tuple(Path(path_text(t.strip())) for t in text.split(","))
+
+
 def _box(text: str) -> tuple[float, ...]:
     try:
         values = tuple(float(t) for t in text.split(","))
@@ -66,8 +70,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     g.add_argument("--robot", help="Franka FCI host")
     g.add_argument("--dxl", help="serial port of the tendon motors")
     g.add_argument("--pose", type=path_text, default="auto", help="pose file (.npz/.npy of 4x4) or 'auto'")
-    g.add_argument("--cloud", type=_path, help="point cloud file (.ply/.npz/.npy)")
-    g.add_argument("--calib", type=_path, help="camera-to-base calibration (.json/.npz/.npy)")
+    g.add_argument(
+        "--cloud", type=_paths, help="point cloud file (.ply/.npz/.npy), or one per camera, comma-separated (merged)"
+    )
+    g.add_argument("--calib", type=_paths, help="camera-to-base calibration (.json/.npz/.npy), or one per --cloud, comma-separated")
     g.add_argument("--ticks", type=int, default=1000, help="tendon pull [ticks of 4096]")
     g.add_argument("--lift", type=float, default=0.10, help="lift height [m]")
     g.add_argument("--speed", type=float, default=0.1, help="franky speed factor (0, 1]")

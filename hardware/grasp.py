@@ -41,8 +41,10 @@ class RobotGraspJob:
         robot: Robot FCI host (None only for a dry run).
         dxl: Serial port of the tendon motors (None only for a dry run).
         pose: Path of a candidate-pose file, or ``"auto"``.
-        cloud: Recorded point cloud (PLY/NPZ/NPY); None to capture from a RealSense.
-        calibration: Camera-to-base transform file; None means the cloud is in the base frame.
+        cloud: Recorded point cloud (PLY/NPZ/NPY), or one per camera (a tuple: merged in the base
+            frame); None to capture from a RealSense.
+        calibration: Camera-to-base transform file, or one per cloud; None means the clouds are in the
+            base frame.
         settings: Grasp parameters and limits.
         motors: Tendon motors, one per finger.
         speed_factor: franky relative dynamics factor in (0, 1].
@@ -60,8 +62,8 @@ class RobotGraspJob:
     robot: str | None
     dxl: str | None
     pose: str = AUTO
-    cloud: Path | None = None
-    calibration: Path | None = None
+    cloud: Path | tuple[Path, ...] | None = None
+    calibration: Path | tuple[Path, ...] | None = None
     settings: GraspSettings = GraspSettings()
     motors: tuple[FingerMotor, ...] = (FingerMotor(1, "A"), FingerMotor(2, "B"))
     speed_factor: float = 0.1
@@ -107,12 +109,27 @@ class RobotGraspJob:
         )
 
 
+def _paths(value) -> tuple[Path, ...]:
+    if value is None:
+        return ()
+    return tuple(Path(v) for v in value) if isinstance(value, tuple | list) else (Path(value),)
+
+
 def _capture(job: RobotGraspJob) -> np.ndarray:
-    T = None if job.calibration is None else load_calibration(job.calibration)
-    if job.cloud is not None:
-        return FileCamera(job.cloud, T).capture()
-    assert T is not None  # checked in RobotGraspJob
-    return RealSenseCamera(T).capture()
+    """The object's cloud in the base frame: the recorded clouds of every camera, merged.
+
+    Each cloud is mapped by its own calibration (one per cloud, or one for all of them).
+    """
+    clouds, calibs = _paths(job.cloud), _paths(job.calibration)
+    Ts = [load_calibration(c) for c in calibs]
+    if clouds:
+        if len(Ts) not in (0, 1, len(clouds)):
+            raise HardwareError(f"{len(clouds)} clouds need one calibration each or one for all, got {len(Ts)}")
+        per = Ts if len(Ts) == len(clouds) else [Ts[0] if Ts else None] * len(clouds)
+        return np.concatenate([FileCamera(c, T).capture() for c, T in zip(clouds, per, strict=True)])
+    if len(Ts) != 1:
+        raise HardwareError("a live capture uses one RealSense camera: give one calibration, or recorded clouds")
+    return RealSenseCamera(Ts[0]).capture()
 
 
 def plan_job(job: RobotGraspJob) -> tuple[np.ndarray, GraspPlan]:

@@ -96,3 +96,28 @@ def test_surrogate_needs_a_design(tmp_path, capsys):
     )
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--design" in err
+
+
+def test_clouds_of_two_cameras_are_merged_in_the_base_frame(tmp_path, capsys):
+    """Two cameras each see half the box; the merged cloud plans like the whole one."""
+    from mjcodesign.hardware.camera import transform_points
+
+    from mjcodesign.cli.main import main
+
+    cloud = sample_box_surface(BOX_SIZE, BOX_CENTRE, 3000, seed=5)
+    halves = (cloud[cloud[:, 1] >= BOX_CENTRE[1]], cloud[cloud[:, 1] < BOX_CENTRE[1]])
+    args = []
+    for k, (half, yaw) in enumerate(zip(halves, (0.3, -1.2), strict=True)):
+        T = _tip_pose(0.3, 0.2 * k, 0.7, yaw)  # camera k looking down from 0.7 m
+        save_point_cloud(tmp_path / f"c{k}.ply", transform_points(half, np.linalg.inv(T)))
+        (tmp_path / f"c{k}.json").write_text(json.dumps({"T_base_camera": T.tolist()}))
+    save_point_cloud(tmp_path / "all.ply", cloud)
+    clouds = f"{tmp_path / 'c0.ply'},{tmp_path / 'c1.ply'}"
+    calibs = f"{tmp_path / 'c0.json'},{tmp_path / 'c1.json'}"
+    assert main(["hw", "grasp", "--dry-run", "--json", "--cloud", clouds, "--calib", calibs]) == 0
+    merged = json.loads(capsys.readouterr().out)["plan"]
+    assert main(["hw", "grasp", "--dry-run", "--json", "--cloud", str(tmp_path / "all.ply")]) == 0
+    whole = json.loads(capsys.readouterr().out)["plan"]
+    assert merged == whole
+    args = ["hw", "grasp", "--dry-run", "--cloud", clouds, "--calib", f"{calibs},{tmp_path / 'c0.json'}"]
+    assert main(args) == 2 and "calibration" in capsys.readouterr().err
