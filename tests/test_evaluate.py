@@ -140,12 +140,15 @@ def test_cli_writes_the_report(tmp_path):
     out = tmp_path / "report"
     p = _cli(
         "--designs", "soft", "--objects", "012_strawberry", "--density", "light",
-        "--pose-sampling", "fixed", "--impulse", "0.1", "--candidates", "2", "--out", str(out), "--json",
+        "--pose-sampling", "fixed", "--impulse", "0.1", "--candidates", "2", "--out", str(out / "sub"), "--json",
+        "--rrd", str(tmp_path / "ex.rrd"),
         cwd=tmp_path,
     )  # fmt: skip
     assert p.returncode == 0, p.stderr
     summary = json.loads(p.stdout)
     assert summary["rollouts"] == 1
+    assert len(summary["recorded"]) == 1 and (tmp_path / "ex.rrd").stat().st_size > 0  # its one grasp
+    out = out / "sub"  # made with its parent
     assert {f.name for f in out.iterdir()} == {"table.md", "disturbance.md", "results.json", "success.png"}
     res = json.loads((out / "results.json").read_text())
     c = summary["table"][0]["cells"]["in-domain/light"]
@@ -165,6 +168,7 @@ def test_cli_writes_the_report(tmp_path):
         ("--pose-sampling", "fixed", "--objects", "no_such_object"),
         ("--pose-sampling", "fixed", "--candidates", "0"),
         ("--pose-sampling", "fixed", "--anygrasp", "/nonexistent"),
+        ("--pose-sampling", "fixed", "--rrd", "/nonexistent/x.rrd"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(tmp_path, args, monkeypatch, capsys):

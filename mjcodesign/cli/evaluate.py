@@ -7,6 +7,7 @@ leaves no folder behind. The report lands in ``--out`` only when the run finishe
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -122,9 +123,11 @@ def _check_out(out: Path) -> None:
         raise OutputError(f"--out {out} is a file")
     if out.is_dir() and any(out.iterdir()) and not (out / "results.json").is_file():
         raise OutputError(f"--out {out} holds other files: give an empty folder or an earlier report's")
-    parent = out if out.is_dir() else out.parent
-    if not parent.exists():
-        raise OutputError(f"--out: folder {parent} does not exist")
+    base = out
+    while not base.exists():  # the folders are made when the report is written
+        base = base.parent
+    if not base.is_dir() or not os.access(base, os.W_OK):
+        raise OutputError(f"--out {out}: {base} is not a writable folder")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -138,6 +141,10 @@ def run(args: argparse.Namespace) -> int:
     config = _config(args)
     out = Path(args.out)
     _check_out(out)
+    if args.rrd is not None and not Path(args.rrd).resolve().parent.is_dir():
+        from mjcodesign.errors import OutputError
+
+        raise OutputError(f"--rrd {args.rrd}: folder {Path(args.rrd).parent} does not exist")
     surrogate = None
     n_points = None
     if config.needs_surrogate:
