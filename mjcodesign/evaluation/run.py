@@ -81,6 +81,29 @@ def _predict(surrogate, cands: ObjectCandidates, design, rho: float):
     return np.asarray(pred.success_score, dtype=float), np.asarray(pred.success, dtype=bool)
 
 
+def _job(
+    cands: ObjectCandidates,
+    k: int,
+    design,
+    config: EvalConfig,
+    scenario,
+    rho: float,
+    impulse: float,
+    label: str,
+) -> GraspJob:
+    """The grasp of candidate ``k`` with ``design`` at density ``rho`` under ``impulse`` [N s]."""
+    return GraspJob(
+        obj=cands.obj,
+        pose=cands.poses[k],
+        design=design,
+        finger_model=config.model,
+        scenario=dataclasses.replace(scenario, impulse=impulse),
+        density=rho,
+        seed=config.seed,
+        label=label,
+    )
+
+
 def _outcome_row(o: Outcome) -> dict:
     return {
         "success": bool(o.success),
@@ -132,17 +155,9 @@ def run_evaluation(
                         key = (ev.name, g.label, dens, k, imp)
                         if key not in job_of:
                             job_of[key] = len(jobs)
+                            label = f"{g.label}/{ev.name}/{dens}/{k}/{imp}"
                             jobs.append(
-                                GraspJob(
-                                    obj=cands.obj,
-                                    pose=cands.poses[k],
-                                    design=design,
-                                    finger_model=config.model,
-                                    scenario=dataclasses.replace(scenario, impulse=paper_impulse(imp)),
-                                    density=rho,
-                                    seed=config.seed,
-                                    label=f"{g.label}/{ev.name}/{dens}/{k}/{imp}",
-                                )
+                                _job(cands, k, design, config, scenario, rho, paper_impulse(imp), label)
                             )
                         rows.append(
                             {
@@ -219,16 +234,11 @@ def record_examples(
     jobs = []
     for r in picked:
         c = cands[r["object"]]
+        label = f"{r['design_label']}/{r['_tag']}/{r['object']}/{r['density']}"
+        design = Stiffness(r["design"])
         jobs.append(
-            GraspJob(
-                obj=c.obj,
-                pose=c.poses[r["candidate"]],
-                design=Stiffness(r["design"]),
-                finger_model=config.model,
-                scenario=dataclasses.replace(GraspScenario(), impulse=r["impulse_ns"]),
-                density=r["density_kg_m3"],
-                seed=config.seed,
-                label=f"{r['design_label']}/{r['_tag']}/{r['object']}/{r['density']}",
+            _job(
+                c, r["candidate"], design, config, GraspScenario(), r["density_kg_m3"], r["impulse_ns"], label
             )
         )
     if jobs:
