@@ -63,6 +63,11 @@ _MIN_TRIES = 64  # candidates tried at most, at least (large objects accept few:
 # pairs for 50 poses), up to this many fresh sets of samples are drawn, seeded seed + k * step.
 _EXTRA_POOLS = 4
 _POOL_SEED_STEP = 1_000_003
+# Where the pass above accepts fewer than asked, the fallback (_fallback) tries at most this many more
+# candidates, in rounds of _FALLBACK_ROUND.
+_FALLBACK_TRIES = 2048
+_FALLBACK_ROUND = 64
+_FALLBACK_POOLS = 8  # ... drawing up to this many more sets of surface samples than _EXTRA_POOLS
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -150,7 +155,10 @@ def sample_poses(
     samples, e.g. a partial point cloud from a camera; the refinement still uses the mesh. The
     candidates are drawn by prior score without replacement and refined in rounds, one numpy batch a
     round, until ``n`` distinct candidates are accepted or ``options.candidates_per_pose`` × ``n`` (at
-    least 64) have been tried. ``cache_dir`` keeps the object's signed-distance grid (:class:`ObjectSDF`).
+    least 64) have been tried; where fewer than ``n`` are accepted then, :func:`_fallback` tries the
+    pairs left and fresh samples' pairs (so the candidates of an object that gets ``n`` are those of
+    the pass alone). ``cache_dir`` keeps the object's signed-distance grid (:class:`ObjectSDF`).
+    :class:`PoseError` when no candidate is accepted, with every reason counted.
     """
     seed = check_seed(seed, error=PoseError)
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
@@ -201,28 +209,33 @@ def sample_poses(
         rate = got / tried if tried else _FIRST_RATE
         size = int(np.ceil(_ROUND_MARGIN * (n - got) / max(rate, _MIN_RATE)))
         pick = order[tried : tried + max(size, _MIN_ROUND)]
-        source = np.arange(tried, tried + len(pick))
-        tried += len(pick)
         T = _approach(obj, centre[pick], u[pick], design, options.top_fraction, rng)
-        T = augment_poses(T, options.augment, rng)
-        copies = options.augment + 1
-        parts.append(
-            refine_and_rank(
-                obj,
-                T,
-                np.repeat(prior[pick], copies),
-                design,
-                rejected,
-                source_index=np.repeat(source, copies),
-                copy_index=np.tile(np.arange(copies), len(pick)),
-                sdf=sdf,
-            )
+        parts.append(_refine_round(obj, T, prior[pick], tried, design, options, rng, rejected, sdf))
+        tried += len(pick)
+    got = len({int(x) for c in parts for x in c.source_index})
+    if got < n:  # the fallback: only where the pass above fell short, so it changes no other output
+        more = range(extra + 1, _EXTRA_POOLS + _FALLBACK_POOLS + 1) if points is None else range(0)
+        pools = [seed + _POOL_SEED_STEP * k for k in more]
+        pairs = _Pairs(centre, u, prior)
+        parts += _fallback(
+            obj, pairs, order[:tried], n - got, tried, pools, design, options, rng, rejected, sdf
         )
     out = Candidates.concat(parts)
     if len(out) == 0 and all(r == Rejection.PART_TOO_WIDE.value for _, _, r in out.refused):
         raise PoseError(
             f"object {obj.name} is too wide for the stroke: at every pose the part between the fingers "
             f"reaches past the {1000 * MAX_OPENING:.0f}-mm opening of a finger"
+        )
+    if len(out) == 0:  # every reason, exact: the pairs dropped before a pose, then every pose refused
+        dropped = (Rejection.FRICTION_CONE, Rejection.PAIR_TOO_WIDE, Rejection.STEEP_AXIS)
+        refused: dict[str, int] = {}
+        for _, _, r in out.refused:
+            refused[r] = refused.get(r, 0) + 1
+        raise PoseError(
+            f"object {obj.name}: no grasp candidate accepted. Contact pairs of the surface samples dropped: "
+            + ", ".join(f"{r.value} {rejected.get(r.value, 0)}" for r in dropped)
+            + f"; all {len(out.refused)} candidates from the other pairs refused: "
+            + ", ".join(f"{k} {v}" for k, v in sorted(refused.items(), key=lambda kv: -kv[1]))
         )
     out.rejected = dict(rejected)
     return out.head(n)
@@ -263,6 +276,68 @@ def _pool(obj, pts, nrm, sdf, design, rejected: dict[str, int]):
     prior = align * np.exp(-r_com / _COM_SCALE)
     prior = prior * np.where(can_side, 1.0, _TOP_ONLY_WEIGHT) * np.where(flat, 1.0, _STEEP_WEIGHT)
     return centre, u, prior, bool(np.any(steep))
+
+
+@dataclass(frozen=True)
+class _Pairs:
+    """The contact pairs of every pool drawn.
+
+    Centres (k, 3) [m, COM frame], closing axes (k, 3) and prior scores (k,).
+    """
+
+    centre: np.ndarray
+    u: np.ndarray
+    prior: np.ndarray
+
+
+def _refine_round(obj, T, prior, first, design, options, rng, rejected, sdf) -> Candidates:
+    """Refine-and-rank one round of palm poses (P, 4, 4) with their noisy copies; sources ``first``..."""
+    copies = options.augment + 1
+    T = augment_poses(T, options.augment, rng)
+    return refine_and_rank(
+        obj,
+        T,
+        np.repeat(prior, copies),
+        design,
+        rejected,
+        source_index=np.repeat(np.arange(first, first + len(prior)), copies),
+        copy_index=np.tile(np.arange(copies), len(prior)),
+        sdf=sdf,
+    )
+
+
+def _fallback(obj, pairs: _Pairs, done, need, first, pools, design, options, rng, rejected, sdf):
+    """More candidates where the regular pass accepted fewer than asked (``need`` more).
+
+    The pairs that pass never tried (``done``: those it tried), then the pairs of fresh sets of
+    surface samples (``pools``: their seeds; none for a point cloud), each set in random order (not
+    by prior: the prior favours pairs near the COM, where that pass has just failed) and approached
+    as that pass approaches them. On an object too wide as a whole, the pairs that fit the stroke are
+    far from the COM (the tab of 071_nine_hole_peg_test, a 073-g_lego_duplo brick's sides): low-prior,
+    past that pass's cap. At most ``_FALLBACK_TRIES`` candidates in all, in rounds of
+    ``_FALLBACK_ROUND``; their sources are numbered from ``first`` on.
+    """
+    parts: list[Candidates] = []
+    left = np.setdiff1d(np.arange(len(pairs.prior)), done)
+    order = rng.permutation(left)
+    tried = 0
+    pools = list(pools)
+    while tried < _FALLBACK_TRIES and len({int(x) for c in parts for x in c.source_index}) < need:
+        if len(order) == 0:
+            if not pools:
+                break
+            pts, nrm = _surface(obj, options.surface_samples, pools.pop(0))
+            pairs = _Pairs(*_pool(obj, pts, nrm, sdf, design, rejected)[:3])
+            order = rng.permutation(len(pairs.prior))
+            continue
+        pick, order = order[:_FALLBACK_ROUND], order[_FALLBACK_ROUND:]
+        pick = pick[: _FALLBACK_TRIES - tried]
+        T = _approach(obj, pairs.centre[pick], pairs.u[pick], design, options.top_fraction, rng)
+        parts.append(
+            _refine_round(obj, T, pairs.prior[pick], first + tried, design, options, rng, rejected, sdf)
+        )
+        tried += len(pick)
+    return parts
 
 
 def _count(rejected: dict[str, int], reason: Rejection, k: int) -> None:
