@@ -38,6 +38,7 @@ from mjcodesign.data import (
     sample_designs,
     summarize,
 )
+from mjcodesign.data.executors import cpu_count
 from mjcodesign.data.schema import SAMPLES, build_table, empty_columns
 from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
 from mjcodesign.errors import MjcodesignError
@@ -289,6 +290,22 @@ def test_two_workers_give_the_same_dataset(reference, config, work):
     _assert_same_dataset(reference, open_dataset(work / "two"))
 
 
+def test_one_core_gives_the_same_dataset(reference, config, work, monkeypatch):
+    """On one core ``--workers 1`` runs each task inline (elsewhere: a worker thread per core)."""
+    import importlib
+
+    from mjcodesign.data import executors
+
+    gen = importlib.import_module("mjcodesign.data.generate")  # the package's ``generate`` is the function
+
+    made = []
+    monkeypatch.setattr(gen, "cpu_count", lambda: 1)
+    monkeypatch.setattr(gen, "InlineExecutor", lambda *a: made.append(1) or executors.InlineExecutor(*a))
+    generate(config, work / "inline", workers=1, cache_dir=work / "cache")
+    assert made == [1]
+    _assert_same_dataset(reference, open_dataset(work / "inline"))
+
+
 _RUNNER = """
 import json, pickle, sys
 from mjcodesign.data import generate
@@ -353,7 +370,9 @@ def test_killed_runs_resume_to_the_same_dataset(reference, config, work):
             if sum(e["kind"] in ("object", "shard") for e in _events(log)) >= wait_for:
                 break
             time.sleep(0.01)
-        time.sleep(float(rng.uniform(0.0, 0.3)))
+        # A random moment within 0.1 s: the tasks left take about 1 s on 2 cores (events 0.04-0.3 s
+        # apart), so each killed run leaves work for the next and the test kills at least _KILLS times.
+        time.sleep(float(rng.uniform(0.0, 0.1)))
         killed = proc.poll() is None
         if killed:
             proc.send_signal(signal.SIGKILL)
@@ -365,7 +384,8 @@ def test_killed_runs_resume_to_the_same_dataset(reference, config, work):
             while _tagged_pids(tag) and time.monotonic() < deadline:
                 time.sleep(0.1)
             assert not _tagged_pids(tag), "pool workers outlived the killed driver"
-        runs.append((_events(log), killed, 2 * workers if workers > 1 else 1))
+        # Tasks in flight: twice the pool's workers, or (--workers 1) twice the worker threads.
+        runs.append((_events(log), killed, 2 * (workers if workers > 1 else cpu_count())))
     assert sum(r[1] for r in runs) >= _KILLS
     final = generate(config, out, workers=1, cache_dir=work / "cache")
     assert final["complete"]

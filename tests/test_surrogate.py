@@ -363,9 +363,10 @@ def test_bench_surrogate_times_every_case_on_a_tiny_network():
 
 
 def test_smoothness_rebuilds_either_tendon_drive_from_the_manifest():
+    from mjcodesign.surrogate.smoothness import _scenario
+
     from mjcodesign.data.config import _tendon_dict
     from mjcodesign.scenarios.drive import TendonForce, TendonPosition
-    from mjcodesign.surrogate.smoothness import _scenario
 
     keep = ("settle_s", "close_s", "tighten_s", "lift", "lift_s", "hold_s", "impulse", "post_hold_s", "lifted_fraction")
     for drive in (TendonForce(tension=7.0), TendonPosition(ticks=800.0)):

@@ -15,7 +15,7 @@ import os
 import sys
 from pathlib import Path
 
-from mjcodesign.cli.common import Parser, emit, quiet_warp, user_cache_dir
+from mjcodesign.cli.common import Parser, emit, int_at_least, quiet_warp, user_cache_dir
 
 __all__ = ["add_parser", "add_bench_parser", "run_datagen", "run_info", "run_bench", "datagen_config"]
 
@@ -93,6 +93,12 @@ def add_bench_parser(bench_subparsers) -> None:
     p.add_argument("--backend", choices=("mujoco", "mjwarp"), default="mujoco")
     p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--repeats",
+        type=int_at_least(1),
+        default=2,
+        help="raw and pipeline passes, alternated (fastest kept)",
+    )
     p.add_argument("--out", default=None, help="also write the JSON to this file")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=run_bench)
@@ -308,6 +314,7 @@ def run_bench(args: argparse.Namespace) -> int:
         device=device,
         seed=args.seed,
         cache_dir=user_cache_dir(),
+        repeats=args.repeats,
     )
     if args.out:
         from mjcodesign.bench import write_json

@@ -159,6 +159,10 @@ def run_train(args: argparse.Namespace) -> int:
                     bars[run] = progress.add_task(f"train {run}", total=args.epochs)
                 text = f"train {run}: loss {log.train_loss:.4f}, validation {log.val_loss:.4f}"
                 progress.update(bars[run], completed=log.epoch + 1, description=text)
+                if not console.is_terminal:  # a log file or pipe gets one line per epoch instead of the bar
+                    console.print(
+                        f"{text}, lr {log.lr:.3g}, {log.seconds:.0f} s{' (best)' if log.best else ''}"
+                    )
                 if args.tensorboard and run == "full":
                     if not boards:
                         boards.append(TensorBoardLog(args.tensorboard))

@@ -5,7 +5,8 @@ list of :class:`~mjcodesign.data.tasks.ShardTask`), runs at most :attr:`slots` a
 back finished ones with their result or exception. A process keeps one
 :class:`~mjcodesign.data.tasks.Worker` (objects, compiled scenes, simulator) for all its tasks.
 
-* :class:`InlineExecutor`: runs a task when it is submitted (``--workers 1``).
+* :class:`InlineExecutor`: runs a task when it is submitted (``--workers 1`` on MJWarp or one core).
+* :class:`ThreadExecutor`: a thread per core in this process (``--workers 1`` on MuJoCo C).
 * :class:`PoolExecutor`: ``concurrent.futures.ProcessPoolExecutor`` with the ``spawn`` context (no
   fork of a process holding MuJoCo's and Warp's threads); each worker runs ``cores // workers``
   MuJoCo threads and exits when its parent dies, so a killed run leaves no worker behind.
@@ -25,7 +26,7 @@ from collections.abc import Callable
 
 from mjcodesign.data.tasks import Worker
 
-__all__ = ["InlineExecutor", "PoolExecutor", "RayExecutor", "cpu_count", "execute"]
+__all__ = ["InlineExecutor", "PoolExecutor", "RayExecutor", "ThreadExecutor", "cpu_count", "execute"]
 
 _RAY_RETRIES = 3  # reruns of a task whose worker process died
 _PARENT_POLL_S = 0.5  # how often a pool worker checks that its parent is alive
@@ -75,6 +76,42 @@ class InlineExecutor:
 
     def close(self) -> None:  # noqa: D102
         pass
+
+
+class ThreadExecutor:
+    """``threads`` workers in this process, each with one MuJoCo thread (``--workers 1`` on MuJoCo C).
+
+    A rollout releases the GIL, so one worker's Python work (model copies, outcome replays) overlaps
+    another's rollout instead of leaving a core idle, as it does between the batches of one worker on
+    every core. Object preparation (Warp's SDF kernels) runs one task at a time. A shard's rows do not
+    depend on which worker runs it, so the dataset is the same as the other executors'.
+    """
+
+    def __init__(self, threads: int, device: str = "cpu", slots: int | None = None):
+        self.slots = slots or 2 * threads
+        self.device = device
+        self._local = threading.local()
+        self._prepare = threading.Lock()
+        self.pool = cf.ThreadPoolExecutor(max_workers=threads, thread_name_prefix="datagen")
+
+    def _run(self, kind: str, payload):
+        worker = getattr(self._local, "worker", None)
+        if worker is None:
+            worker = self._local.worker = Worker(nthread=1, device=self.device)
+        if kind == "prepare":
+            with self._prepare:
+                return execute(kind, payload, worker)
+        return execute(kind, payload, worker)
+
+    def submit(self, kind: str, payload) -> cf.Future:  # noqa: D102
+        return self.pool.submit(self._run, kind, payload)
+
+    def wait(self, handles: list) -> list[tuple[object, object, BaseException | None]]:  # noqa: D102
+        done, _ = cf.wait(handles, return_when=cf.FIRST_COMPLETED)
+        return [(f, None if f.exception() else f.result(), f.exception()) for f in done]
+
+    def close(self) -> None:  # noqa: D102
+        self.pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _init_pool_worker(nthread: int, device: str, setup: Callable[[], None] | None, parent: int) -> None:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mjcodesign.data.config import DatagenConfig
-from mjcodesign.data.executors import InlineExecutor, PoolExecutor, RayExecutor, cpu_count
+from mjcodesign.data.executors import InlineExecutor, PoolExecutor, RayExecutor, ThreadExecutor, cpu_count
 from mjcodesign.data.store import DatasetDir
 from mjcodesign.data.tasks import ObjectTask, ShardTask
 from mjcodesign.errors import DesignError, MjcodesignError
@@ -68,7 +68,8 @@ def generate(
 ) -> dict:
     """Generate (or continue) the dataset ``config`` in ``out``; a summary of the folder and this run.
 
-    ``workers``: 1 runs in this process; more runs a spawned process pool. ``ray``: ``"local"`` or a
+    ``workers``: 1 runs in this process (MuJoCo C: a worker thread per core); more runs a spawned
+    process pool. ``ray``: ``"local"`` or a
     cluster address, instead of the pool. ``device``: MJWarp's Warp device. ``cache_dir``: CoACD's cache.
     ``slots``: tasks in flight (default twice the workers or CPUs). ``worker_setup``: a picklable
     function every worker process runs first (e.g. quieting Warp's log). ``command``: recorded in the
@@ -83,7 +84,7 @@ def generate(
     t0 = time.perf_counter()
     ds = DatasetDir.open(out, config, run_info)
     try:
-        executor = _executor(workers, ray, device, worker_setup, slots)
+        executor = _executor(workers, ray, device, worker_setup, slots, config.backend)
         try:
             computed = _Scheduler(ds, config, executor, str(cache_dir) if cache_dir else None, emit).run()
         finally:
@@ -107,11 +108,16 @@ def generate(
     }
 
 
-def _executor(workers, ray, device, setup, slots):
+def _executor(workers, ray, device, setup, slots, backend):
     if ray is not None:
         return RayExecutor(ray, num_cpus=cpu_count(), device=device, setup=setup, slots=slots)
     if workers == 1:
-        return InlineExecutor(device)
+        cores = cpu_count()
+        return (
+            ThreadExecutor(cores, device, slots)
+            if backend == "mujoco" and cores > 1
+            else InlineExecutor(device)
+        )
     return PoolExecutor(workers, device=device, setup=setup, slots=slots)
 
 

@@ -19,6 +19,7 @@ All lengths are metres.
 from __future__ import annotations
 
 import enum
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -143,7 +144,7 @@ class Block:
         hi = np.c_[p[:, 0], np.full(len(p), half), p[:, 1]]
         return np.vstack([lo, hi])
 
-    @property
+    @functools.cached_property  # a frozen block: computed once (model copies read it per design)
     def volume(self) -> float:
         """Volume [m^3] (side-profile area times width)."""
         p = self.side_profile()

@@ -27,7 +27,7 @@ from mjcodesign.design.calibration import block_compliance, calibration_for
 from mjcodesign.design.finger import Block, BlockKind, FingerDesign
 from mjcodesign.models.types import CONTYPE_FINGER, CONTYPE_WORLD, FingerHandle, FingerModel, SimOptions
 
-__all__ = ["add_chain_finger", "hinge_stiffness", "hinge_axes", "contact_solref"]
+__all__ = ["add_chain_finger", "hinge_stiffness", "hinge_axes", "contact_solref", "contact_solrefs"]
 
 # Contact stiffness of a block face: a flat punch of the block's width, k_c = E w (N/m), and a
 # time constant from the block's mass, tau = 2 pi sqrt(m / k_c), floored at MuJoCo's stable 2 dt.
@@ -63,6 +63,14 @@ def contact_solref(block: Block, young: float, density: float, timestep: float) 
     mass = block.volume * density
     tau = 2.0 * np.pi * np.sqrt(mass / k_c)
     return (max(float(tau), 2.0 * timestep), _CONTACT_DAMPRATIO)
+
+
+def contact_solrefs(blocks: list[Block], young: np.ndarray, density: float, timestep: float) -> np.ndarray:
+    """:func:`contact_solref` of every block at once, shape (n_blocks, 2); equal to it bit for bit."""
+    k_c = np.asarray(young, dtype=float) * np.array([b.width for b in blocks])
+    mass = np.array([b.volume for b in blocks]) * density
+    tau = 2.0 * np.pi * np.sqrt(mass / k_c)
+    return np.column_stack([np.maximum(tau, 2.0 * timestep), np.full(len(blocks), _CONTACT_DAMPRATIO)])
 
 
 def _neutral_axis(block: Block) -> float:

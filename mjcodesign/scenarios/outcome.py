@@ -129,19 +129,26 @@ def finger_wrench(
     if d.ncon == 0:
         return wrench, False, False
     con = d.contact
-    g1, g2 = np.asarray(con.geom1), np.asarray(con.geom2)
-    # A flex side of a contact has geom -1 and its flex id in con.flex; every flex is a finger.
-    flex = np.asarray(con.flex).reshape(-1, 2)
-    b1 = np.where(g1 >= 0, m.geom_bodyid[g1], -1)
-    b2 = np.where(g2 >= 0, m.geom_bodyid[g2], -1)
-    on_obj = (b1 == ob) | (b2 == ob)
-    ground = bool(np.any(on_obj & ((g1 == scene.ground_geom) | (g2 == scene.ground_geom))))
-    other = np.where(b1 == ob, b2, b1)
-    other_flex = np.where(b1 == ob, flex[:, 1], flex[:, 0])
-    finger = (other_flex >= 0) | ((other >= 0) & scene.finger_mask[np.maximum(other, 0)])
-    sel = np.flatnonzero(on_obj & finger)
-    if sel.size == 0 or not forces:
-        return wrench, sel.size > 0, ground
+    # Per contact, its side away from the object: geom, body and flex (a flex side has geom -1 and
+    # its flex id in con.flex; every flex is a finger). Plain Python: ~10 contacts, called per replay.
+    geoms, flexes, bodyid, mask = con.geom.tolist(), con.flex.tolist(), m.geom_bodyid, scene.finger_mask
+    ground, sel, b2 = False, [], []
+    for i, ((g1, g2), (f1, f2)) in enumerate(zip(geoms, flexes, strict=True)):
+        b1_ = int(bodyid[g1]) if g1 >= 0 else -1
+        b2_ = int(bodyid[g2]) if g2 >= 0 else -1
+        if b1_ == ob:
+            g, b, f = g2, b2_, f2
+        elif b2_ == ob:
+            g, b, f = g1, b1_, f1
+        else:
+            continue
+        ground = ground or g == scene.ground_geom
+        if f >= 0 or (b >= 0 and mask[b]):
+            sel.append(i)
+            b2.append(b2_)
+    if not sel or not forces:
+        return wrench, bool(sel), ground
+    sel, b2 = np.array(sel), np.array(b2)
     f6 = np.zeros(6)
     local = np.empty((sel.size, 6))
     for k, i in enumerate(sel):
@@ -149,7 +156,7 @@ def finger_wrench(
         local[k] = f6
     # mj_contactForce gives the force of geom1 on geom2 in the contact frame (rows = axes).
     frames = np.asarray(con.frame)[sel].reshape(-1, 3, 3)
-    sign = np.where(b2[sel] == ob, 1.0, -1.0)[:, None]
+    sign = np.where(b2 == ob, 1.0, -1.0)[:, None]
     F = sign * np.einsum("kji,kj->ki", frames, local[:, :3])
     T = sign * np.einsum("kji,kj->ki", frames, local[:, 3:])
     r = np.asarray(con.pos)[sel] - d.xipos[ob]

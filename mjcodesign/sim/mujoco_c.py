@@ -8,6 +8,7 @@ import functools
 import os
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 
 import mujoco
@@ -18,7 +19,7 @@ from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import SimulationDiverged
 from mjcodesign.models.builder import make_data
-from mjcodesign.models.chain import contact_solref, hinge_stiffness
+from mjcodesign.models.chain import contact_solrefs, hinge_stiffness
 from mjcodesign.models.simulate import captured_warnings, check_state, has_warning, reset_warnings
 from mjcodesign.models.types import GripperPose
 from mjcodesign.scenarios.grasp import (
@@ -53,42 +54,56 @@ def with_stiffness(scene: GraspScene, stiffness: Stiffness) -> mujoco.MjModel:
     the design's cell modulus (:func:`mjcodesign.models.flex.rescale_cell_young`; equal to a recompile
     to round-off, tested).
     """
+    return _stiffness_writer(scene)(stiffness)
+
+
+def _stiffness_writer(scene: GraspScene) -> Callable[[Stiffness], mujoco.MjModel]:
+    """:func:`with_stiffness` for many designs of one scene: the ids are looked up once."""
     built = scene.built
-    m = copy.copy(scene.model)
     if built.finger_model.is_flex:
         from mjcodesign.models.flex import rescale_cell_young
 
-        for h, young in zip(built.fingers, stiffness.young, strict=True):
-            rescale_cell_young(m, h, built.design, young, built.options)
-        return m
+        def flex(stiffness: Stiffness) -> mujoco.MjModel:
+            m = copy.copy(scene.model)
+            for h, young in zip(built.fingers, stiffness.young, strict=True):
+                rescale_cell_young(m, h, built.design, young, built.options)
+            return m
+
+        return flex
     design, opts = built.design, built.options
-    blocks = _blocks(design)
+    blocks = list(_blocks(design))
     ids = _chain_ids(scene)
-    for i, young in enumerate(stiffness.young):
-        k = hinge_stiffness(design, young, opts.stiffness_model)
-        for j, (blk, e) in enumerate(zip(blocks, young, strict=True)):
-            jid, gids = ids[i][j]
-            m.jnt_stiffness[jid] = k[j]
-            m.dof_damping[m.jnt_dofadr[jid]] = opts.damping_time * k[j]
-            solref = contact_solref(blk, float(e), design.density, opts.timestep)
-            for gid in gids:
-                m.geom_solref[gid] = solref
-    return m
+
+    def chain(stiffness: Stiffness) -> mujoco.MjModel:
+        m = copy.copy(scene.model)
+        for (jids, dofs, gids, owner), young in zip(ids, stiffness.young, strict=True):
+            k = hinge_stiffness(design, young, opts.stiffness_model)
+            m.jnt_stiffness[jids] = k
+            m.dof_damping[dofs] = opts.damping_time * k
+            m.geom_solref[gids] = contact_solrefs(blocks, young, design.density, opts.timestep)[owner]
+        return m
+
+    return chain
 
 
-def _chain_ids(scene: GraspScene) -> list[list[tuple[int, list[int]]]]:
-    """Per finger, per block: (hinge joint id, ids of the geoms carrying the block's contact solref)."""
+def _chain_ids(scene: GraspScene) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Per finger: (hinge joint ids, their dofs, the geoms carrying a block's solref, each one's block).
+
+    One hinge per block; a block has one or two geoms (its proximal and distal pieces).
+    """
     m = scene.model
     out = []
     for h in scene.built.fingers:
-        rows = []
+        jids, gids, owner = [], [], []
         for j, name in enumerate(h.joints):
-            gids = [
-                mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"{h.prefix}b{j}_{part}")
-                for part in ("p", "d")
-            ]
-            rows.append((mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name), [g for g in gids if g >= 0]))
-        out.append(rows)
+            jids.append(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name))
+            for part in ("p", "d"):
+                g = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"{h.prefix}b{j}_{part}")
+                if g >= 0:
+                    gids.append(g)
+                    owner.append(j)
+        jids = np.array(jids)
+        out.append((jids, m.jnt_dofadr[jids].copy(), np.array(gids, dtype=int), np.array(owner, dtype=int)))
     return out
 
 
@@ -222,8 +237,9 @@ class MujocoBackend:
         receives every rollout, labelled ``labels[i]`` (default ``design{i}``).
         """
         labels = labels or [f"design{i}" for i in range(len(stiffnesses))]
-        scenes = [scene_with_design(scene, s) for s in stiffnesses]
-        return self.run_scenes(scenes, scenario, observer=observer, labels=labels)
+        write = _stiffness_writer(scene)
+        scenes = [_scene_with(scene, write(s), s) for s in stiffnesses]
+        return self._run_scenes(scenes, scenario, observer, labels, same_start=True)
 
     def run_poses(
         self,
@@ -261,24 +277,39 @@ class MujocoBackend:
         evaluated on ``nthread`` threads; MuJoCo releases the GIL in ``mj_forward``. ``observer``
         receives every rollout, labelled ``labels[i]`` (default ``scene{i}``).
         """
-        labels = labels or [f"scene{i}" for i in range(len(scenes))]
+        return self._run_scenes(
+            scenes, scenario, observer, labels or [f"scene{i}" for i in range(len(scenes))]
+        )
+
+    def _run_scenes(self, scenes, scenario, observer, labels, *, same_start: bool = False) -> list[Outcome]:
+        """:meth:`run_scenes`, with ``same_start`` when the scenes differ only in stiffness.
+
+        Then (:meth:`run_batch`) they share one initial state and one control sequence (neither
+        depends on stiffness), made once and broadcast by ``mujoco.rollout``.
+        """
         t0 = time.perf_counter()
         scenes = [drive_scene(sc, scenario) for sc in scenes]
-        plans: dict[tuple, tuple[np.ndarray, dict[str, int], np.ndarray]] = {}
-        for sc in scenes:  # designs of one pose share their controls and initial state
-            key = (id(sc.built), sc.pose)
-            if key not in plans:
-                plans[key] = (*phase_controls(sc, scenario), initial_state(sc))
-        rows = [plans[(id(sc.built), sc.pose)] for sc in scenes]
-        starts = rows[0][1]
-        ctrl = np.stack([c for c, _, _ in rows])
-        x0 = np.stack([x for _, _, x in rows])
+        n = len(scenes)
+        if same_start:  # one control sequence and initial state, which mujoco.rollout broadcasts
+            c0, starts = phase_controls(scenes[0], scenario)
+            ctrl_in, x0_in = c0[None], initial_state(scenes[0])[None]
+            ctrl, x0 = np.broadcast_to(ctrl_in, (n, *c0.shape)), np.broadcast_to(x0_in, (n, x0_in.shape[1]))
+        else:
+            plans: dict[tuple, tuple[np.ndarray, dict[str, int], np.ndarray]] = {}
+            for sc in scenes:  # designs of one pose share their controls and initial state
+                key = (id(sc.built), sc.pose)
+                if key not in plans:
+                    plans[key] = (*phase_controls(sc, scenario), initial_state(sc))
+            rows = [plans[(id(sc.built), sc.pose)] for sc in scenes]
+            starts = rows[0][1]
+            ctrl_in = ctrl = np.stack([c for c, _, _ in rows])
+            x0_in = x0 = np.stack([x for _, _, x in rows])
         models = [sc.model for sc in scenes]
-        datas = [mujoco.MjData(models[0]) for _ in range(min(self.nthread, len(models)))]
+        datas = [mujoco.MjData(models[0]) for _ in range(min(self.nthread, n))]
         for d in datas:
             reset_warnings(d)
         with captured_warnings() as printed:
-            states, sensors = mj_rollout.rollout(models, datas, x0, ctrl, control_spec=control_spec())
+            states, sensors = mj_rollout.rollout(models, datas, x0_in, ctrl_in, control_spec=control_spec())
         bad = _diverged(states, x0, models[0].opt.timestep)
         warned = bool(printed)
         for d in datas:
@@ -372,7 +403,10 @@ def scene_with_design(scene: GraspScene, stiffness: Stiffness) -> GraspScene:
 
     The ``built`` names that model and design, so an observer colours the rollout by the design that ran.
     """
-    m = with_stiffness(scene, stiffness)
+    return _scene_with(scene, with_stiffness(scene, stiffness), stiffness)
+
+
+def _scene_with(scene: GraspScene, m: mujoco.MjModel, stiffness: Stiffness) -> GraspScene:
     other = copy.copy(scene)
     other.built = dataclasses.replace(scene.built, model=m, stiffness=stiffness)
     other.model = m
