@@ -61,10 +61,17 @@ def test_batched_rollout_equals_single_bitwise(box_scene):
     assert_array_equal(outs[1].body_force, soft.body_force)
 
 
-def test_with_stiffness_equals_recompile(box_scene):
-    soft = Stiffness.preset("soft")
-    m = with_stiffness(box_scene, soft)
-    ref = build_scene(box_scene.obj, FingerDesign(), soft, FingerModel.CHAIN, box_scene.pose).model
+_ALTERNATING = ",".join(["14", "17"] * 11)  # soft segments, stiff flexures (and the reverse on finger B)
+
+
+@pytest.mark.parametrize(
+    "text", ["soft", "semi-rigid", "random:3", "random:11", _ALTERNATING, ",".join(["17", "14"] * 11)]
+)
+def test_with_stiffness_equals_recompile(box_scene, text):
+    """Across the design space: presets, random designs, the extreme alternating ones."""
+    design = Stiffness.parse(text)
+    m = with_stiffness(box_scene, design)
+    ref = build_scene(box_scene.obj, FingerDesign(), design, FingerModel.CHAIN, box_scene.pose).model
     for name in ("jnt_stiffness", "dof_damping", "geom_solref", "body_mass", "body_inertia"):
         assert_array_equal(getattr(m, name), getattr(ref, name), err_msg=name)
 
