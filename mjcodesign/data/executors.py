@@ -23,6 +23,7 @@ import os
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures.process import BrokenProcessPool
 
 from mjcodesign.data.tasks import Worker
 
@@ -78,6 +79,18 @@ class InlineExecutor:
         pass
 
 
+def _wait_futures(handles: list) -> list[tuple[object, object, BaseException | None]]:
+    """The futures that finished first, as (future, result, error); a broken process pool is raised."""
+    done, _ = cf.wait(handles, return_when=cf.FIRST_COMPLETED)
+    out = []
+    for f in done:
+        err = f.exception()
+        if isinstance(err, BrokenProcessPool):
+            raise err
+        out.append((f, None if err else f.result(), err))
+    return out
+
+
 class ThreadExecutor:
     """``threads`` workers in this process, each with one MuJoCo thread (``--workers 1`` on MuJoCo C).
 
@@ -107,8 +120,7 @@ class ThreadExecutor:
         return self.pool.submit(self._run, kind, payload)
 
     def wait(self, handles: list) -> list[tuple[object, object, BaseException | None]]:  # noqa: D102
-        done, _ = cf.wait(handles, return_when=cf.FIRST_COMPLETED)
-        return [(f, None if f.exception() else f.result(), f.exception()) for f in done]
+        return _wait_futures(handles)
 
     def close(self) -> None:  # noqa: D102
         self.pool.shutdown(wait=True, cancel_futures=True)
@@ -156,14 +168,7 @@ class PoolExecutor:
         return self.pool.submit(_pool_task, kind, payload)
 
     def wait(self, handles: list) -> list[tuple[object, object, BaseException | None]]:  # noqa: D102
-        done, _ = cf.wait(handles, return_when=cf.FIRST_COMPLETED)
-        out = []
-        for f in done:
-            err = f.exception()
-            if isinstance(err, cf.process.BrokenProcessPool):
-                raise err
-            out.append((f, None if err else f.result(), err))
-        return out
+        return _wait_futures(handles)
 
     def close(self) -> None:  # noqa: D102
         self.pool.shutdown(wait=True, cancel_futures=True)

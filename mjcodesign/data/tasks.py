@@ -180,9 +180,7 @@ class Worker:
             obj, c.poses_per_object, seed=object_pose_seed(c.seed, task.index), design=c.geometry
         )
         t_pose = time.perf_counter() - t0
-        if len(cands) == 0:
-            top = sorted(cands.rejected.items(), key=lambda kv: -kv[1])[:3]
-            raise PoseError(f"no grasp pose accepted ({', '.join(f'{k} {v}' for k, v in top)})")
+        # sample_poses raises PoseError (every reason counted) when it accepts no candidate.
         cols = empty_columns(POSES)
         dropped: dict[str, str] = {}
         t0 = time.perf_counter()

@@ -27,7 +27,7 @@ from mjcodesign.design.calibration import block_compliance, calibration_for
 from mjcodesign.design.finger import Block, BlockKind, FingerDesign
 from mjcodesign.models.types import CONTYPE_FINGER, CONTYPE_WORLD, FingerHandle, FingerModel, SimOptions
 
-__all__ = ["add_chain_finger", "hinge_stiffness", "hinge_axes", "contact_solref", "contact_solrefs"]
+__all__ = ["add_chain_finger", "hinge_stiffness", "hinge_axes", "contact_solrefs"]
 
 # Contact stiffness of a block face: a flat punch of the block's width, k_c = E w (N/m), and a
 # time constant from the block's mass, tau = 2 pi sqrt(m / k_c), floored at MuJoCo's stable 2 dt.
@@ -57,16 +57,8 @@ def hinge_axes(design: FingerDesign, model: str = "fem") -> np.ndarray:
     return np.array([_neutral_axis(b) for b in design.blocks()])
 
 
-def contact_solref(block: Block, young: float, density: float, timestep: float) -> tuple[float, float]:
-    """(time constant [s], damping ratio) of a block's contacts from its Young's modulus."""
-    k_c = young * block.width
-    mass = block.volume * density
-    tau = 2.0 * np.pi * np.sqrt(mass / k_c)
-    return (max(float(tau), 2.0 * timestep), _CONTACT_DAMPRATIO)
-
-
 def contact_solrefs(blocks: list[Block], young: np.ndarray, density: float, timestep: float) -> np.ndarray:
-    """:func:`contact_solref` of every block at once, shape (n_blocks, 2); equal to it bit for bit."""
+    """(time constant [s], damping ratio) of every block's contacts from its modulus, shape (n_blocks, 2)."""
     k_c = np.asarray(young, dtype=float) * np.array([b.width for b in blocks])
     mass = np.array([b.volume for b in blocks]) * density
     tau = 2.0 * np.pi * np.sqrt(mass / k_c)
@@ -143,10 +135,8 @@ class _ChainBuilder:
 
     def __post_init__(self) -> None:
         self.blocks = self.design.blocks()
-        self.solrefs = [
-            contact_solref(b, e, self.design.density, self.options.timestep)
-            for b, e in zip(self.blocks, self.young, strict=True)
-        ]
+        rows = contact_solrefs(self.blocks, self.young, self.design.density, self.options.timestep)
+        self.solrefs = [(float(tau), float(ratio)) for tau, ratio in rows]
 
     def piece(self, body, i: int, a: float, b: float, origin: float, end: str) -> None:
         """Block ``i``'s piece between x=a and x=b on ``body`` (frame at x=origin); ``end`` is p or d."""

@@ -49,7 +49,7 @@ def with_stiffness(scene: GraspScene, stiffness: Stiffness) -> mujoco.MjModel:
 
     Chain: hinge stiffness (:func:`mjcodesign.models.chain.hinge_stiffness` under the scene's stiffness
     model, ~0.1 ms a finger for the FEM calibration), damping ``damping_time`` k and the blocks' contact
-    solref (:func:`mjcodesign.models.chain.contact_solref`) are rewritten instead of a recompile; the
+    solref (:func:`mjcodesign.models.chain.contact_solrefs`) are rewritten instead of a recompile; the
     test checks they equal a recompiled model bitwise. Flex: each cell's stiffness record is rescaled to
     the design's cell modulus (:func:`mjcodesign.models.flex.rescale_cell_young`; equal to a recompile
     to round-off, tested).
