@@ -232,7 +232,15 @@ def test_desktop_view_binds_loopback_only(tmp_path, fake_display):
         proc.send_signal(signal.SIGINT)  # view closes its viewer and returns 130
         code = proc.wait(timeout=30)
     assert code == 130, proc.stderr.read()
-    assert not _sockets_on(port)  # the viewer went with it
+    left = _sockets_on(port)  # the viewer went with it; if not, name who still holds the port
+    assert not left, {pid: _cmdline(pid) for pid in _pids_holding(left)} or left
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_text().replace("\0", " ")[:200]
+    except OSError:
+        return "(gone)"
 
 
 def test_spawn_starts_a_viewer_bound_to_loopback_only(tmp_path, fake_display):
