@@ -6,6 +6,7 @@ thread: the point is the pipeline's behaviour, not accuracy (docs/benchmarks.md 
 """
 
 import argparse
+import dataclasses
 import importlib
 import json
 import subprocess
@@ -32,7 +33,7 @@ from mjcodesign.surrogate import (
     train,
 )
 from mjcodesign.surrogate.data import GraspDataset, pose_batches
-from mjcodesign.surrogate.train import grasp_loss
+from mjcodesign.surrogate.train import PRECISIONS, grasp_loss
 from numpy.testing import assert_array_equal
 
 from mjcodesign.cli import surrogate as cli_surrogate
@@ -53,6 +54,7 @@ _TRAIN = TrainConfig(
 _TRAIN_FALL = 0.7  # training loss after / before training (mean over the training samples)
 _FD_STEP = 1e-6  # [ln E] central differences of a float64 network
 _TOL_FD = 1e-5  # relative: float64 central differences, O(h²) error and round-off ~1e-10 / h
+_TOL_F32 = 1e-5  # one function summed in another order in float32 (eps 1.2e-7, sums of 128 terms)
 # The success rule read off the simulator's own outputs against its flag: the rule differs from the
 # simulator's only in where the rise is measured from (start of the lift, not t = 0) and in the
 # force threshold (half the weight, not 1e-6 N).
@@ -237,6 +239,50 @@ def test_design_gradient_equals_finite_differences(data, trained):
     assert g.loss == pytest.approx(g.rows.sum()) and len(g.rows) == len(batch)
 
 
+def test_pointnet_as_a_matrix_product_is_the_convolution():
+    torch.manual_seed(3)
+    net = GraspNet(ModelConfig(point_widths=(64, 128, 128), hidden=8, depth=1, penultimate=4)).pointnet
+    clouds = torch.randn(5, 3, 256)
+    direct = net.net(clouds).amax(dim=2)  # the authors' form: Conv1d layers over (P, 3, N)
+    np.testing.assert_allclose(
+        net(clouds).detach().numpy(), direct.detach().numpy(), rtol=_TOL_F32, atol=_TOL_F32
+    )
+
+
+def test_dropout_keeps_1_minus_p_and_the_mean_and_is_off_in_eval():
+    drop = GraspNet(ModelConfig(hidden=8, depth=1, penultimate=4, dropout=0.3)).mlp[3]
+    x = torch.ones(1000, 1000)
+    drop.train()
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(0)
+        y = drop(x)
+    kept = float((y > 0).float().mean())
+    # 1e6 Bernoulli(0.7) draws: the standard error of the kept fraction is 4.6e-4.
+    assert abs(kept - 0.7) < 5e-3, kept
+    np.testing.assert_allclose(np.unique(y.numpy()), [0.0, 1 / 0.7], rtol=1e-6)
+    assert abs(float(y.mean()) - 1.0) < 1e-2
+    drop.eval()
+    assert drop(x) is x
+
+
+def test_bf16_training_learns_and_is_deterministic(data):
+    parts = split(data, "random", seed=0)
+    cfg = dataclasses.replace(_TRAIN, epochs=15, precision="bf16")
+    a, b = train(data, parts, cfg, _TINY), train(data, parts, cfg, _TINY)
+    assert [h.val_loss for h in a.history] == [h.val_loss for h in b.history]
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(cfg.seed)
+        untrained = GraspNet(_TINY)
+    seen = GraspDataset(data, parts.train, a.normalizer)
+    fit = _sample_losses(a.model, seen).mean() / _sample_losses(untrained, seen).mean()
+    assert fit < _TRAIN_FALL, fit
+    assert all(v.dtype == torch.float32 for v in a.model.state_dict().values() if v.is_floating_point())
+
+
+def test_precision_choices_of_the_command_are_the_library_s():
+    assert cli_surrogate._PRECISIONS == PRECISIONS
+
+
 # -- commands --------------------------------------------------------------------------------------
 
 
@@ -368,7 +414,17 @@ def test_smoothness_rebuilds_either_tendon_drive_from_the_manifest():
     from mjcodesign.data.config import _tendon_dict
     from mjcodesign.scenarios.drive import TendonForce, TendonPosition
 
-    keep = ("settle_s", "close_s", "tighten_s", "lift", "lift_s", "hold_s", "impulse", "post_hold_s", "lifted_fraction")
+    keep = (
+        "settle_s",
+        "close_s",
+        "tighten_s",
+        "lift",
+        "lift_s",
+        "hold_s",
+        "impulse",
+        "post_hold_s",
+        "lifted_fraction",
+    )
     for drive in (TendonForce(tension=7.0), TendonPosition(ticks=800.0)):
         sc = GraspScenario(tendon=drive)
         manifest = {"config": {"tendon": _tendon_dict(drive), "scenario": {k: getattr(sc, k) for k in keep}}}
