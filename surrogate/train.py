@@ -29,6 +29,7 @@ from mjcodesign.surrogate.data import (
     GraspDataset,
     Normalizer,
     Split,
+    TrainBatch,
     pose_batches,
 )
 from mjcodesign.surrogate.model import GraspNet, ModelConfig
@@ -47,7 +48,9 @@ __all__ = [
     "TrainResult",
     "evaluate_loss",
     "grasp_loss",
+    "make_optimizer",
     "train",
+    "train_step",
 ]
 
 
@@ -200,10 +203,10 @@ def train(
     return result
 
 
-def _fit(model, train_set, val_set, cfg: TrainConfig, rng, result: TrainResult, on_epoch) -> None:
-    o = cfg.optimizer
+def make_optimizer(model: GraspNet, o: OptimizerConfig) -> torch.optim.AdamW:
+    """AdamW over the network, the PointNet (and its feature scale) at ``o.pointnet_lr_factor``."""
     point = list(model.pointnet.parameters()) + [model.pc_scale]
-    opt = torch.optim.AdamW(
+    return torch.optim.AdamW(
         [
             {"params": point, "lr": o.lr * o.pointnet_lr_factor},
             {"params": list(model.mlp.parameters()), "lr": o.lr},
@@ -211,6 +214,26 @@ def _fit(model, train_set, val_set, cfg: TrainConfig, rng, result: TrainResult, 
         weight_decay=o.weight_decay,
         fused=True,  # one kernel per step on the CPU (15 ms of a 210-ms step here in the foreach form)
     )
+
+
+def train_step(model: GraspNet, opt: torch.optim.Optimizer, b: TrainBatch, precision: str = "fp32") -> float:
+    """One optimiser step on batch ``b`` (model in train mode); returns the batch's loss.
+
+    ``bf16``: the forward (and so the backward) under CPU autocast in bfloat16; the loss is taken in
+    float32 and the weights stay float32.
+    """
+    with torch.autocast("cpu", dtype=torch.bfloat16, enabled=precision == "bf16"):
+        pred = model(b.clouds, b.pose_of, b.x)
+    loss = grasp_loss(pred.float(), b.y)
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    opt.step()
+    return loss.item()
+
+
+def _fit(model, train_set, val_set, cfg: TrainConfig, rng, result: TrainResult, on_epoch) -> None:
+    o = cfg.optimizer
+    opt = make_optimizer(model, o)
     sched = torch.optim.lr_scheduler.ReduceLROnPlateau(
         opt, mode="min", factor=o.plateau_factor, patience=o.plateau_patience
     )
@@ -221,14 +244,8 @@ def _fit(model, train_set, val_set, cfg: TrainConfig, rng, result: TrainResult, 
         model.train()
         total, n = 0.0, 0
         for idx in pose_batches(train_set.pose, cfg.batch_size, rng, cfg.pose_group):
-            b = train_set.__getitems__(idx)
-            with torch.autocast("cpu", dtype=torch.bfloat16, enabled=cfg.precision == "bf16"):
-                pred = model(b.clouds, b.pose_of, b.x)
-            loss = grasp_loss(pred.float(), b.y)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            total += loss.item() * len(idx)
+            loss = train_step(model, opt, train_set.__getitems__(idx), cfg.precision)
+            total += loss * len(idx)
             n += len(idx)
         val = evaluate_loss(model, val_set)
         sched.step(val)

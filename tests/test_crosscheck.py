@@ -123,3 +123,35 @@ def test_crosscheck_cli_refuses_a_reversed_sweep(capsys):
     )
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "below the first" in err[0]
+
+
+def test_grasp_study_case_selection():
+    from mjcodesign.cli.crosscheck import select_cases
+    from mjcodesign.crosscheck import GRASP_CASES
+
+    assert select_cases(GRASP_CASES, "3") == GRASP_CASES[:3]
+    assert select_cases(GRASP_CASES, "12:24") == GRASP_CASES[12:]
+    assert select_cases(GRASP_CASES, "20,2") == (GRASP_CASES[20], GRASP_CASES[2])
+    for bad in ("x", "1,99", "5:5", "-1,2", "1:b"):
+        with pytest.raises(DesignError):
+            select_cases(GRASP_CASES, bad)
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["--cases", "1,99"], "--cases indices"),
+        (["--cases", "two"], "--cases takes"),
+        (["--fem-contact-ke", "-5"], "--fem-contact-ke"),
+    ],
+)
+def test_grasp_study_cli_refuses_bad_selection_before_simulating(capsys, argv, says):
+    from mjcodesign.cli.main import main
+
+    try:
+        code = main(["crosscheck", "--scenario", "grasp", "--models", "chain,fem", *argv])
+    except SystemExit as exc:  # argparse's own refusal
+        code = exc.code
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and says in err[0], err

@@ -8,8 +8,10 @@ alternately, so that a busy machine slows both alike):
   per pose; inputs normalised, outputs de-normalised, the success score), samples/s; target ≥ 90 %
   of the bare MLP in the same run;
 * ``mlp_train_step_b512``: one AdamW step of the MLP alone at batch 512;
-* ``train_step_b512``: one full training step at batch 512 grouped by pose (``512 // 35 + 1`` unique
-  clouds through the PointNet, as :func:`~mjcodesign.surrogate.data.pose_batches` makes them);
+* ``train_step_b512``: one full training step (:func:`~mjcodesign.surrogate.train.train_step`, the
+  training's loss and optimiser) at batch 512 grouped by pose (``512 // 35 + 1`` unique clouds through
+  the PointNet, as :func:`~mjcodesign.surrogate.data.pose_batches` makes them); ``_bf16`` the same
+  step under ``--precision bf16``, timed alternately with it;
 * ``pointnet_fwd_bwd_512``: the PointNet forward and backward over 512 clouds of 1024 points;
 * ``loss_and_grad_46x10``: :meth:`Surrogate.loss_and_grad` over 46 objects × 10 poses against
   ``mlp_fwd_bwd_460``, the bare MLP's forward and backward on a batch of that size; target ≤ 1.5×.
@@ -30,7 +32,17 @@ import numpy as np
 import torch
 
 from mjcodesign.errors import DesignError
-from mjcodesign.surrogate import GraspBatch, GraspNet, ModelConfig, Normalizer, Poses, Surrogate
+from mjcodesign.surrogate import (
+    GraspBatch,
+    GraspNet,
+    ModelConfig,
+    Normalizer,
+    OptimizerConfig,
+    Poses,
+    Surrogate,
+)
+from mjcodesign.surrogate.data import TrainBatch
+from mjcodesign.surrogate.train import make_optimizer, train_step
 
 __all__ = ["bench_surrogate"]
 
@@ -129,14 +141,16 @@ def bench_surrogate(*, repeats: int = 5, seed: int = 0, model: ModelConfig | Non
         opt.step()
 
     unique = _TRAIN_BATCH // _DESIGNS_PER_POSE + 1
-    clouds_u = torch.randn(unique, 3, _POINTS)
-    pose_of = torch.from_numpy(np.sort(rng.integers(0, unique, _TRAIN_BATCH)))
-    xd = torch.randn(_TRAIN_BATCH, config.design_inputs)
+    tb = TrainBatch(
+        torch.randn(unique, 3, _POINTS),
+        torch.from_numpy(np.sort(rng.integers(0, unique, _TRAIN_BATCH))),
+        torch.randn(_TRAIN_BATCH, config.design_inputs),
+        torch.cat([yb[:, :9], (yb[:, 9:] > 0).float()], dim=1),
+    )
+    train_opt = make_optimizer(net, OptimizerConfig())  # what ``train`` steps with
 
-    def full_step():
-        opt.zero_grad(set_to_none=True)
-        (net(clouds_u, pose_of, xd) - yb).abs().mean().backward()
-        opt.step()
+    def full_step(precision="fp32"):
+        train_step(net, train_opt, tb, precision)
 
     clouds = torch.randn(_CLOUDS, 3, _POINTS)
 
@@ -145,7 +159,9 @@ def bench_surrogate(*, repeats: int = 5, seed: int = 0, model: ModelConfig | Non
         net.encode(clouds).sum().backward()
 
     cases["mlp_train_step_b512"] = row(_fastest(mlp_step, repeats), _TRAIN_BATCH)
-    cases["train_step_b512"] = row(_fastest(full_step, repeats), _TRAIN_BATCH)
+    t32, t16 = _paired(full_step, lambda: full_step("bf16"), repeats)
+    cases["train_step_b512"] = row(t32, _TRAIN_BATCH)
+    cases["train_step_b512_bf16"] = row(t16, _TRAIN_BATCH)
     cases["pointnet_fwd_bwd_512"] = row(_fastest(pointnet, max(1, repeats // 2)), _CLOUDS)
     # Design gradient over 46 x 10 (object, pose) rows against the bare MLP's forward and backward.
     n = _OBJECTS * _POSES
@@ -194,6 +210,7 @@ def bench_surrogate(*, repeats: int = 5, seed: int = 0, model: ModelConfig | Non
         "epoch_80k_estimate_s": {
             "mlp_only": step_80k,
             "pose_grouped": cases["train_step_b512"]["seconds"] * 80_000 / _TRAIN_BATCH,
+            "pose_grouped_bf16": cases["train_step_b512_bf16"]["seconds"] * 80_000 / _TRAIN_BATCH,
             "pointnet_per_sample": step_80k + cases["pointnet_fwd_bwd_512"]["seconds"] * 80_000 / _CLOUDS,
         },
     }

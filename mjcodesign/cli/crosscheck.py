@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import sys
 
-from mjcodesign.cli.common import emit
+from mjcodesign.cli.common import emit, finite_float
 from mjcodesign.cli.viz import add_recording_flags, open_recorder
 from mjcodesign.crosscheck import (
     GRASP_CASES,
@@ -52,9 +52,7 @@ def _cmd_grasp(args) -> int:
         fem_mesh = FemOptions(
             h=args.fem_h, h_flexure=args.fem_h_flexure, spine_layers=args.fem_layers, waypoint_layers=False
         )
-        from mjcodesign.sim.fem import FemDynamics
-
-        dyn = None if args.fem_dt is None else FemDynamics(dt=args.fem_dt)
+        dyn = _fem_dynamics(args)
         rows = authors_case(
             args.models.split(","),
             row=args.authors_row,
@@ -73,13 +71,10 @@ def _cmd_grasp(args) -> int:
             h=args.fem_h, h_flexure=args.fem_h_flexure, spine_layers=args.fem_layers, waypoint_layers=False
         )
         settings = {"cases": GRASP_CASES, "fem_options": mesh}
-        if args.fem_dt is not None:  # issue 18: the FEM substep of the study
-            from mjcodesign.sim.fem import FemDynamics
-
-            settings["fem_dynamics"] = FemDynamics(dt=args.fem_dt)
+        if (dyn := _fem_dynamics(args)) is not None:  # issue 18: the FEM substep and contact of the study
+            settings["fem_dynamics"] = dyn
     if args.cases is not None:
-        first, _, last = args.cases.rpartition(":")
-        settings["cases"] = settings["cases"][int(first or 0) : int(last)]
+        settings["cases"] = select_cases(settings["cases"], args.cases)
 
     done: list[dict] = []
 
@@ -178,6 +173,35 @@ def _cmd_bench_fem(args) -> int:
     return 0
 
 
+def _fem_dynamics(args):
+    """`FemDynamics` from ``--fem-dt`` and ``--fem-contact-ke`` (None: neither given, the defaults)."""
+    from mjcodesign.sim.fem import FemDynamics
+
+    given = {"dt": args.fem_dt, "contact_ke": args.fem_contact_ke}
+    given = {k: v for k, v in given.items() if v is not None}
+    return FemDynamics(**given) if given else None
+
+
+def select_cases(cases: tuple, text: str) -> tuple:
+    """``--cases``: ``N`` (the first N), ``A:B`` (a slice) or ``I,J,K`` (those indices, in that order)."""
+    from mjcodesign.errors import DesignError
+
+    first, _, last = text.rpartition(":")
+    try:
+        picked = [int(v) for v in text.split(",")] if "," in text else None
+        span = None if picked else (int(first or 0), int(last))
+    except ValueError:
+        raise DesignError(f"--cases takes N, A:B or I,J,K (integers), got {text!r}") from None
+    if picked is not None:
+        if not all(0 <= i < len(cases) for i in picked):
+            raise DesignError(f"--cases indices must be in 0..{len(cases) - 1}, got {text!r}")
+        return tuple(cases[i] for i in picked)
+    chosen = cases[span[0] : span[1]]
+    if not chosen:
+        raise DesignError(f"--cases {text!r} selects none of the {len(cases)} cases")
+    return chosen
+
+
 def _fem_flags(p, *, h: float, layers: int, order: int) -> None:
     p.add_argument("--fem-h", type=float, default=h, help="FEM cell size in the segments [m]")
     p.add_argument("--fem-layers", type=int, default=layers, help="FEM layers through the 2 mm spine (even)")
@@ -198,7 +222,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--tensions", default=None, help="curl tensions [N], comma-separated (press: the first)")
     p.add_argument("--plot", default=None, help="curl: write tip paths and bend against tension to this PNG")
     p.add_argument(
-        "--cases", default=None, help="grasp: run the study's cases N (the first N) or A:B (a slice of them)"
+        "--cases",
+        default=None,
+        help="grasp: run the study's cases N (the first N), A:B (a slice of them) or I,J,K (those indices)",
     )
     p.add_argument(
         "--short", action="store_true", help="grasp: the CI version (two cases, short horizon, coarse mesh)"
@@ -215,6 +241,12 @@ def add_parser(subparsers) -> None:
     p.add_argument("--authors-row", type=int, default=0, help="grasp --authors-case: the authors' pose row")
     p.add_argument(
         "--fem-dt", type=float, default=None, help="grasp: FEM substep [s] (default the paper's 2.5e-6)"
+    )
+    p.add_argument(
+        "--fem-contact-ke",
+        type=finite_float(0.0, strict=True),
+        default=None,
+        help="grasp: FEM penalty contact stiffness [Pa/m] (default the paper's 1e3 N/m per cm², 1e7)",
     )
     # Quadratic tets, 2 spine layers: within 4% of Euler–Bernoulli on the cantilever (mjcodesign.sim.fem).
     _fem_flags(p, h=4e-3, layers=2, order=2)
