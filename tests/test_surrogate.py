@@ -394,8 +394,8 @@ def test_bench_surrogate_times_every_case_on_a_tiny_network():
 
     res = run_benchmark("surrogate", repeats=1, model=_TINY)
     expected = {"mlp_infer_b460", "surrogate_infer_b460", "mlp_infer_b4096", "surrogate_infer_b4096",
-                "mlp_train_step_b512", "train_step_b512", "pointnet_fwd_bwd_512", "mlp_fwd_bwd_460",
-                "loss_and_grad_46x10"}  # fmt: skip
+                "mlp_train_step_b512", "train_step_b512", "train_step_b512_bf16", "pointnet_fwd_bwd_512",
+                "mlp_fwd_bwd_460", "loss_and_grad_46x10"}  # fmt: skip
     assert set(res["cases"]) == expected
     for name, case in res["cases"].items():
         assert case["ms"] > 0 and case["samples_per_s"] > 0 and np.isfinite(case["cpu_ms"]), name
