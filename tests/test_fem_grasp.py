@@ -308,3 +308,42 @@ def test_grasp_cli_model_fem_selects_the_fem(tmp_path, monkeypatch):
     assert out["reason"] == "not lifted (stub)"
     with pytest.raises(DesignError, match="--model fem"):
         grasp(str(path), "semi-rigid", "fem", backend="mjwarp", cache_dir=tmp_path)
+
+
+def _study_record(case: str, chain_ok: bool, fem_failures: list[str]) -> dict:
+    starts = {
+        "settle": 0,
+        "close": 1,
+        "tighten": 2,
+        "lift": 3,
+        "hold": 4,
+        "impulse": 6,
+        "post_hold": 7,
+        "end": 8,
+    }
+    path = [[0.0, 0.0, 0.0]] * 4 + [[0.0, 0.0, 0.03]] * 5
+
+    def rec(ok: bool, failures: list[str]) -> dict:
+        return {"success": ok, "failures": [] if ok else failures, "reason": "ok" if ok else failures[0],
+                "body_force": [0.0] * 5 + [0.1], "displacement": [0.0, 0.0, 0.001], "path": path,
+                "starts": starts, "hold_force_ratio": 1.0, "max_depth_m": 1e-4}  # fmt: skip
+
+    return {"case": case, "mass_kg": 0.01, "lift": 0.03, "chain": rec(chain_ok, ["not_lifted"]),
+            "fem": rec(not fem_failures, fem_failures)}  # fmt: skip
+
+
+def test_study_summary_keeps_diverged_cases_out_of_the_valid_agreement():
+    from mjcodesign.crosscheck.grasp import study_summary
+
+    records = [
+        _study_record("a", True, []),  # both succeed
+        _study_record("b", False, ["not_lifted"]),  # both fail
+        _study_record("c", False, ["diverged"]),  # "agree" on failure, but the FEM blew up
+        _study_record("d", True, ["not_lifted"]),  # disagree
+    ]
+    s = study_summary(records)
+    assert s["success_agreement"] == 0.75
+    assert s["invalid_cases"] == ["c"]
+    assert s["success_agreement_valid"] == pytest.approx(2 / 3)
+    assert [d["case"] for d in s["disagreements"]] == ["d"]
+    assert s["checks"]["fem"][2]["energy"] and not s["checks"]["chain"][2]["energy"]

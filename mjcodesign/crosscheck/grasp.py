@@ -10,7 +10,8 @@ object from it).
 
 `grasp_study` reports, per case and model, the outcome and three physical checks, and over the cases:
 
-* success agreement;
+* success agreement, over all cases and over those where neither rollout diverged or broke the energy
+  bound (``success_agreement_valid``; ``invalid_cases`` lists the others);
 * cases whose sampler pose the scene refuses (wider than the stroke), left out and listed;
 * per-output Pearson correlation of the body force (6) and displacement (3) across cases;
 * median relative difference of the force (3) and of Δq, the FEM being the reference;
@@ -55,6 +56,8 @@ PART_DISTANCE = 5e-3
 STUDY_TENSION = 4.0
 """Tendon tension of the study [N]: `mjcodesign.sim.fem.gripper_grasp.GRASP_TENSION` (its reason there),
 written out so that importing this module stays free of MuJoCo (tested equal)."""
+_INVALID = {"implausible", "diverged"}
+"""Failure kinds of a rollout that broke a physical bound or blew up (`Failure` values)."""
 _FORCE_FLOOR = 0.1
 """Median relative force difference: denominators below this fraction of m·g are raised to it."""
 _DISP_FLOOR = 1e-3
@@ -344,10 +347,16 @@ def study_summary(records: list[dict], models=GRASP_MODELS) -> dict:
         np.linalg.norm(xb[:, 6:], axis=1), _DISP_FLOOR
     )
     agree = [x["success"] == y["success"] for x, y in zip(a, b, strict=True)]
+    # A diverged or implausible rollout is a failure, but no reference: its agreement is also given
+    # without such cases.
+    invalid = [bool(_INVALID & (set(x["failures"]) | set(y["failures"]))) for x, y in zip(a, b, strict=True)]
+    valid_agree = [ok for ok, bad_run in zip(agree, invalid, strict=True) if not bad_run]
     return {
         "cases": len(records),
         "bad_poses": bad,
         "success_agreement": float(np.mean(agree)),
+        "invalid_cases": [r["case"] for r, bad_run in zip(records, invalid, strict=True) if bad_run],
+        "success_agreement_valid": float(np.mean(valid_agree)) if valid_agree else None,
         "success": {"chain": int(sum(x["success"] for x in a)), "fem": int(sum(y["success"] for y in b))},
         "correlation": {k: _pearson(xa[:, i], xb[:, i]) for i, k in enumerate(outputs)},
         "median_rel_diff": {"force": float(np.median(df)), "displacement": float(np.median(dq))},
@@ -372,7 +381,7 @@ def _checks(rec: dict, lift: float) -> dict:
         "held": held,
         "hold_force": bool(held and abs(rec["hold_force_ratio"] - 1.0) > HOLD_TOL),
         "penetration": bool(rec["max_depth_m"] > MAX_DEPTH),
-        "energy": bool({"implausible", "diverged"} & set(rec["failures"])),
+        "energy": bool(_INVALID & set(rec["failures"])),
     }
 
 
