@@ -174,10 +174,14 @@ def _cmd_bench_fem(args) -> int:
 
 
 def _fem_dynamics(args):
-    """`FemDynamics` from ``--fem-dt`` and ``--fem-contact-ke`` (None: neither given, the defaults)."""
+    """`FemDynamics` from the ``--fem-dt`` and ``--fem-contact-*`` flags (None: none given, the defaults)."""
     from mjcodesign.sim.fem import FemDynamics
 
-    given = {"dt": args.fem_dt, "contact_ke": args.fem_contact_ke}
+    given = {
+        "dt": args.fem_dt,
+        "contact_ke": args.fem_contact_ke,
+        "contact_damping_ratio": args.fem_contact_damping_ratio,
+    }
     given = {k: v for k, v in given.items() if v is not None}
     return FemDynamics(**given) if given else None
 
@@ -247,6 +251,12 @@ def add_parser(subparsers) -> None:
         type=finite_float(0.0, strict=True),
         default=None,
         help="grasp: FEM penalty contact stiffness [Pa/m] (default the paper's 1e3 N/m per cm², 1e7)",
+    )
+    p.add_argument(
+        "--fem-contact-damping-ratio",
+        type=finite_float(0.0, strict=True),
+        default=None,
+        help="grasp: damp every FEM finger contact at this ratio of critical instead of the paper's kd",
     )
     # Quadratic tets, 2 spine layers: within 4% of Euler–Bernoulli on the cantilever (mjcodesign.sim.fem).
     _fem_flags(p, h=4e-3, layers=2, order=2)

@@ -24,6 +24,8 @@ _f64 = wp.float64
 _V3 = wp.array(dtype=wp.vec3d)
 _F64 = wp.array(dtype=wp.float64)
 _I32 = wp.array(dtype=wp.int32)
+Contact = wp.types.vector(length=5, dtype=wp.float64)
+"""The finger vertices' contact law: (α [1/s], ke [Pa/m], kd [Pa·s/m], μ, ζ) (`gripper_integrate`)."""
 _GAP_MARGIN = 0.25
 """How far past its sides [fraction] a facing cut face still takes a vertex (`gap_contact`)."""
 
@@ -244,7 +246,7 @@ def gripper_integrate(
     x_in: _V3, v_in: _V3, f_in: _V3,
     mass_in: wp.array(dtype=wp.vec2d), area_in: _F64, rest_in: _V3, flags_in: wp.array(dtype=wp.vec2i),
     offset_in: wp.array2d(dtype=wp.vec3d), step_in: int,
-    gravity_in: wp.vec3d, contact_in: wp.vec4d, dt_in: wp.float64,
+    gravity_in: wp.vec3d, contact_in: Contact, dt_in: wp.float64,
     body_in: ObjectState, points_in: _V3, faces_in: wp.array(dtype=wp.vec3i), inv_mass_in: wp.float64,
     face_in: _I32, load_in: _F64,
     x_out: _V3, v_out: _V3, depth_out: _F64, wrench_out: _V3, load_out: _F64,
@@ -254,7 +256,8 @@ def gripper_integrate(
     Per vertex: ``mass_in`` (inertial, true) [kg], contact area [m²], rest position [m] and ``flags_in``
     (pinned, finger 0 or 1).
 
-    ``contact_in`` = (α [1/s], ke [Pa/m], kd [Pa·s/m], μ). Ground: the plane z = 0. Object: depth below
+    ``contact_in`` = (α [1/s], ke [Pa/m], kd [Pa·s/m], μ, ζ); ζ > 0 replaces kd by the vertex's own
+    damping ratio ζ: area·kd = 2ζ √(ke·area·m), m the vertex's inertial mass. Ground: the plane z = 0. Object: depth below
     the plane of the closest face ``face_in`` (body frame, float64), penalty on the vertex's velocity
     relative to the object's surface. Friction turns viscous below the speed at which one step could
     reverse the sliding velocity of the vertex or of the object under its previous total normal load
@@ -285,6 +288,8 @@ def gripper_integrate(
     ke = contact_in[1]
     kd = contact_in[2]
     mu = contact_in[3]
+    if contact_in[4] > zero and area > zero:  # interior vertices have no area (and no contact)
+        kd = _f64(2.0) * contact_in[4] * wp.sqrt(ke * m / area)
     f = f_in[i] + masses[1] * gravity_in - contact_in[0] * m * v
     if x[2] < zero:
         up = wp.vec3d(zero, zero, _f64(1.0))

@@ -162,7 +162,9 @@ class FemGrasp:
             self._rate = arr(rate, wp.float64)
         self._push = arr(sch.push, wp.vec3d)
         self._box = (wp.vec3d(*obj.lower), wp.vec3d(*obj.upper))
-        self._contact = wp.vec4d(dyn.mass_damping, dyn.contact_ke, dyn.contact_kd, dyn.friction)
+        self._contact = grasp_kernels.Contact(
+            dyn.mass_damping, dyn.contact_ke, dyn.contact_kd, dyn.friction, dyn.contact_damping_ratio
+        )
         self._ground = wp.vec3d(*GROUND_CONTACT)
         self._gravity = wp.vec3d(*gravity)
         self._body = [f64(obj.mass), wp.mat33d(*obj.inertia.ravel()), self._gravity]

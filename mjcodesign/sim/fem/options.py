@@ -57,6 +57,11 @@ class FemDynamics:
     """Ground penalty stiffness [Pa/m]: the paper's ke = 1e3 N/m per vertex over a 1 cm² patch."""
     contact_kd: float = 10.0 / 1e-4
     """Ground penalty damping [Pa·s/m] (the paper's kd = 10 per vertex over 1 cm²)."""
+    contact_damping_ratio: float = 0.0
+    """Two-finger grasp only: > 0 gives every finger vertex's contact this damping ratio ζ instead of
+    ``contact_kd`` (area·kd = 2ζ √(ke·area·m)). The paper's kd is 10–20× critical on a vertex of the
+    coarse mesh, and it adds to the normal force that bounds friction (docs/benchmarks.md, issue 18);
+    MuJoCo's chain contacts are critically damped (ζ = 1)."""
     friction: float = 1.0
     """Coulomb coefficient (the paper's μ = 1)."""
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
@@ -65,3 +70,5 @@ class FemDynamics:
     def __post_init__(self) -> None:
         if not (np.isfinite(self.dt) and self.dt > 0):
             raise DesignError(f"dt must be positive, got {self.dt}")
+        if not (np.isfinite(self.contact_damping_ratio) and self.contact_damping_ratio >= 0):
+            raise DesignError(f"contact_damping_ratio must be >= 0, got {self.contact_damping_ratio}")
