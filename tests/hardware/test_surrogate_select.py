@@ -5,7 +5,7 @@ import json
 
 import numpy as np
 import pytest
-from mjcodesign.hardware.camera import GripperGeometry, crop_to_gripper, save_point_cloud
+from mjcodesign.hardware.camera import GripperGeometry, crop_to_gripper, load_point_cloud, save_point_cloud
 from mjcodesign.hardware.selftest import BOX_CENTRE, BOX_SIZE, sample_box_surface
 from mjcodesign.hardware.surrogate_select import palm_frame, score_candidates
 
@@ -65,7 +65,10 @@ def test_scores_pick_the_best_feasible_candidate(tiny_checkpoint, tmp_path, caps
 
     design = Stiffness.preset("soft")
     cands = load_candidates(tmp_path / "cands.npz", _GEO)
-    scores, est = score_candidates(tiny_checkpoint, design, 100.0, cloud, cands, _GEO)
+    # The points the command will read: the PLY stores float32, and a score near zero (here ~-0.011)
+    # moves by 1e-5 of itself between the float64 cloud and its float32 copy.
+    read_back = load_point_cloud(tmp_path / "cloud.ply")
+    scores, est = score_candidates(tiny_checkpoint, design, 100.0, read_back, cands, _GEO)
     assert [s.index for s in scores] == list(range(len(poses)))
     for s in scores[3:]:  # no measured point in their fingers' box
         assert s.success_score is None and "points" in s.reason
