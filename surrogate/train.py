@@ -92,8 +92,8 @@ class TrainConfig:
     precision: str = "fp32"
     """``fp32``, or ``bf16``: the training forward and backward under ``torch.autocast`` in bfloat16
     (weights, optimiser state, loss and validation stay float32). On a CPU with AVX512-BF16 a paper
-    network's step takes 117 ms against 196 ms (measured here, batch 512); see docs/benchmarks.md for
-    what it does to the metrics."""
+    network's step at batch 512 takes 88 ms against 160 ms (``bench surrogate``, alternated, 2 threads);
+    see docs/benchmarks.md for what it does to the metrics."""
     seed: int = 0
 
     def __post_init__(self) -> None:
