@@ -139,14 +139,15 @@ def train_and_report(
     config: TrainConfig | None = None,
     model_config: ModelConfig | None = None,
     efficiency: float = 0.25,
-    smoothness_poses: int = 2,
+    smoothness_poses: int = 16,
+    smoothness_lines: int = 4,
     cache_dir=None,
     on_epoch: Callable[[str, EpochLog], None] | None = None,
 ) -> dict:
     """Train on the dataset in ``data_dir``, write the checkpoint and report into ``out``; the metrics.
 
     ``efficiency``: the share of training data of the second run (0: none). ``smoothness_poses``: test
-    poses re-simulated along design lines (0: none). ``on_epoch(run, log)`` sees every epoch of the
+    poses re-simulated along ``smoothness_lines`` design lines each (0: none). ``on_epoch(run, log)`` sees every epoch of the
     runs ``full`` and ``efficiency``.
     """
     cfg, mcfg = config or TrainConfig(), model_config or ModelConfig()
@@ -189,7 +190,9 @@ def train_and_report(
     root.mkdir(parents=True, exist_ok=True)
     if smoothness_poses:
         poses = _smoothness_poses(data, parts, smoothness_poses)
-        metrics["smoothness"] = smoothness(sur, data, poses, seed=cfg.seed, cache_dir=cache_dir)
+        metrics["smoothness"] = smoothness(
+            sur, data, poses, lines=smoothness_lines, seed=cfg.seed, cache_dir=cache_dir
+        )
         plot_lines(metrics["smoothness"], root / "smoothness.png")
     metrics["verdict"] = verdict(models)
     sur.meta = {
@@ -287,5 +290,11 @@ def summary_markdown(m: dict) -> str:
         lines += [f"| {r['object']} | {r['pose_row']} | {_fmt(r['grad_norm_mean'])} | {_fmt(r['surrogate_slope_max'])} | "
                   f"{_fmt(r['simulator_fd_abs_max'])} | {_fmt(r['surrogate_total_variation'])} | "
                   f"{_fmt(r['simulator_total_variation'])} | {r['simulator_success_flips']} |" for r in s["lines"]]  # fmt: skip
+        med = s["median"]
+        if "slope_correlation" in med:
+            lines += ["", f"Over the {med['lines']} lines: total variation median {_fmt(med['surrogate_total_variation'])} "
+                      f"(simulator {_fmt(med['simulator_total_variation'])}), mean {_fmt(med['surrogate_total_variation_mean'])} "
+                      f"(simulator {_fmt(med['simulator_total_variation_mean'])}); median ‖∇L‖ {_fmt(med['grad_norm_mean'])}; "
+                      f"correlation of the two curves' slopes along the lines: {_fmt(med['slope_correlation'])}."]  # fmt: skip
         lines.append("")
     return "\n".join(lines)

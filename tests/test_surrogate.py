@@ -354,7 +354,7 @@ def test_train_command_writes_checkpoint_and_report(dataset, work, cli):
     code, stdout, err = cli(
         "train", "--data", str(dataset), "--out", str(out), "--epochs", "3", "--batch-size", "32",
         "--hidden", "16", "--depth", "1", "--penultimate", "8", "--point-widths", "8,16",
-        "--efficiency", "0.5", "--smoothness-poses", "1", "--json",
+        "--efficiency", "0.5", "--smoothness-poses", "1", "--smoothness-lines", "2", "--json",
     )  # fmt: skip
     assert code == 0, err
     res = json.loads(stdout)
@@ -372,6 +372,7 @@ def test_train_command_writes_checkpoint_and_report(dataset, work, cli):
         assert (out / name).is_file(), name
     m = json.loads((out / "metrics.json").read_text())
     assert m["dataset"]["samples"] == len(load_grasp_data(dataset)) and len(m["smoothness"]["lines"]) == 2
+    assert m["smoothness"]["median"]["lines"] == 2 and "slope_correlation" in m["smoothness"]["median"]
     assert "Verdict" in (out / "summary.md").read_text()
     assert load_surrogate(out).meta["dataset"]["manifest_sha256"] == m["dataset"]["manifest_sha256"]
 
@@ -406,6 +407,16 @@ def test_bench_surrogate_times_every_case_on_a_tiny_network():
     json.dumps(res, allow_nan=False)  # what --out and --json write
     with pytest.raises(DesignError):
         run_benchmark("surrogate", repeats=0)
+
+
+def test_smoothness_slope_correlation_is_none_where_undefined():
+    from mjcodesign.surrogate.smoothness import _correlation
+
+    assert _correlation(np.array([1.0, 2.0, 3.0]), np.array([2.0, 4.0, 7.0])) == pytest.approx(
+        0.9934, abs=1e-4
+    )
+    assert _correlation(np.array([1.0, 2.0]), np.array([3.0, 3.0])) is None  # a flat simulator: no r, no NaN
+    assert _correlation(np.array([1.0]), np.array([2.0])) is None
 
 
 def test_smoothness_rebuilds_either_tendon_drive_from_the_manifest():

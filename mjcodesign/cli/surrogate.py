@@ -94,8 +94,14 @@ def add_parser(subparsers) -> None:
     t.add_argument(
         "--smoothness-poses",
         type=int_at_least(0),
-        default=2,
-        help="test poses re-simulated along design lines",
+        default=16,
+        help="test poses re-simulated along design lines (0: none)",
+    )
+    t.add_argument(
+        "--smoothness-lines",
+        type=int_at_least(1),
+        default=4,
+        help="random design lines per smoothness pose",
     )
     t.add_argument(
         "--threads", type=int_at_least(1), default=None, help="torch CPU threads (default: torch's)"
@@ -186,6 +192,7 @@ def run_train(args: argparse.Namespace) -> int:
                 model_config=mcfg,
                 efficiency=args.efficiency,
                 smoothness_poses=args.smoothness_poses,
+                smoothness_lines=args.smoothness_lines,
                 cache_dir=user_cache_dir(),
                 on_epoch=on_epoch,
             )
