@@ -42,7 +42,7 @@ from mjcodesign.surrogate.inference import (
     success_score,
 )
 from mjcodesign.surrogate.model import GraspNet, ModelConfig
-from mjcodesign.surrogate.report import TensorBoardLog, train_and_report
+from mjcodesign.surrogate.report import TensorBoardLog, checkpoint_smoothness, train_and_report
 from mjcodesign.surrogate.train import EpochLog, OptimizerConfig, TrainConfig, TrainResult, train
 
 __all__ = [
@@ -67,6 +67,7 @@ __all__ = [
     "TensorBoardLog",
     "TrainConfig",
     "TrainResult",
+    "checkpoint_smoothness",
     "load_grasp_data",
     "load_surrogate",
     "normalize_clouds",

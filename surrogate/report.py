@@ -18,7 +18,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from mjcodesign.surrogate.checkpoint import save_checkpoint, write_text
+from mjcodesign.surrogate.checkpoint import load_surrogate, save_checkpoint, write_text
 from mjcodesign.surrogate.data import (
     N_REGRESSION,
     GraspData,
@@ -38,7 +38,7 @@ from mjcodesign.surrogate.train import EpochLog, TrainConfig, evaluate_loss, tra
 
 from mjcodesign.errors import OutputError, UnsupportedError
 
-__all__ = ["TensorBoardLog", "predict_rows", "standard_loss", "train_and_report"]
+__all__ = ["TensorBoardLog", "checkpoint_smoothness", "predict_rows", "standard_loss", "train_and_report"]
 
 _PREDICT_CHUNK = 8192  # rows per predict call
 _EPS = 1e-6  # probability clip of the cross-entropy
@@ -129,6 +129,41 @@ def _smoothness_poses(data: GraspData, parts: Split, n: int) -> np.ndarray:
         ps[i] for i in range(max(map(len, by_object.values()))) for ps in by_object.values() if i < len(ps)
     ]
     return np.array(order[:n], dtype=int)
+
+
+def checkpoint_smoothness(
+    ckpt: str | Path, data_dir: str | Path, *, poses: int = 16, lines: int = 4, cache_dir=None
+) -> dict:
+    """Re-measure a trained checkpoint's smoothness on the held-out poses of the dataset it was trained on.
+
+    The split is rebuilt from the checkpoint's record (mode and seed) and must hold out the same objects;
+    the lines are those ``train`` draws for its seed, so checkpoints of one dataset are compared on the
+    same lines. :class:`OutputError` if the dataset is not the checkpoint's.
+    """
+    if poses < 1 or lines < 1:
+        raise OutputError(f"smoothness needs poses >= 1 and lines >= 1, got {poses} and {lines}")
+    sur = load_surrogate(ckpt)
+    data = load_grasp_data(data_dir)
+    meta = sur.meta
+    try:
+        recorded, mode, seed = (
+            meta["dataset"]["manifest_sha256"],
+            meta["split"]["mode"],
+            int(meta["train"]["seed"]),
+        )
+        held_out = list(meta["split"]["test_objects"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise OutputError(f"{ckpt}: the checkpoint records no dataset split ({exc})") from exc
+    if recorded != data.manifest_sha256:
+        raise OutputError(f"{ckpt} was trained on another dataset (manifest sha256 {recorded[:12]}, "
+                          f"{data_dir} has {data.manifest_sha256[:12]})")  # fmt: skip
+    parts = split(data, mode, seed=seed)
+    if list(parts.test_objects) != held_out:
+        raise OutputError(
+            f"{ckpt}: the rebuilt split holds out {list(parts.test_objects)}, the checkpoint {held_out}"
+        )
+    rows = _smoothness_poses(data, parts, poses)
+    return smoothness(sur, data, rows, lines=lines, seed=seed, cache_dir=cache_dir)
 
 
 def train_and_report(

@@ -9,6 +9,7 @@ import argparse
 import dataclasses
 import importlib
 import json
+import shutil
 import subprocess
 import sys
 
@@ -375,6 +376,23 @@ def test_train_command_writes_checkpoint_and_report(dataset, work, cli):
     assert m["smoothness"]["median"]["lines"] == 2 and "slope_correlation" in m["smoothness"]["median"]
     assert "Verdict" in (out / "summary.md").read_text()
     assert load_surrogate(out).meta["dataset"]["manifest_sha256"] == m["dataset"]["manifest_sha256"]
+    # The checkpoint's smoothness re-measured later: the same lines, the same numbers.
+    lines_file = work / "smooth.json"
+    code, stdout, err = cli("smoothness", "--ckpt", str(out), "--data", str(dataset), "--poses", "1",
+                            "--lines", "2", "--out", str(lines_file), "--json")  # fmt: skip
+    assert code == 0, err
+    again = json.loads(lines_file.read_text())
+    assert json.loads(stdout)["lines"] == 2
+    for before, after in zip(m["smoothness"]["lines"], again["lines"], strict=True):
+        assert after["surrogate_loss"] == pytest.approx(before["surrogate_loss"], rel=1e-6)
+        assert after["simulator_loss"] == before["simulator_loss"]
+    # Another dataset (its manifest differs by one byte) and an --out folder exit 2 with one line.
+    other = work / "other_ds"
+    shutil.copytree(dataset, other)
+    (other / "manifest.json").write_text((dataset / "manifest.json").read_text() + "\n")
+    for argv in (("--data", str(other)), ("--data", str(dataset), "--out", str(work))):
+        code, stdout, err = cli("smoothness", "--ckpt", str(out), *argv, "--poses", "1", "--lines", "1")
+        assert code == 2 and len(err) == 1 and "Traceback" not in err[0] and not stdout, err
 
 
 def test_cli_module_imports_no_torch():

@@ -1,4 +1,4 @@
-"""``mjcodesign train``, ``mjcodesign predict`` and ``mjcodesign bench surrogate``.
+"""``mjcodesign train``, ``mjcodesign predict``, ``mjcodesign smoothness`` and ``mjcodesign bench surrogate``.
 
 Wire them into the main CLI with ``cli_surrogate.add_parser(subparsers)`` and
 ``cli_surrogate.add_bench_parser(bench_subparsers)``. torch is imported inside the handlers only, so
@@ -13,7 +13,7 @@ import sys
 
 from mjcodesign.cli.common import emit, finite_float, int_at_least, parse_design, path_text, user_cache_dir
 
-__all__ = ["add_bench_parser", "add_parser", "run_bench", "run_predict", "run_train"]
+__all__ = ["add_bench_parser", "add_parser", "run_bench", "run_predict", "run_smoothness", "run_train"]
 
 _SPLITS = ("object", "random")  # mjcodesign.surrogate.SPLITS, without importing torch here
 
@@ -109,6 +109,22 @@ def add_parser(subparsers) -> None:
     t.add_argument("--tensorboard", type=path_text, default=None, help="also write TensorBoard events to DIR")
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=run_train)
+
+    s = subparsers.add_parser(
+        "smoothness", help="re-measure a checkpoint's smoothness along design lines against the simulator"
+    )
+    s.add_argument("--ckpt", required=True, type=path_text, help="checkpoint folder (mjcodesign train --out)")
+    s.add_argument("--data", required=True, type=path_text, help="the dataset it was trained on")
+    s.add_argument(
+        "--poses", type=int_at_least(1), default=16, help="held-out poses, one object after another"
+    )
+    s.add_argument("--lines", type=int_at_least(1), default=4, help="random design lines per pose")
+    s.add_argument("--out", type=path_text, default=None, help="also write every line to this JSON file")
+    s.add_argument(
+        "--threads", type=int_at_least(1), default=None, help="torch CPU threads (default: torch's)"
+    )
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=run_smoothness)
 
     p = subparsers.add_parser("predict", help="the surrogate's outputs for one object, pose and design")
     p.add_argument("--ckpt", required=True, type=path_text, help="checkpoint folder (mjcodesign train --out)")
@@ -230,6 +246,32 @@ def run_predict(args: argparse.Namespace) -> int:
         args.ckpt, args.object, args.pose, design, density, seed=args.seed, cache_dir=user_cache_dir()
     )
     emit(res if args.json else {k: v for k, v in res.items() if k not in ("pose", "design")}, args.json)
+    return 0
+
+
+def run_smoothness(args: argparse.Namespace) -> int:
+    """Run ``smoothness``."""
+    import torch
+
+    from mjcodesign.surrogate import checkpoint_smoothness
+    from mjcodesign.surrogate.checkpoint import write_text
+
+    if args.out:  # refused before the re-simulation, not after it
+        from pathlib import Path
+
+        from mjcodesign.errors import OutputError
+
+        out = Path(args.out)
+        if out.is_dir() or not out.parent.is_dir():
+            raise OutputError(f"--out {out}: need a file path in an existing folder")
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    res = checkpoint_smoothness(
+        args.ckpt, args.data, poses=args.poses, lines=args.lines, cache_dir=user_cache_dir()
+    )
+    if args.out:
+        write_text(args.out, json.dumps({"ckpt": args.ckpt, "data": args.data, **res}, indent=1))
+    emit({"ckpt": args.ckpt, **res["median"]}, args.json)
     return 0
 
 
