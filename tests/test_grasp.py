@@ -9,7 +9,7 @@ from numpy.testing import assert_array_equal
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import PoseError
-from mjcodesign.models.types import FingerModel, GripperPose
+from mjcodesign.models.types import FingerModel, GripperPose, SimOptions
 from mjcodesign.objects import box_object
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
 from mjcodesign.sim import MujocoBackend, with_stiffness
@@ -74,6 +74,20 @@ def test_with_stiffness_equals_recompile(box_scene, text):
     ref = build_scene(box_scene.obj, FingerDesign(), design, FingerModel.CHAIN, box_scene.pose).model
     for name in ("jnt_stiffness", "dof_damping", "geom_solref", "body_mass", "body_inertia"):
         assert_array_equal(getattr(m, name), getattr(ref, name), err_msg=name)
+
+
+def test_with_stiffness_equals_recompile_with_two_hinge_flexures(box_scene):
+    box_scene_njnt = box_scene.model.njnt
+    obj, two = box_object((_BOX,) * 3, _RHO), SimOptions(flexure_hinges=2)
+    pose = auto_pose(obj)
+    scene = build_scene(obj, FingerDesign(), Stiffness.preset("soft"), FingerModel.CHAIN, pose, options=two)
+    for text in ("random:3", _ALTERNATING):
+        design = Stiffness.parse(text)
+        ref = build_scene(obj, FingerDesign(), design, FingerModel.CHAIN, pose, options=two).model
+        m = with_stiffness(scene, design)
+        assert m.njnt == ref.njnt == box_scene_njnt + 2 * 5  # a second hinge in each of 2 x 5 flexures
+        for name in ("jnt_stiffness", "dof_damping", "geom_solref", "body_mass", "body_inertia"):
+            assert_array_equal(getattr(m, name), getattr(ref, name), err_msg=name)
 
 
 def test_pose_below_ground_is_refused(box_scene):

@@ -111,6 +111,10 @@ def _plain(obj):
 
 
 def _cmd_crosscheck(args) -> int:
+    if args.flexure_hinges != 1 and args.scenario not in ("cantilever", "curl"):
+        from mjcodesign.errors import DesignError
+
+        raise DesignError(f"--flexure-hinges applies to the cantilever and the curl, not to {args.scenario}")
     if args.scenario == "grasp":
         return _cmd_grasp(args)
     tensions = [float(v) for v in args.tensions.split(",")] if args.tensions else None
@@ -128,6 +132,7 @@ def _cmd_crosscheck(args) -> int:
             tensions=tensions,
             observer=rec,
             on_note=_note,
+            flexure_hinges=args.flexure_hinges,
         )
     finally:
         if rec is not None:
@@ -236,6 +241,13 @@ def add_parser(subparsers) -> None:
     p.add_argument("--out", default=None, help="grasp: also write the JSON report to this file")
     p.add_argument(
         "--fem-h-flexure", type=float, default=None, help="grasp: FEM cell size in flexures and cuts [m]"
+    )
+    p.add_argument(
+        "--flexure-hinges",
+        type=int,
+        choices=(1, 2),
+        default=1,
+        help="cantilever/curl: chain hinges per flexure (2: at its quarter points; matches the FEM's large-bend curl)",
     )
     p.add_argument(
         "--authors-case",

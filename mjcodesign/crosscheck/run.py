@@ -56,6 +56,7 @@ def crosscheck(
     tensions: list[float] | None = None,
     observer=None,
     on_note: Callable[[str], None] | None = None,
+    flexure_hinges: int = 1,
 ) -> tuple[list[dict], dict]:
     """Run ``scenario`` in every backend of ``models``; return (rows, curves for plotting).
 
@@ -68,7 +69,8 @@ def crosscheck(
     every model's rest shape as it is computed (:class:`~mjcodesign.crosscheck.shapes.Shapes` names
     them), so recording costs no extra simulation. ``on_note`` hears one line per model that gave no rest
     state (the CLI prints them on stderr). Curves (curl only) map a model to its ``tension`` [N],
-    ``bend`` [rad] and ``tip`` displacements [m].
+    ``bend`` [rad] and ``tip`` displacements [m]. ``flexure_hinges``: the chain's hinges per flexure
+    (`mjcodesign.models.types.SimOptions.flexure_hinges`; the cantilever and the curl).
     """
     from mjcodesign.design.stiffness import Stiffness
     from mjcodesign.errors import DesignError
@@ -90,27 +92,33 @@ def crosscheck(
                 tensions=tensions,
                 observer=observer,
                 on_note=on_note,
+                flexure_hinges=flexure_hinges,
             )[0]
         return rows + summary_rows(scenario, design_name, rows), {}
     stiffness = Stiffness.parse(design_name)
     shapes = Shapes(observer, stiffness)
     curves: dict[str, dict] = {}
     if scenario == "cantilever":
-        rows = _cantilever_rows(models, design_name, stiffness, fem_options, shapes)
+        rows = _cantilever_rows(models, design_name, stiffness, fem_options, shapes, flexure_hinges)
     elif scenario == "press":
         rows = press_rows(models, design_name, stiffness, fem_options, tensions, shapes, on_note)
     else:
-        rows, curves = _curl_rows(models, design_name, stiffness, fem_options, tensions, shapes)
+        rows, curves = _curl_rows(
+            models, design_name, stiffness, fem_options, tensions, shapes, flexure_hinges
+        )
     shapes.flush()
     return rows, curves
 
 
-def _cantilever_rows(models, design_name: str, stiffness, fem_options, shapes: Shapes) -> list[dict]:
+def _cantilever_rows(
+    models, design_name: str, stiffness, fem_options, shapes: Shapes, flexure_hinges: int = 1
+) -> list[dict]:
     """Tip deflection of every model under a tip load, against the FEM when it runs.
 
     The FEM itself, and every model when the FEM does not run, against Euler–Bernoulli.
     """
     from mjcodesign.design.finger import FingerDesign
+    from mjcodesign.models.types import SimOptions
     from mjcodesign.scenarios.static import validate_beam
 
     design = FingerDesign()
@@ -132,8 +140,9 @@ def _cantilever_rows(models, design_name: str, stiffness, fem_options, shapes: S
         else:
             force = None if fem_value is None else fem_value[0]
             res = validate_beam(
-                design, stiffness, m, force=force, observe=shapes.mujoco(label, tip_load=True)
-            )
+                design, stiffness, m, force=force, options=SimOptions(flexure_hinges=flexure_hinges),
+                observe=shapes.mujoco(label, tip_load=True),
+            )  # fmt: skip
             shapes.set_metrics(label, pick(res, BEAM_METRICS), tip_force=[0.0, 0.0, res["force_n"]])
             value = res["tip_deflection_m"]
             reference = res["analytic_m"] if fem_value is None else fem_value[1]
@@ -142,7 +151,9 @@ def _cantilever_rows(models, design_name: str, stiffness, fem_options, shapes: S
     return sorted(rows, key=lambda r: order[r["model"]])
 
 
-def _curl_rows(models, design_name: str, stiffness, fem_options, tensions, shapes: Shapes):
+def _curl_rows(
+    models, design_name: str, stiffness, fem_options, tensions, shapes: Shapes, flexure_hinges: int = 1
+):
     """Bend and tip displacement of every model at each tension, against the FEM; (rows, curves)."""
     from mjcodesign.design.finger import FingerDesign
     from mjcodesign.sim.fem import FemFinger
@@ -165,7 +176,10 @@ def _curl_rows(models, design_name: str, stiffness, fem_options, tensions, shape
                 bend, tip, tip_xyz = ref[t]
             else:
                 label = f"curl/{m}/{t:.4g}N"
-                r = model_curl(design, stiffness, m, t, observe=shapes.mujoco(label, group=f"curl/{m}"))
+                r = model_curl(
+                    design, stiffness, m, t, observe=shapes.mujoco(label, group=f"curl/{m}"),
+                    flexure_hinges=flexure_hinges,
+                )  # fmt: skip
                 shapes.set_metrics(
                     label, curl_metrics(r["tension_n"], r["bend_angle_rad"], r["tip_displacement_m"])
                 )
@@ -179,7 +193,9 @@ def _curl_rows(models, design_name: str, stiffness, fem_options, tensions, shape
     return rows, curves
 
 
-def model_curl(design, stiffness, model: str, tension: float, *, observe=None) -> dict:
+def model_curl(
+    design, stiffness, model: str, tension: float, *, observe=None, flexure_hinges: int = 1
+) -> dict:
     """Free curl of finger A of a MuJoCo model at ``tension`` [N], as the curl comparison runs it.
 
     Chain and flex: point-force tendon dynamics to rest (`mjcodesign.scenarios.static.curl`).
@@ -192,7 +208,16 @@ def model_curl(design, stiffness, model: str, tension: float, *, observe=None) -
     from mjcodesign.scenarios.static import curl
 
     if FingerModel(model) is not FingerModel.FLEX_QUADRATIC:
-        return curl(design, stiffness, model, tension, tendon_mode=TendonMode.POINT_FORCE, observe=observe)
+        opts = SimOptions(flexure_hinges=flexure_hinges)
+        return curl(
+            design,
+            stiffness,
+            model,
+            tension,
+            tendon_mode=TendonMode.POINT_FORCE,
+            options=opts,
+            observe=observe,
+        )
     from mjcodesign.models.flex import linear_curl, load_nodes
 
     opts = SimOptions(gravity=False)

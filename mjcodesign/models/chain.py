@@ -153,13 +153,22 @@ class _ChainBuilder:
             self.design.density,
         )
 
-    def link(self, parent, i: int, origin_prev: float, k: float, axis: float, waypoint: np.ndarray):
-        """Block ``i``'s body under ``parent`` (frame at x=origin_prev): hinge, pieces, waypoint site."""
+    def split(self, i: int) -> bool:
+        """Whether block ``i`` is a flexure carried by two hinges (``SimOptions.flexure_hinges``)."""
+        return self.options.flexure_hinges == 2 and self.blocks[i].kind is BlockKind.FLEXURE
+
+    def hinge_points(self, i: int) -> tuple[float, ...]:
+        """Where block ``i``'s hinges sit along x: its middle, or a split flexure's quarter points."""
         blk = self.blocks[i]
-        p = self.prefix
-        body = parent.add_body(name=f"{p}block{i}", pos=[blk.mid - origin_prev, 0, 0])
+        if self.split(i):
+            quarter = 0.25 * (blk.x1 - blk.x0)
+            return (blk.x0 + quarter, blk.x1 - quarter)
+        return (blk.mid,)
+
+    def hinge(self, body, name: str, i: int, k: float, axis: float) -> None:
+        """A hinge of block ``i`` at ``body``'s origin, ``k`` [N m/rad] and its Rayleigh damping."""
         body.add_joint(
-            name=f"{p}hinge{i}",
+            name=name,
             type=mujoco.mjtJoint.mjJNT_HINGE,
             axis=[0, -1, 0],
             pos=[0, 0, axis],
@@ -167,28 +176,57 @@ class _ChainBuilder:
             damping=float(self.options.damping_time * k),
             armature=self.options.hinge_armature,
         )
-        self.piece(body, i, blk.mid, blk.x1, blk.mid, "d")
-        if i + 1 < len(self.blocks):
-            nxt = self.blocks[i + 1]
-            self.piece(body, i + 1, nxt.x0, nxt.mid, blk.mid, "p")
+        self.handle.joints.append(name)
+        self.handle.joint_blocks.append(i)
+        self.handle.joint_scale.append(float(len(self.hinge_points(i))))
+
+    def waypoint(self, body, i: int, origin: float, waypoint: np.ndarray) -> None:
         site = body.add_site(
-            name=f"{p}wp{i}",
-            pos=waypoint - [blk.mid, 0, 0],
+            name=f"{self.prefix}wp{i}",
+            pos=waypoint - [origin, 0, 0],
             size=[0.0008, 0, 0],
             rgba=[0.9, 0.1, 0.1, 1],
             group=3,
         )
         self.handle.waypoint_sites.append(site.name)
-        self.handle.joints.append(f"{p}hinge{i}")
+
+    def link(self, parent, i: int, origin_prev: float, k: float, axis: float, waypoint: np.ndarray):
+        """Block ``i``'s bodies under ``parent`` (frame at x=origin_prev): hinges, pieces, waypoint site.
+
+        Returns the last body and its frame's x.
+        """
+        blk = self.blocks[i]
+        p = self.prefix
+        points = self.hinge_points(i)
+        k_hinge = k * len(points)  # hinges in series: the block keeps its compliance 1/k
+        if len(points) == 2:  # the middle link of a split flexure carries the waypoint
+            mid = parent.add_body(name=f"{p}block{i}m", pos=[points[0] - origin_prev, 0, 0])
+            self.hinge(mid, f"{p}hinge{i}m", i, k_hinge, axis)
+            self.piece(mid, i, points[0], points[1], points[0], "m")
+            self.waypoint(mid, i, points[0], waypoint)
+            self.handle.bodies.append(mid.name)
+            parent, origin_prev = mid, points[0]
+        body = parent.add_body(name=f"{p}block{i}", pos=[points[-1] - origin_prev, 0, 0])
+        self.hinge(body, f"{p}hinge{i}", i, k_hinge, axis)
+        self.piece(body, i, points[-1], blk.x1, points[-1], "d")
+        if i + 1 < len(self.blocks):
+            nxt = self.blocks[i + 1]
+            self.piece(body, i + 1, nxt.x0, self.hinge_points(i + 1)[0], points[-1], "p")
+        if len(points) == 1:
+            self.waypoint(body, i, points[-1], waypoint)
         self.handle.bodies.append(body.name)
-        return body
+        return body, points[-1]
 
     def tip(self, body) -> None:
         """The tip site on the last block's body."""
         last = self.blocks[-1]
         body.add_site(
             name=self.handle.tip_site,
-            pos=[last.x1 - last.mid, 0, 0.5 * self.design.flexure_thickness],
+            pos=[
+                last.x1 - self.hinge_points(len(self.blocks) - 1)[-1],
+                0,
+                0.5 * self.design.flexure_thickness,
+            ],
             size=[0.0008, 0, 0],
             group=3,
         )
@@ -210,11 +248,10 @@ def add_chain_finger(
     )
     builder = _ChainBuilder(spec, design, young, prefix, options, handle)
     blocks = builder.blocks
-    builder.piece(parent, 0, 0.0, blocks[0].mid, 0.0, "p")
+    builder.piece(parent, 0, 0.0, builder.hinge_points(0)[0], 0.0, "p")
     body = parent
     origin_prev = 0.0
-    for i, blk in enumerate(blocks):
-        body = builder.link(body, i, origin_prev, k[i], axes[i], wps[i])
-        origin_prev = blk.mid
+    for i in range(len(blocks)):
+        body, origin_prev = builder.link(body, i, origin_prev, k[i], axes[i], wps[i])
     builder.tip(body)
     return handle

@@ -76,8 +76,8 @@ def _stiffness_writer(scene: GraspScene) -> Callable[[Stiffness], mujoco.MjModel
 
     def chain(stiffness: Stiffness) -> mujoco.MjModel:
         m = copy.copy(scene.model)
-        for (jids, dofs, gids, owner), young in zip(ids, stiffness.young, strict=True):
-            k = hinge_stiffness(design, young, opts.stiffness_model)
+        for (jids, dofs, gids, owner, blocks_of, scale), young in zip(ids, stiffness.young, strict=True):
+            k = hinge_stiffness(design, young, opts.stiffness_model)[blocks_of] * scale
             m.jnt_stiffness[jids] = k
             m.dof_damping[dofs] = opts.damping_time * k
             m.geom_solref[gids] = contact_solrefs(blocks, young, design.density, opts.timestep)[owner]
@@ -86,24 +86,27 @@ def _stiffness_writer(scene: GraspScene) -> Callable[[Stiffness], mujoco.MjModel
     return chain
 
 
-def _chain_ids(scene: GraspScene) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
-    """Per finger: (hinge joint ids, their dofs, the geoms carrying a block's solref, each one's block).
+def _chain_ids(scene: GraspScene) -> list[tuple[np.ndarray, ...]]:
+    """Per finger: hinge ids, dofs, the geoms with a block's solref and their blocks, hinge blocks, scales.
 
-    One hinge per block; a block has one or two geoms (its proximal and distal pieces).
+    The last two: each hinge's block, and its stiffness over its block's. One hinge per block, or two for a split flexure (``SimOptions.flexure_hinges``); a block has one to
+    three geoms (its proximal, middle and distal pieces).
     """
     m = scene.model
     out = []
     for h in scene.built.fingers:
-        jids, gids, owner = [], [], []
-        for j, name in enumerate(h.joints):
-            jids.append(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name))
-            for part in ("p", "d"):
-                g = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"{h.prefix}b{j}_{part}")
+        jids = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name) for name in h.joints])
+        blocks_of = np.array(h.joint_blocks or range(len(h.joints)), dtype=int)
+        scale = np.array(h.joint_scale or [1.0] * len(h.joints), dtype=float)
+        gids, owner = [], []
+        for b in range(int(blocks_of.max()) + 1):
+            for part in ("p", "m", "d"):
+                g = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"{h.prefix}b{b}_{part}")
                 if g >= 0:
                     gids.append(g)
-                    owner.append(j)
-        jids = np.array(jids)
-        out.append((jids, m.jnt_dofadr[jids].copy(), np.array(gids, dtype=int), np.array(owner, dtype=int)))
+                    owner.append(b)
+        out.append((jids, m.jnt_dofadr[jids].copy(), np.array(gids, dtype=int), np.array(owner, dtype=int),
+                    blocks_of, scale))  # fmt: skip
     return out
 
 
