@@ -1,6 +1,7 @@
 """The FEM behind the simulator interface, and the cross-simulator comparison as a library call."""
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -155,3 +156,26 @@ def test_grasp_study_cli_refuses_bad_selection_before_simulating(capsys, argv, s
     assert code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and says in err[0], err
+
+
+_AUTHORS_POSES = Path(__file__).resolve().parents[2] / "shared/reference/codesign-soft-gripper/pose_info"
+
+
+@pytest.mark.skipif(not _AUTHORS_POSES.is_dir(), reason="the authors' reference data is not on this machine")
+def test_authors_case_starts_at_the_refined_openings_or_sweeps_in():
+    from mjcodesign.crosscheck.authors_case import AUTHORS_RESULT, authors_case
+
+    pose_file = _AUTHORS_POSES / "006_mustard_bottle.npz"
+    refined = authors_case(("chain",), pose_file=pose_file, start="refined")
+    sweep = authors_case(("chain",), pose_file=pose_file, start="sweep")
+    assert [r["log_e"] for r in refined] == list(AUTHORS_RESULT)
+    for a, b in zip(refined, sweep, strict=True):
+        assert a["start"] == "refined" and b["start"] == "sweep" and a["openings"] == b["openings"]
+        assert a["chain"]["class"] in ("lifts", "slips", "no contact")
+        assert np.all(np.isfinite(a["chain"]["displacement"]))
+    # Starting at the refined openings changes the rollout (the carriages no longer sweep in)
+    assert any(
+        a["chain"]["displacement"] != b["chain"]["displacement"] for a, b in zip(refined, sweep, strict=True)
+    )
+    with pytest.raises(DesignError, match="unknown start"):
+        authors_case(("chain",), pose_file=pose_file, start="nowhere")

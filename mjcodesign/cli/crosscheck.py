@@ -59,6 +59,7 @@ def _cmd_grasp(args) -> int:
             fem_options=fem_mesh,
             fem_dynamics=dyn,
             cache_dir=user_cache_dir(),
+            start=args.authors_start,
         )
         if args.out:
             Path(args.out).write_text(json.dumps(_plain(rows)))
@@ -255,6 +256,12 @@ def add_parser(subparsers) -> None:
         help="grasp: the authors' simulator's one case instead (mustard bottle, ln E 13.5/15/16.5)",
     )
     p.add_argument("--authors-row", type=int, default=0, help="grasp --authors-case: the authors' pose row")
+    p.add_argument(
+        "--authors-start",
+        choices=("refined", "sweep"),
+        default="refined",
+        help="grasp --authors-case: fingers start at the refined openings (theirs) or outside the object (ours)",
+    )
     p.add_argument(
         "--fem-dt", type=float, default=None, help="grasp: FEM substep [s] (default the paper's 2.5e-6)"
     )

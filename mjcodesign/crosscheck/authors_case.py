@@ -12,9 +12,11 @@ Mapped to real size as the NOTES give it: lengths 1/5 with E unchanged, so equal
 T = 100 / 25 = 4 N, and equal grip-to-weight at that tension a density of 10 kg/m³; the lift 0.1676 / 5
 = 33.5 mm; the disturbance `mjcodesign.scenarios.grasp.paper_impulse`. The pose is their row 0 mapped
 into our scene (`mjcodesign.poses.external.anygrasp_to_world`) and refined by our refinement (theirs,
-an SGD over the approach offset and the openings, is not in the shared files). One difference stays:
-our close phase drives both carriages to the refined openings before the tendon pulls, where their
-fingers stay at the refined pose and only the tendon closes them.
+an SGD over the approach offset and the openings, is not in the shared files, but ours minimises the same
+L_init and closes each finger until it touches). By default (``start="refined"``) the fingers start at
+the refined openings, as theirs do, and only the tendon closes them (the close phase has nothing to
+move); ``start="sweep"`` runs our own scenario instead, the carriages driven in from outside the object
+to the refined openings before the tendon pulls.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["AUTHORS_RESULT", "authors_case", "classify"]
+__all__ = ["AUTHORS_RESULT", "STARTS", "authors_case", "classify"]
 
 AUTHORS_RESULT = {13.5: "lifts", 15.0: "slips", 16.5: "no contact"}
 """Uniform ln E → what the authors' simulator did with it (module docstring)."""
@@ -35,6 +37,8 @@ _DENSITY = 10.0
 _LIFT = 0.1676 / 5.0
 """[m] their finger base rise, 0.1676 of their units."""
 _POSES = Path("shared/reference/codesign-soft-gripper/pose_info")
+STARTS = ("refined", "sweep")
+"""Where the fingers start: at the refined openings (the authors'), or outside the object (ours)."""
 
 
 def classify(rec: dict, lift: float) -> str:
@@ -54,13 +58,16 @@ def authors_case(
     fem_options=None,
     fem_dynamics=None,
     cache_dir: Path | None = None,
+    start: str = "refined",
 ) -> list[dict]:
     """Each uniform design of `AUTHORS_RESULT` in each model: outcome, contacts, and the class.
 
     ``pose_file``: the authors' ``006_mustard_bottle.npz`` (default: under ``shared/reference`` in the
     working directory or its parent); ``row``: its pose (0 is the authors' case). Raises PoseError when
-    our refinement refuses the pose or our stroke cannot take it.
+    our refinement refuses the pose or our stroke cannot take it. ``start``: one of `STARTS`.
     """
+    import dataclasses
+
     from mjcodesign.crosscheck.grasp import model_runners
     from mjcodesign.design.finger import FingerDesign
     from mjcodesign.design.stiffness import Stiffness
@@ -70,7 +77,12 @@ def authors_case(
     from mjcodesign.objects import load_mesh
     from mjcodesign.poses import to_gripper_pose
     from mjcodesign.poses.external import import_anygrasp, load_external
-    from mjcodesign.scenarios.grasp import GraspScenario, build_scene, start_openings
+    from mjcodesign.scenarios.grasp import GraspScenario, GraspScene, build_scene, start_openings
+
+    if start not in STARTS:
+        from mjcodesign.errors import DesignError
+
+        raise DesignError(f"unknown start {start!r}; choose from {', '.join(STARTS)}")
 
     path = (
         pose_file or next((p for p in (_POSES, Path("..") / _POSES) if p.is_dir()), _POSES) / f"{_OBJECT}.npz"
@@ -89,12 +101,17 @@ def authors_case(
     out = []
     for log_e, theirs in AUTHORS_RESULT.items():
         scene = build_scene(obj, FingerDesign(), Stiffness([log_e] * 11), FingerModel.CHAIN, pose)
+        if start == "refined":  # the carriages start where the refinement left them, and stay
+            built = dataclasses.replace(scene.built, openings=pose.openings)
+            scene = GraspScene(built, scene.obj, pose, tuple(pose.openings))
         rec_row = {
             "log_e": log_e,
             "authors": theirs,
             "row": row,
             "mass_kg": obj.mass,
             "pose": [*pose.position, *pose.quat],
+            "openings": list(pose.openings),
+            "start": start,
         }
         for name, run in sims.items():
             rec = run(scene, scenario)
