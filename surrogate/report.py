@@ -119,9 +119,9 @@ def _rule_ceiling(data: GraspData, rows: np.ndarray) -> dict:
             "missed_success": int(np.sum((score <= 0) & truth))}  # fmt: skip
 
 
-def _smoothness_poses(data: GraspData, parts: Split, n: int) -> np.ndarray:
-    """Up to ``n`` test poses, one per object in turn."""
-    poses = np.unique(data.pose[parts.test])
+def _smoothness_poses(data: GraspData, parts: Split, n: int, part: str = "test") -> np.ndarray:
+    """Up to ``n`` poses of the split's ``part`` (``test`` or ``train``), one per object in turn."""
+    poses = np.unique(data.pose[getattr(parts, part)])
     by_object: dict[str, list[int]] = {}
     for p in poses:
         by_object.setdefault(data.objects[p], []).append(int(p))
@@ -132,9 +132,18 @@ def _smoothness_poses(data: GraspData, parts: Split, n: int) -> np.ndarray:
 
 
 def checkpoint_smoothness(
-    ckpt: str | Path, data_dir: str | Path, *, poses: int = 16, lines: int = 4, cache_dir=None
+    ckpt: str | Path,
+    data_dir: str | Path,
+    *,
+    poses: int = 16,
+    lines: int = 4,
+    part: str = "test",
+    cache_dir=None,
 ) -> dict:
     """Re-measure a trained checkpoint's smoothness on the held-out poses of the dataset it was trained on.
+
+    ``part="train"`` takes training poses instead: whether the network follows the design on objects
+    it has seen.
 
     The split is rebuilt from the checkpoint's record (mode and seed) and must hold out the same objects;
     the lines are those ``train`` draws for its seed, so checkpoints of one dataset are compared on the
@@ -142,6 +151,8 @@ def checkpoint_smoothness(
     """
     if poses < 1 or lines < 1:
         raise OutputError(f"smoothness needs poses >= 1 and lines >= 1, got {poses} and {lines}")
+    if part not in ("test", "train"):
+        raise OutputError(f"smoothness part must be test or train, got {part!r}")
     sur = load_surrogate(ckpt)
     data = load_grasp_data(data_dir)
     meta = sur.meta
@@ -162,8 +173,8 @@ def checkpoint_smoothness(
         raise OutputError(
             f"{ckpt}: the rebuilt split holds out {list(parts.test_objects)}, the checkpoint {held_out}"
         )
-    rows = _smoothness_poses(data, parts, poses)
-    return smoothness(sur, data, rows, lines=lines, seed=seed, cache_dir=cache_dir)
+    rows = _smoothness_poses(data, parts, poses, part)
+    return {**smoothness(sur, data, rows, lines=lines, seed=seed, cache_dir=cache_dir), "part": part}
 
 
 def train_and_report(
@@ -330,6 +341,7 @@ def summary_markdown(m: dict) -> str:
             lines += ["", f"Over the {med['lines']} lines: total variation median {_fmt(med['surrogate_total_variation'])} "
                       f"(simulator {_fmt(med['simulator_total_variation'])}), mean {_fmt(med['surrogate_total_variation_mean'])} "
                       f"(simulator {_fmt(med['simulator_total_variation_mean'])}); median ‖∇L‖ {_fmt(med['grad_norm_mean'])}; "
-                      f"correlation of the two curves' slopes along the lines: {_fmt(med['slope_correlation'])}."]  # fmt: skip
+                      f"the two curves' slopes along the lines: correlation {_fmt(med['slope_correlation'])}, rank correlation "
+                      f"{_fmt(med.get('slope_rank_correlation'))}, same sign on {_fmt(med.get('slope_sign_agreement'))} of the lines."]  # fmt: skip
         lines.append("")
     return "\n".join(lines)

@@ -373,7 +373,9 @@ def test_train_command_writes_checkpoint_and_report(dataset, work, cli):
         assert (out / name).is_file(), name
     m = json.loads((out / "metrics.json").read_text())
     assert m["dataset"]["samples"] == len(load_grasp_data(dataset)) and len(m["smoothness"]["lines"]) == 2
-    assert m["smoothness"]["median"]["lines"] == 2 and "slope_correlation" in m["smoothness"]["median"]
+    med = m["smoothness"]["median"]
+    assert med["lines"] == 2 and "slope_correlation" in med and "slope_rank_correlation" in med
+    assert 0.0 <= med["slope_sign_agreement"] <= 1.0
     assert "Verdict" in (out / "summary.md").read_text()
     assert load_surrogate(out).meta["dataset"]["manifest_sha256"] == m["dataset"]["manifest_sha256"]
     # The checkpoint's smoothness re-measured later: the same lines, the same numbers.
@@ -382,7 +384,10 @@ def test_train_command_writes_checkpoint_and_report(dataset, work, cli):
                             "--lines", "2", "--out", str(lines_file), "--json")  # fmt: skip
     assert code == 0, err
     again = json.loads(lines_file.read_text())
-    assert json.loads(stdout)["lines"] == 2
+    assert json.loads(stdout)["lines"] == 2 and json.loads(stdout)["part"] == "test"
+    code, stdout, err = cli("smoothness", "--ckpt", str(out), "--data", str(dataset), "--poses", "1",
+                            "--lines", "1", "--part", "train", "--json")  # fmt: skip
+    assert code == 0 and json.loads(stdout)["part"] == "train" and json.loads(stdout)["lines"] == 1, err
     for before, after in zip(m["smoothness"]["lines"], again["lines"], strict=True):
         assert after["surrogate_loss"] == pytest.approx(before["surrogate_loss"], rel=1e-6)
         assert after["simulator_loss"] == before["simulator_loss"]

@@ -119,6 +119,9 @@ def add_parser(subparsers) -> None:
         "--poses", type=int_at_least(1), default=16, help="held-out poses, one object after another"
     )
     s.add_argument("--lines", type=int_at_least(1), default=4, help="random design lines per pose")
+    s.add_argument(
+        "--part", choices=("test", "train"), default="test", help="held-out poses, or training poses"
+    )
     s.add_argument("--out", type=path_text, default=None, help="also write every line to this JSON file")
     s.add_argument(
         "--threads", type=int_at_least(1), default=None, help="torch CPU threads (default: torch's)"
@@ -267,11 +270,11 @@ def run_smoothness(args: argparse.Namespace) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     res = checkpoint_smoothness(
-        args.ckpt, args.data, poses=args.poses, lines=args.lines, cache_dir=user_cache_dir()
+        args.ckpt, args.data, poses=args.poses, lines=args.lines, part=args.part, cache_dir=user_cache_dir()
     )
     if args.out:
         write_text(args.out, json.dumps({"ckpt": args.ckpt, "data": args.data, **res}, indent=1))
-    emit({"ckpt": args.ckpt, **res["median"]}, args.json)
+    emit({"ckpt": args.ckpt, "part": res["part"], **res["median"]}, args.json)
     return 0
 
 
