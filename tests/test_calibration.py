@@ -112,8 +112,10 @@ def test_two_hinge_flexures_keep_the_linear_calibration(name):
 
 def _large_curls():
     """FEM curls up to ~1.3 rad recorded by ``crosscheck --scenario curl --models chain,flex,fem --design
-    random:0..1`` (quadratic tets, the CLI's 4-mm mesh; docs/crosscheck_curl_sweep.json)."""
-    rows = json.loads((_DOCS / "crosscheck_curl_sweep.json").read_text())
+    random:0..1`` and ``--models chain,fem --design random:2..5 --flexure-hinges 2`` (quadratic tets, the
+    CLI's 4-mm mesh; docs/crosscheck_curl_sweep.json, docs/crosscheck_curl_sweep_two_hinge.json)."""
+    rows = [r for f in ("crosscheck_curl_sweep.json", "crosscheck_curl_sweep_two_hinge.json")
+            for r in json.loads((_DOCS / f).read_text())]  # fmt: skip
     fem = {(r["design"], r["metric"]): r["reference"] for r in rows if r.get("reference") is not None}
     out = []
     for (design, metric), bend in sorted(fem.items()):
@@ -123,7 +125,7 @@ def _large_curls():
     return out
 
 
-_LARGE_CURL_MAX_RAD = 1.35  # issue 16: curl within 10% "up to about 1.3 rad"
+_LARGE_CURL_MAX_RAD = 1.45  # issue 16: curl within 10% "up to about 1.3 rad" (the sweeps' largest: 1.19–1.41)
 
 
 @pytest.mark.parametrize(("name", "tension", "bend", "tip"), _large_curls())
