@@ -41,12 +41,10 @@ def test_hinge_stiffness_in_model(model):
     built = build_finger(d, s, FingerModel.CHAIN, options=SimOptions(stiffness_model=model))
     k = hinge_stiffness(d, s.finger(0), model)
     np.testing.assert_allclose(built.model.jnt_stiffness, k)
-    # Two hinges per flexure (SimOptions.flexure_hinges=2), each twice as stiff: the block's series
+    # Two hinges per block (SimOptions.hinges_per_block=2), each twice as stiff: the block's series
     # compliance 1/k is kept.
-    flexure = np.array([b.kind is BlockKind.FLEXURE for b in d.blocks()])
-    expected = np.concatenate([[2 * k[i], 2 * k[i]] if flexure[i] else [k[i]] for i in range(len(k))])
-    two = build_finger(d, s, FingerModel.CHAIN, options=SimOptions(stiffness_model=model, flexure_hinges=2))
-    np.testing.assert_allclose(two.model.jnt_stiffness, expected)
+    two = build_finger(d, s, FingerModel.CHAIN, options=SimOptions(stiffness_model=model, hinges_per_block=2))
+    np.testing.assert_allclose(two.model.jnt_stiffness, np.repeat(2 * k, 2))
 
 
 def _random_design(seed):

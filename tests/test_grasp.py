@@ -76,16 +76,16 @@ def test_with_stiffness_equals_recompile(box_scene, text):
         assert_array_equal(getattr(m, name), getattr(ref, name), err_msg=name)
 
 
-def test_with_stiffness_equals_recompile_with_two_hinge_flexures(box_scene):
+def test_with_stiffness_equals_recompile_with_two_hinges_per_block(box_scene):
     box_scene_njnt = box_scene.model.njnt
-    obj, two = box_object((_BOX,) * 3, _RHO), SimOptions(flexure_hinges=2)
+    obj, two = box_object((_BOX,) * 3, _RHO), SimOptions(hinges_per_block=2)
     pose = auto_pose(obj)
     scene = build_scene(obj, FingerDesign(), Stiffness.preset("soft"), FingerModel.CHAIN, pose, options=two)
     for text in ("random:3", _ALTERNATING):
         design = Stiffness.parse(text)
         ref = build_scene(obj, FingerDesign(), design, FingerModel.CHAIN, pose, options=two).model
         m = with_stiffness(scene, design)
-        assert m.njnt == ref.njnt == box_scene_njnt + 2 * 5  # a second hinge in each of 2 x 5 flexures
+        assert m.njnt == ref.njnt == box_scene_njnt + 2 * 11  # a second hinge in each of 2 x 11 blocks
         for name in ("jnt_stiffness", "dof_damping", "geom_solref", "body_mass", "body_inertia"):
             assert_array_equal(getattr(m, name), getattr(ref, name), err_msg=name)
 

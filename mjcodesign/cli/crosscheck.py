@@ -112,10 +112,12 @@ def _plain(obj):
 
 
 def _cmd_crosscheck(args) -> int:
-    if args.flexure_hinges != 1 and args.scenario not in ("cantilever", "curl"):
+    if args.hinges_per_block != 1 and args.scenario not in ("cantilever", "curl"):
         from mjcodesign.errors import DesignError
 
-        raise DesignError(f"--flexure-hinges applies to the cantilever and the curl, not to {args.scenario}")
+        raise DesignError(
+            f"--hinges-per-block applies to the cantilever and the curl, not to {args.scenario}"
+        )
     if args.scenario == "grasp":
         return _cmd_grasp(args)
     tensions = [float(v) for v in args.tensions.split(",")] if args.tensions else None
@@ -133,7 +135,7 @@ def _cmd_crosscheck(args) -> int:
             tensions=tensions,
             observer=rec,
             on_note=_note,
-            flexure_hinges=args.flexure_hinges,
+            hinges_per_block=args.hinges_per_block,
         )
     finally:
         if rec is not None:
@@ -244,11 +246,11 @@ def add_parser(subparsers) -> None:
         "--fem-h-flexure", type=float, default=None, help="grasp: FEM cell size in flexures and cuts [m]"
     )
     p.add_argument(
-        "--flexure-hinges",
+        "--hinges-per-block",
         type=int,
         choices=(1, 2),
         default=1,
-        help="cantilever/curl: chain hinges per flexure (2: at its quarter points; matches the FEM's large-bend curl)",
+        help="cantilever/curl: chain hinges per block (2: at its quarter points; follows the FEM's large-bend curl)",
     )
     p.add_argument(
         "--authors-case",

@@ -56,7 +56,7 @@ def crosscheck(
     tensions: list[float] | None = None,
     observer=None,
     on_note: Callable[[str], None] | None = None,
-    flexure_hinges: int = 1,
+    hinges_per_block: int = 1,
 ) -> tuple[list[dict], dict]:
     """Run ``scenario`` in every backend of ``models``; return (rows, curves for plotting).
 
@@ -69,8 +69,8 @@ def crosscheck(
     every model's rest shape as it is computed (:class:`~mjcodesign.crosscheck.shapes.Shapes` names
     them), so recording costs no extra simulation. ``on_note`` hears one line per model that gave no rest
     state (the CLI prints them on stderr). Curves (curl only) map a model to its ``tension`` [N],
-    ``bend`` [rad] and ``tip`` displacements [m]. ``flexure_hinges``: the chain's hinges per flexure
-    (`mjcodesign.models.types.SimOptions.flexure_hinges`; the cantilever and the curl).
+    ``bend`` [rad] and ``tip`` displacements [m]. ``hinges_per_block``: the chain's hinges per block
+    (`mjcodesign.models.types.SimOptions.hinges_per_block`; the cantilever and the curl).
     """
     from mjcodesign.design.stiffness import Stiffness
     from mjcodesign.errors import DesignError
@@ -92,26 +92,26 @@ def crosscheck(
                 tensions=tensions,
                 observer=observer,
                 on_note=on_note,
-                flexure_hinges=flexure_hinges,
+                hinges_per_block=hinges_per_block,
             )[0]
         return rows + summary_rows(scenario, design_name, rows), {}
     stiffness = Stiffness.parse(design_name)
     shapes = Shapes(observer, stiffness)
     curves: dict[str, dict] = {}
     if scenario == "cantilever":
-        rows = _cantilever_rows(models, design_name, stiffness, fem_options, shapes, flexure_hinges)
+        rows = _cantilever_rows(models, design_name, stiffness, fem_options, shapes, hinges_per_block)
     elif scenario == "press":
         rows = press_rows(models, design_name, stiffness, fem_options, tensions, shapes, on_note)
     else:
         rows, curves = _curl_rows(
-            models, design_name, stiffness, fem_options, tensions, shapes, flexure_hinges
+            models, design_name, stiffness, fem_options, tensions, shapes, hinges_per_block
         )
     shapes.flush()
     return rows, curves
 
 
 def _cantilever_rows(
-    models, design_name: str, stiffness, fem_options, shapes: Shapes, flexure_hinges: int = 1
+    models, design_name: str, stiffness, fem_options, shapes: Shapes, hinges_per_block: int = 1
 ) -> list[dict]:
     """Tip deflection of every model under a tip load, against the FEM when it runs.
 
@@ -140,7 +140,7 @@ def _cantilever_rows(
         else:
             force = None if fem_value is None else fem_value[0]
             res = validate_beam(
-                design, stiffness, m, force=force, options=SimOptions(flexure_hinges=flexure_hinges),
+                design, stiffness, m, force=force, options=SimOptions(hinges_per_block=hinges_per_block),
                 observe=shapes.mujoco(label, tip_load=True),
             )  # fmt: skip
             shapes.set_metrics(label, pick(res, BEAM_METRICS), tip_force=[0.0, 0.0, res["force_n"]])
@@ -152,7 +152,7 @@ def _cantilever_rows(
 
 
 def _curl_rows(
-    models, design_name: str, stiffness, fem_options, tensions, shapes: Shapes, flexure_hinges: int = 1
+    models, design_name: str, stiffness, fem_options, tensions, shapes: Shapes, hinges_per_block: int = 1
 ):
     """Bend and tip displacement of every model at each tension, against the FEM; (rows, curves)."""
     from mjcodesign.design.finger import FingerDesign
@@ -178,7 +178,7 @@ def _curl_rows(
                 label = f"curl/{m}/{t:.4g}N"
                 r = model_curl(
                     design, stiffness, m, t, observe=shapes.mujoco(label, group=f"curl/{m}"),
-                    flexure_hinges=flexure_hinges,
+                    hinges_per_block=hinges_per_block,
                 )  # fmt: skip
                 shapes.set_metrics(
                     label, curl_metrics(r["tension_n"], r["bend_angle_rad"], r["tip_displacement_m"])
@@ -194,7 +194,7 @@ def _curl_rows(
 
 
 def model_curl(
-    design, stiffness, model: str, tension: float, *, observe=None, flexure_hinges: int = 1
+    design, stiffness, model: str, tension: float, *, observe=None, hinges_per_block: int = 1
 ) -> dict:
     """Free curl of finger A of a MuJoCo model at ``tension`` [N], as the curl comparison runs it.
 
@@ -208,7 +208,7 @@ def model_curl(
     from mjcodesign.scenarios.static import curl
 
     if FingerModel(model) is not FingerModel.FLEX_QUADRATIC:
-        opts = SimOptions(flexure_hinges=flexure_hinges)
+        opts = SimOptions(hinges_per_block=hinges_per_block)
         return curl(
             design,
             stiffness,

@@ -154,11 +154,11 @@ class _ChainBuilder:
         )
 
     def split(self, i: int) -> bool:
-        """Whether block ``i`` is a flexure carried by two hinges (``SimOptions.flexure_hinges``)."""
-        return self.options.flexure_hinges == 2 and self.blocks[i].kind is BlockKind.FLEXURE
+        """Whether block ``i`` is carried by two hinges (``SimOptions.hinges_per_block``)."""
+        return self.options.hinges_per_block == 2
 
     def hinge_points(self, i: int) -> tuple[float, ...]:
-        """Where block ``i``'s hinges sit along x: its middle, or a split flexure's quarter points."""
+        """Where block ``i``'s hinges sit along x: its middle, or a split block's quarter points."""
         blk = self.blocks[i]
         if self.split(i):
             quarter = 0.25 * (blk.x1 - blk.x0)
@@ -199,7 +199,7 @@ class _ChainBuilder:
         p = self.prefix
         points = self.hinge_points(i)
         k_hinge = k * len(points)  # hinges in series: the block keeps its compliance 1/k
-        if len(points) == 2:  # the middle link of a split flexure carries the waypoint
+        if len(points) == 2:  # the middle link of a split block carries the waypoint
             mid = parent.add_body(name=f"{p}block{i}m", pos=[points[0] - origin_prev, 0, 0])
             self.hinge(mid, f"{p}hinge{i}m", i, k_hinge, axis)
             self.piece(mid, i, points[0], points[1], points[0], "m")

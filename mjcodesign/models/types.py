@@ -121,13 +121,15 @@ class SimOptions:
     of 2, and the grasp blew up (BADQACC) or made energy. 1e-6 brings ω dt below 1 up to the tension
     limit; it is 3% of one finger's inertia about its base, so the slow grasp motion hardly sees it
     (docs/benchmarks.md, time step and armature)."""
-    flexure_hinges: int = 1
-    """Chain hinges per flexure: 1, at its middle; or 2, at its quarter points, each twice as stiff (the
-    same small-deflection compliance), with the middle link carrying the tendon's waypoint. A waypoint
-    on the distal side of a single hinge swings back over it as the flexure bends, and the tendon's
-    lever across a soft flexure of random:0 falls from 5.4 mm to 3.4 mm at 0.63 rad, where the FEM's
-    flexure, which carries the waypoint on its middle section, keeps 5.6 mm; two hinges keep 5.8 mm
-    (docs/benchmarks.md, large-bend curl)."""
+    hinges_per_block: int = 1
+    """Chain hinges per block: 1, at its middle; or 2, at its quarter points, each twice as stiff (the
+    same small-deflection compliance), with the middle link carrying the block's tendon waypoint. On a
+    single hinge the waypoint sits on the distal body above the hinge and swings back over it as the block
+    bends: the tendon's lever across a soft flexure of random:0 falls from 5.4 mm to 3.4 mm at 0.63 rad,
+    where the FEM, which carries the waypoint on the block's middle section, keeps 5.6 mm; two hinges keep
+    5.8 mm, and the chain's curl stays within 4.4% of the FEM's to 1.4 rad (one hinge: 12-19% off) and
+    6.7% at 3.3 rad (docs/benchmarks.md, large-bend curl). Not the default: grasps with it fold the
+    fingers (same section)."""
     stiffness_model: str = "fem"
     """How block moduli become finger stiffness: ``fem``, calibrated to the converged Warp FEM
     (:mod:`mjcodesign.design.calibration`; the default finger geometry only), or ``beam``,
@@ -146,8 +148,8 @@ class SimOptions:
             raise DesignError("hinge_armature must be a finite inertia >= 0 kg m²")
         if not (0 <= self.poisson < 0.5):
             raise DesignError("poisson must be in [0, 0.5)")
-        if self.flexure_hinges not in (1, 2) or isinstance(self.flexure_hinges, bool):
-            raise DesignError(f"flexure_hinges must be 1 or 2, got {self.flexure_hinges!r}")
+        if self.hinges_per_block not in (1, 2) or isinstance(self.hinges_per_block, bool):
+            raise DesignError(f"hinges_per_block must be 1 or 2, got {self.hinges_per_block!r}")
 
 
 @dataclass
@@ -169,9 +171,9 @@ class FingerHandle:
     joints: list[str] = field(default_factory=list)
     """Chain: hinge names, base to tip."""
     joint_blocks: list[int] = field(default_factory=list)
-    """Chain: the block of every hinge in ``joints`` (a split flexure has two)."""
+    """Chain: the block of every hinge in ``joints`` (a split block has two)."""
     joint_scale: list[float] = field(default_factory=list)
-    """Chain: every hinge's stiffness over its block's (2 for the hinges of a split flexure, else 1)."""
+    """Chain: every hinge's stiffness over its block's (2 for the hinges of a split block, else 1)."""
     bodies: list[str] = field(default_factory=list)
     """Chain: block bodies base to tip; flex: node bodies."""
     flex: str | None = None

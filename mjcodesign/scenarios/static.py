@@ -152,9 +152,13 @@ def bend_angles(built: Built, d: mujoco.MjData) -> np.ndarray:
     m = built.model
     h = built.fingers[0]
     if built.finger_model is FingerModel.CHAIN:
-        q = np.array([d.qpos[m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)]] for j in h.joints])
+        q = np.array(
+            [d.qpos[m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)]] for j in h.joints]
+        )
         blocks_of = np.array(h.joint_blocks or range(len(q)), dtype=int)
-        return np.bincount(blocks_of, weights=q, minlength=built.design.n_blocks)  # a split flexure's two hinges
+        return np.bincount(
+            blocks_of, weights=q, minlength=built.design.n_blocks
+        )  # a split block's two hinges
     # Flex: direction of the spine (bottom mid-width node line) at block boundaries.
     nx, ny, nz, n_cells, order = h.grid
     gj = ny // 2

@@ -89,7 +89,7 @@ def _stiffness_writer(scene: GraspScene) -> Callable[[Stiffness], mujoco.MjModel
 def _chain_ids(scene: GraspScene) -> list[tuple[np.ndarray, ...]]:
     """Per finger: hinge ids, dofs, the geoms with a block's solref and their blocks, hinge blocks, scales.
 
-    The last two: each hinge's block, and its stiffness over its block's. One hinge per block, or two for a split flexure (``SimOptions.flexure_hinges``); a block has one to
+    The last two: each hinge's block, and its stiffness over its block's. One hinge per block, or two for a split block (``SimOptions.hinges_per_block``); a block has one to
     three geoms (its proximal, middle and distal pieces).
     """
     m = scene.model
