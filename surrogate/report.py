@@ -193,8 +193,8 @@ def train_and_report(
     """Train on the dataset in ``data_dir``, write the checkpoint and report into ``out``; the metrics.
 
     ``efficiency``: the share of training data of the second run (0: none). ``smoothness_poses``: test
-    poses re-simulated along ``smoothness_lines`` design lines each (0: none). ``on_epoch(run, log)`` sees every epoch of the
-    runs ``full`` and ``efficiency``.
+    poses re-simulated along ``smoothness_lines`` design lines each (0: none). ``on_epoch(run, log)``
+    sees every epoch of the runs ``full`` and ``efficiency``.
     """
     cfg, mcfg = config or TrainConfig(), model_config or ModelConfig()
     root = Path(out)

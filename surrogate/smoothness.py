@@ -10,8 +10,9 @@ surrogate's gradient norm and directional derivative ``u · ∇L``, the simulato
 simulator shows along the line. The summary gives medians over the lines, the mean total variation,
 and the agreement of the two curves' least-squares slopes along the lines: Pearson's and Spearman's
 correlation (``None`` where either set of slopes is constant) and the share of lines where the signs
-agree: how far the surrogate's design gradient points where the simulator's outcome moves. A few lines say little: the median total variation of one network measured 0.19 on 4
-lines and 3.3 on 64 (docs/benchmarks.md), so the report's default is 16 poses with 4 lines each.
+agree: how far the surrogate's design gradient points where the simulator's outcome moves. A few
+lines say little: the median total variation of one network measured 0.19 on 4 lines and 3.3 on 64
+(docs/benchmarks.md), so the report's default is 16 poses with 4 lines each.
 """
 
 from __future__ import annotations

@@ -178,7 +178,6 @@ class _ChainBuilder:
         )
         self.handle.joints.append(name)
         self.handle.joint_blocks.append(i)
-        self.handle.joint_scale.append(float(len(self.hinge_points(i))))
 
     def waypoint(self, body, i: int, origin: float, waypoint: np.ndarray) -> None:
         site = body.add_site(

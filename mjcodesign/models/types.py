@@ -171,9 +171,7 @@ class FingerHandle:
     joints: list[str] = field(default_factory=list)
     """Chain: hinge names, base to tip."""
     joint_blocks: list[int] = field(default_factory=list)
-    """Chain: the block of every hinge in ``joints`` (a split block has two)."""
-    joint_scale: list[float] = field(default_factory=list)
-    """Chain: every hinge's stiffness over its block's (2 for the hinges of a split block, else 1)."""
+    """Chain: the block of every hinge in ``joints`` (a block has one, or two with ``hinges_per_block=2``)."""
     bodies: list[str] = field(default_factory=list)
     """Chain: block bodies base to tip; flex: node bodies."""
     flex: str | None = None

@@ -155,10 +155,8 @@ def bend_angles(built: Built, d: mujoco.MjData) -> np.ndarray:
         q = np.array(
             [d.qpos[m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)]] for j in h.joints]
         )
-        blocks_of = np.array(h.joint_blocks or range(len(q)), dtype=int)
-        return np.bincount(
-            blocks_of, weights=q, minlength=built.design.n_blocks
-        )  # a split block's two hinges
+        # A block's bend is the sum of its hinges' (two per block with SimOptions.hinges_per_block=2)
+        return np.bincount(h.joint_blocks, weights=q, minlength=built.design.n_blocks)
     # Flex: direction of the spine (bottom mid-width node line) at block boundaries.
     nx, ny, nz, n_cells, order = h.grid
     gj = ny // 2

@@ -87,19 +87,20 @@ def _stiffness_writer(scene: GraspScene) -> Callable[[Stiffness], mujoco.MjModel
 
 
 def _chain_ids(scene: GraspScene) -> list[tuple[np.ndarray, ...]]:
-    """Per finger: hinge ids, dofs, the geoms with a block's solref and their blocks, hinge blocks, scales.
+    """Per finger: hinge ids and dofs, solref geoms and their blocks, each hinge's block and stiffness scale.
 
-    The last two: each hinge's block, and its stiffness over its block's. One hinge per block, or two for a split block (``SimOptions.hinges_per_block``); a block has one to
-    three geoms (its proximal, middle and distal pieces).
+    The scale is a hinge's stiffness over its block's. A block has one hinge, or two in series at twice its stiffness (``SimOptions.hinges_per_block``),
+    and one to three geoms (its proximal, middle and distal pieces).
     """
     m = scene.model
+    n_blocks = scene.built.design.n_blocks
     out = []
     for h in scene.built.fingers:
         jids = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name) for name in h.joints])
-        blocks_of = np.array(h.joint_blocks or range(len(h.joints)), dtype=int)
-        scale = np.array(h.joint_scale or [1.0] * len(h.joints), dtype=float)
+        blocks_of = np.array(h.joint_blocks, dtype=int)
+        scale = np.bincount(blocks_of, minlength=n_blocks)[blocks_of].astype(float)
         gids, owner = [], []
-        for b in range(int(blocks_of.max()) + 1):
+        for b in range(n_blocks):
             for part in ("p", "m", "d"):
                 g = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"{h.prefix}b{b}_{part}")
                 if g >= 0:
