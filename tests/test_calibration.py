@@ -130,16 +130,27 @@ _LARGE_CURL_MAX_RAD = 1.45  # issue 16: curl within 10% "up to about 1.3 rad" (l
 
 @pytest.mark.parametrize(("name", "tension", "bend", "tip"), _large_curls())
 def test_two_hinge_chain_follows_the_fem_curl_to_large_bends(name, tension, bend, tip):
-    r = curl(FingerDesign(), Stiffness.parse(name), "chain", tension, options=SimOptions(hinges_per_block=2))
+    two = SimOptions(hinges_per_block=2, tendon_lever="path")
+    r = curl(FingerDesign(), Stiffness.parse(name), "chain", tension, options=two)
     assert r["bend_angle_rad"] == pytest.approx(bend, rel=_TOL_CURL)
     assert np.linalg.norm(r["tip_displacement_m"]) == pytest.approx(tip, rel=_TOL_CURL)
 
 
-def test_one_hinge_chain_misses_the_fem_curl_at_large_bends():
-    # Why two hinges: a single hinge's waypoint swings back over it, its tendon lever shrinks, and at
-    # 1.1-1.4 rad the one-hinge chain bends 12-19% less than the FEM.
+@pytest.mark.parametrize(("name", "tension", "bend", "tip"), _large_curls())
+def test_default_chain_follows_the_fem_curl_to_large_bends(name, tension, bend, tip):
+    # One hinge per block with the tendon's lever held at the straight finger's (the default): the FEM
+    # carries each waypoint on its block's middle section, whose lever hardly changes as the block bends.
+    r = curl(FingerDesign(), Stiffness.parse(name), "chain", tension)
+    assert r["bend_angle_rad"] == pytest.approx(bend, rel=_TOL_CURL)
+    assert np.linalg.norm(r["tip_displacement_m"]) == pytest.approx(tip, rel=_TOL_CURL)
+
+
+def test_path_tendon_on_one_hinge_misses_the_fem_curl_at_large_bends():
+    # Why the default holds the lever: on one hinge a waypoint swings back over it, the spatial tendon's
+    # lever shrinks, and at 1.1-1.4 rad that chain bends 12-19% less than the FEM.
     name, tension, bend, _ = max(_large_curls(), key=lambda c: c[2])
-    r = curl(FingerDesign(), Stiffness.parse(name), "chain", tension, options=SimOptions(hinges_per_block=1))
+    path = SimOptions(hinges_per_block=1, tendon_lever="path")
+    r = curl(FingerDesign(), Stiffness.parse(name), "chain", tension, options=path)
     assert bend > 1.2 and r["bend_angle_rad"] < (1 - _TOL_CURL) * bend
 
 

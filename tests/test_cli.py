@@ -61,7 +61,9 @@ def test_finger_export_reloads(tmp_path):
     )
     assert r.returncode == 0, r.stderr
     m = mujoco.MjModel.from_xml_path(str(tmp_path / "model.xml"))
-    assert m.ntendon == 2 and m.nu == 5
+    names = [m.tendon(i).name for i in range(m.ntendon)]
+    assert m.nu == 5 and sorted(n for n in names if "gap" not in n) == ["A_tendon", "B_tendon"]
+    assert len(names) == 2 + 2 * 5  # and every flexure's gap stop (chain)
     mb = mujoco.MjModel.from_binary_path(str(tmp_path / "model.mjb"))
     assert mb.nq == m.nq
     assert len(list((tmp_path / "blocks").glob("*.stl"))) == 11

@@ -9,7 +9,7 @@ from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.models.builder import build_finger
 from mjcodesign.models.tendon import TendonDriver
-from mjcodesign.models.types import FingerModel, TendonMode
+from mjcodesign.models.types import FingerModel, SimOptions, TendonMode
 from mjcodesign.scenarios.static import curl
 
 # Point forces of a frictionless tendon are the native spatial tendon's forces: same rest shape.
@@ -27,10 +27,12 @@ def curls():
 
 
 def test_point_force_equals_native_tendon():
+    # The point forces act at the waypoints as they move: the spatial (path) tendon, not the constant lever.
     s = Stiffness.preset("paper-optimized")
     d = FingerDesign()
-    a = curl(d, s, "chain", 1.0, tendon_mode=TendonMode.NATIVE)
-    b = curl(d, s, "chain", 1.0, tendon_mode=TendonMode.POINT_FORCE)
+    path = SimOptions(tendon_lever="path")
+    a = curl(d, s, "chain", 1.0, tendon_mode=TendonMode.NATIVE, options=path)
+    b = curl(d, s, "chain", 1.0, tendon_mode=TendonMode.POINT_FORCE, options=path)
     np.testing.assert_allclose(a["block_angles_rad"], b["block_angles_rad"], atol=_TOL_NATIVE_VS_POINT_RAD)
 
 
@@ -84,3 +86,86 @@ def test_flex_small_curl_matches_the_recorded_fem():
     tension = 0.05 / rec["tendon"]["face10"]
     flex = curl(FingerDesign(), s, FingerModel.FLEX, tension, tendon_mode=TendonMode.POINT_FORCE)
     assert flex["bend_angle_rad"] == pytest.approx(tension * rec["tendon"]["face10"], rel=_TOL_FLEX_CURL)
+
+
+# The constant lever is the path tendon's length derivative on the straight finger: equal to round-off
+# of a central difference with a 1e-6 rad step (the path is smooth; its curvature error is ~1e-12 m).
+_TOL_LEVER_M = 1e-9
+
+
+@pytest.mark.parametrize("routing", ["uniform-pressure", "uniform-height"])
+@pytest.mark.parametrize("hinges", [1, 2])
+def test_constant_lever_is_the_path_tendons_on_the_straight_finger(routing, hinges):
+    d, s = FingerDesign(routing=routing), Stiffness.parse("random:3")
+    path = build_finger(
+        d, s, FingerModel.CHAIN, options=SimOptions(hinges_per_block=hinges, tendon_lever="path")
+    )
+    m, h = path.model, path.fingers[0]
+    data = mujoco.MjData(m)
+    fd = []
+    for name in h.joints:
+        q = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)]
+        lengths = []
+        for step in (1e-6, -1e-6):
+            data.qpos[:] = 0.0
+            data.qpos[q] = step
+            mujoco.mj_kinematics(m, data)
+            mujoco.mj_tendon(m, data)
+            lengths.append(data.ten_length[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_TENDON, h.tendons[0])])
+        fd.append((lengths[0] - lengths[1]) / 2e-6)
+    np.testing.assert_allclose(h.joint_levers, fd, atol=_TOL_LEVER_M)
+    assert max(h.joint_levers) < 0.001 < -min(h.joint_levers)  # pulling bends the finger inwards
+
+
+# The levers part to first order in the bend: measured 3e-4 apart at 8 mrad, 5% at 0.8 rad (semi-rigid).
+_TOL_SMALL_CURL = 1e-3
+_TOL_LARGE_CURL_APART = 0.03
+
+
+def test_constant_and_path_tendons_agree_on_a_small_curl_only():
+    # Same force on the straight finger, so the two levers part only as the finger bends.
+    d, s = FingerDesign(), Stiffness.preset("semi-rigid")
+    path = SimOptions(tendon_lever="path")
+    small = curl(d, s, "chain", 0.01), curl(d, s, "chain", 0.01, options=path)
+    assert small[0]["bend_angle_rad"] == pytest.approx(small[1]["bend_angle_rad"], rel=_TOL_SMALL_CURL)
+    large = curl(d, s, "chain", 1.0), curl(d, s, "chain", 1.0, options=path)
+    assert large[0]["bend_angle_rad"] > (1 + _TOL_LARGE_CURL_APART) * large[1]["bend_angle_rad"]
+
+
+def _segments_touch(design: FingerDesign, i: int, axis: float, angle: float) -> bool:
+    """MuJoCo's own collision of flexure ``i``'s two segments (convex prisms) with the distal one turned
+    by ``angle`` about the flexure's hinge: an independent check of the polygon search."""
+    spec = mujoco.MjSpec()
+    blocks = design.blocks()
+    for name, blk in (("prox", blocks[i - 1]), ("dist", blocks[i + 1])):
+        prof = blk.side_profile()
+        half = 0.5 * blk.width
+        verts = np.vstack([np.c_[prof[:, 0], np.full(len(prof), y), prof[:, 1]] for y in (-half, half)])
+        spec.add_mesh(name=name, uservert=verts.ravel().tolist())
+    spec.worldbody.add_body(name="p").add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname="prox")
+    mid = blocks[i].mid
+    body = spec.worldbody.add_body(name="d", pos=[mid, 0, axis])
+    body.add_joint(type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, -1, 0])
+    geom = body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname="dist", pos=[-mid, 0, -axis])
+    geom.density = 1000.0
+    m = spec.compile()
+    d = mujoco.MjData(m)
+    d.qpos[0] = angle
+    mujoco.mj_forward(m, d)
+    return d.ncon > 0
+
+
+def test_flexure_stops_are_where_the_segments_touch():
+    from mjcodesign.models.chain import flexure_stops, hinge_axes
+
+    design = FingerDesign()
+    axes = hinge_axes(design)
+    stops = flexure_stops(design, axes)
+    flexures = [i for i, b in enumerate(design.blocks()) if b.kind.name == "FLEXURE"]
+    assert np.isnan(np.delete(stops, flexures, axis=0)).all()
+    for i in flexures:
+        lo, hi = stops[i]
+        assert 0.9 < hi < 1.8 and -3.0 < lo < -2.0  # the cuts close inwards long before the spine outwards
+        for edge in (lo, hi):
+            assert not _segments_touch(design, i, axes[i], edge * (1 - 1e-3))
+            assert _segments_touch(design, i, axes[i], edge * (1 + 1e-3))

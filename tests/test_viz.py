@@ -29,20 +29,19 @@ ROOT = Path(__file__).resolve().parents[1]
 _KEYS = {"success", "body_force", "displacement", "ground_contact", "reason", "wall_time_s"}
 _BOX = 0.05  # box side [m]
 _RHO = 400.0  # heavy preset [kg/m³]: a 50 g box the chain gripper holds
-# A short grasp (0.87 s simulated) that still closes, tightens, lifts 3 cm and holds. On the
-# FEM-calibrated chain the lift's end sets the held box swinging in the grip: |F| on it (paper-optimized,
-# measured step by step) falls to 0.60 of its mean as the lift ends (t = 0.41 s), then rings at ~12 Hz
-# (peaks 1.11 at 0.47 s and 1.05 at 0.55 s) and decays slowly. The test reads the hold's second half, so
-# the hold must outlast the ringing: hold 0.1 s -> that half spans 0.91-1.11 of the mean, 0.2 s ->
-# 0.95-1.06, 0.3 s -> 0.96-1.02, 0.4 s -> 0.98-1.02 (the outcome's mean is m g within 0.1%). The lift
-# takes the default 0.2 s (a 0.15-s lift rings harder: 0.88-1.12 with a 0.1-s hold).
+# A short grasp (1.47 s simulated) that still closes, tightens, lifts 3 cm and holds. The lift's end sets
+# the held box rocking in the grip, and the test reads the hold's second half, so the hold must outlast
+# the ringing. With the tendon's lever held constant (issue 16; no spatial tendon's restoring geometric
+# stiffness) the box rocks longer: |F| on it (paper-optimized, every 5th step) spans 0.94-1.11 of its mean
+# in the second half of a 0.4-s hold, 0.93-1.09 (0.6 s), 0.98-1.04 (0.8 s), 0.98-1.02 (1.0 s); the
+# outcome's mean is m g within 0.3%. (The spatial tendon's chain spanned 0.98-1.02 after 0.4 s.)
 _SCENARIO = GraspScenario(
-    impulse=0.0, settle_s=0.02, close_s=0.1, tighten_s=0.1, lift_s=0.2, hold_s=0.4, post_hold_s=0.05
+    impulse=0.0, settle_s=0.02, close_s=0.1, tighten_s=0.1, lift_s=0.2, hold_s=1.0, post_hold_s=0.05
 )
 _DECIMATION = 5
 _TOL_EXACT = 1e-12  # logged values replay the same states as the outcome: equal up to rounding [m]
-# logged |F| at hold frames vs the outcome's mean of 5 hold samples: the grip still settles (±2-3%,
-# measured ±2.4% with the 0.4-s hold)
+# logged |F| at hold frames vs the outcome's mean of 5 hold samples: the grip still settles (±2%, measured
+# with the 1.0-s hold above)
 _TOL_HOLD_FORCE = 0.05
 _TOL_VOLUME = 1e-5  # closed-surface volume vs sum of tet volumes: float32 vertex positions in Rerun
 _ROOT = "/designs/paper-optimized"

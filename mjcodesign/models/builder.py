@@ -26,20 +26,30 @@ from mjcodesign.models.types import (
     GripperPose,
     SimOptions,
     TendonMode,
+    tendon_exit_site,
 )
 
 __all__ = ["build_finger", "build_gripper", "set_openings", "make_data", "apply_cell_moduli"]
 
 
 def _add_tendon(spec: mujoco.MjSpec, handle: FingerHandle, exit_site: str, options: SimOptions) -> None:
-    """Native spatial tendon(s) from the base exit through every waypoint, pulled by force motors."""
+    """Native tendon(s) pulled by force motors.
+
+    Spatial from the base exit through every waypoint, or, for a chain with ``tendon_lever="constant"``,
+    fixed on its hinges with the straight finger's levers.
+    """
+    fixed = handle.model is FingerModel.CHAIN and options.tendon_lever == "constant"
     chains = handle.site_chains or [handle.waypoint_sites]
     for j, chain in enumerate(chains):
         suffix = "" if len(chains) == 1 else f"_{j}"
         ten = spec.add_tendon(name=f"{handle.prefix}tendon{suffix}")
-        ten.wrap_site(exit_site)
-        for s in chain:
-            ten.wrap_site(s)
+        if fixed:
+            for joint, lever in zip(handle.joints, handle.joint_levers, strict=True):
+                ten.wrap_joint(joint, lever)
+        else:
+            ten.wrap_site(exit_site)
+            for s in chain:
+                ten.wrap_site(s)
         act = spec.add_actuator(name=f"{handle.prefix}tension{suffix}", target=ten.name)
         act.trntype = mujoco.mjtTrn.mjTRN_TENDON
         # Negative gear: a positive control is a tension [N] that shortens the tendon.
@@ -58,7 +68,7 @@ def _add_finger(spec, parent, design, young, model, prefix, tendon_mode, options
             spec, parent, design, young, prefix, options, quadratic=model is FingerModel.FLEX_QUADRATIC
         )
     exit_site = parent.add_site(
-        name=f"{prefix}tendon_exit", pos=design.tendon_exit() - [0.004, 0, 0], size=[0.001, 0, 0], group=3
+        name=f"{prefix}tendon_exit", pos=tendon_exit_site(design), size=[0.001, 0, 0], group=3
     )
     if tendon_mode is TendonMode.NATIVE:
         _add_tendon(spec, handle, exit_site.name, options)

@@ -12,11 +12,18 @@ boundaries overshoot by 12–25%, shared/NOTES.md). Its stiffness and axis come 
 
 Rigid piece ``k`` spans from block ``k``'s midpoint to block ``k+1``'s midpoint; piece 0's proximal
 half belongs to the base. Adjacent pieces are parent and child, so MuJoCo never collides them; the
-finger's geoms share one contact bit and never collide with each other.
+finger's geoms share one contact bit and never collide with each other. What the printed segments'
+contact does is modelled instead by stops: each flexure's hinge, and its gap (its hinge plus its
+neighbouring segments' root rotation), end where the flexure's two segments meet (:func:`flexure_stops`).
+
+The tendon (:attr:`SimOptions.tendon_lever`) acts on the hinges with the levers it has on the straight
+finger (:attr:`FingerHandle.joint_levers`), as the FEM's tendon does through each block's middle section,
+or through the waypoint sites as a spatial tendon.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import mujoco
@@ -25,9 +32,16 @@ import numpy as np
 from mjcodesign.design.beam import block_effective_ei
 from mjcodesign.design.calibration import block_compliance, calibration_for
 from mjcodesign.design.finger import Block, BlockKind, FingerDesign
-from mjcodesign.models.types import CONTYPE_FINGER, CONTYPE_WORLD, FingerHandle, FingerModel, SimOptions
+from mjcodesign.models.types import (
+    CONTYPE_FINGER,
+    CONTYPE_WORLD,
+    FingerHandle,
+    FingerModel,
+    SimOptions,
+    tendon_exit_site,
+)
 
-__all__ = ["add_chain_finger", "hinge_stiffness", "hinge_axes", "contact_solrefs"]
+__all__ = ["add_chain_finger", "hinge_stiffness", "hinge_axes", "contact_solrefs", "flexure_stops"]
 
 # Contact stiffness of a block face: a flat punch of the block's width, k_c = E w (N/m), and a
 # time constant from the block's mass, tau = 2 pi sqrt(m / k_c), floored at MuJoCo's stable 2 dt.
@@ -55,6 +69,61 @@ def hinge_axes(design: FingerDesign, model: str = "fem") -> np.ndarray:
     if model == "fem":
         return calibration_for(design).axis_heights.copy()
     return np.array([_neutral_axis(b) for b in design.blocks()])
+
+
+_STOP_SCAN = np.radians(5.0)  # first pass over the angle; contact is then bisected to 1e-6 rad
+
+
+def _first_touch(fixed, moving, origin: tuple[float, float], sign: float) -> float:
+    """Smallest rotation [rad] of ``moving`` about ``origin`` that makes it overlap ``fixed``.
+
+    Shapely polygons in side view; towards +z if ``sign`` > 0; π if none does before π.
+    """
+    from shapely import affinity
+
+    def touches(theta: float) -> bool:
+        turned = affinity.rotate(moving, sign * theta, origin=origin, use_radians=True)
+        return fixed.intersection(turned).area > 0.0
+
+    lo = 0.0
+    for hi in np.arange(_STOP_SCAN, np.pi + 1e-12, _STOP_SCAN):
+        if touches(hi):
+            break
+        lo = hi
+    else:
+        return float(np.pi)
+    while hi - lo > 1e-6:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if touches(mid) else (mid, hi)
+    return float(lo)
+
+
+@functools.lru_cache(maxsize=32)
+def _stops(design: FingerDesign, axes: tuple[float, ...]) -> np.ndarray:
+    from shapely.geometry import Polygon
+
+    blocks = design.blocks()
+    out = np.full((len(blocks), 2), np.nan)
+    for i, blk in enumerate(blocks):
+        if blk.kind is not BlockKind.FLEXURE or not 0 < i < len(blocks) - 1:
+            continue
+        fixed, moving = Polygon(blocks[i - 1].side_profile()), Polygon(blocks[i + 1].side_profile())
+        origin = (blk.mid, axes[i])
+        out[i] = (-_first_touch(fixed, moving, origin, -1.0), _first_touch(fixed, moving, origin, 1.0))
+    return out
+
+
+def flexure_stops(design: FingerDesign, axes: np.ndarray) -> np.ndarray:
+    """Joint range [rad] of every flexure's hinge where its two segments meet, shape (n_blocks, 2).
+
+    A flexure's hinge turns its distal segment about (block middle, ``axes[i]``); the range is where the
+    side profile of that segment first overlaps the proximal one's: inwards (positive, the tendon side)
+    when the trapezoid cuts close, 1.0-1.6 rad on the default finger; outwards at about 2.7 rad.
+    The printed finger's segments stop each other there; the chain's finger geoms never collide with
+    one another, so without the stop a tendon with a constant lever folds one flexure round on itself.
+    NaN rows: segments (their hinges are the block's own elasticity) and end blocks.
+    """
+    return _stops(design, tuple(float(a) for a in axes)).copy()
 
 
 def contact_solrefs(blocks: list[Block], young: np.ndarray, density: float, timestep: float) -> np.ndarray:
@@ -132,9 +201,11 @@ class _ChainBuilder:
     handle: FingerHandle
     blocks: list[Block] = field(init=False)
     solrefs: list[tuple[float, float]] = field(init=False)
+    stops: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
         self.blocks = self.design.blocks()
+        self.stops = flexure_stops(self.design, hinge_axes(self.design, self.options.stiffness_model))
         rows = contact_solrefs(self.blocks, self.young, self.design.density, self.options.timestep)
         self.solrefs = [(float(tau), float(ratio)) for tau, ratio in rows]
 
@@ -165,9 +236,9 @@ class _ChainBuilder:
             return (blk.x0 + quarter, blk.x1 - quarter)
         return (blk.mid,)
 
-    def hinge(self, body, name: str, i: int, k: float, axis: float) -> None:
-        """A hinge of block ``i`` at ``body``'s origin, ``k`` [N m/rad] and its Rayleigh damping."""
-        body.add_joint(
+    def hinge(self, body, name: str, i: int, x: float, k: float, axis: float) -> None:
+        """A hinge of block ``i`` at ``body``'s origin (finger x), ``k`` [N m/rad] and its Rayleigh damping."""
+        joint = body.add_joint(
             name=name,
             type=mujoco.mjtJoint.mjJNT_HINGE,
             axis=[0, -1, 0],
@@ -176,8 +247,33 @@ class _ChainBuilder:
             damping=float(self.options.damping_time * k),
             armature=self.options.hinge_armature,
         )
+        stop = self.stops[i]
+        if self.options.hinges_per_block == 1 and np.all(np.isfinite(stop)):
+            # The flexure's own segments meet (see `gap_stops` for its roots' share).
+            joint.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+            joint.range = (np.degrees(stop) if self.spec.compiler.degree else stop).tolist()
+            joint.solref_limit = self.stop_solref()
         self.handle.joints.append(name)
         self.handle.joint_blocks.append(i)
+        self.handle.joint_levers.append(self.lever(x, axis))
+
+    def lever(self, x: float, axis: float) -> float:
+        """d(tendon length)/d(angle) [m/rad] of a hinge at (x, axis) about -y on the straight finger.
+
+        Bodies are added base to tip, so the next waypoint is the first one distal to this hinge; only
+        the tendon's span into it crosses the hinge: ``dl/dθ = u · (ω × r)``, with ``u`` the span's
+        direction, ``ω = -y`` and ``r`` from the hinge to that waypoint. Past the last waypoint (a split
+        tip block's distal hinge) the tendon crosses nothing: 0.
+        """
+        wps = self.design.waypoints()
+        n = len(self.handle.waypoint_sites)
+        if n == len(wps):
+            return 0.0
+        distal = np.asarray(wps[n], dtype=float)
+        proximal = np.asarray(wps[n - 1] if n else tendon_exit_site(self.design), dtype=float)
+        u = (distal - proximal) / np.linalg.norm(distal - proximal)
+        r = distal - np.array([x, 0.0, axis])
+        return float(u @ np.cross([0.0, -1.0, 0.0], r))
 
     def waypoint(self, body, i: int, origin: float, waypoint: np.ndarray) -> None:
         site = body.add_site(
@@ -200,13 +296,13 @@ class _ChainBuilder:
         k_hinge = k * len(points)  # hinges in series: the block keeps its compliance 1/k
         if len(points) == 2:  # the middle link of a split block carries the waypoint
             mid = parent.add_body(name=f"{p}block{i}m", pos=[points[0] - origin_prev, 0, 0])
-            self.hinge(mid, f"{p}hinge{i}m", i, k_hinge, axis)
+            self.hinge(mid, f"{p}hinge{i}m", i, points[0], k_hinge, axis)
             self.piece(mid, i, points[0], points[1], points[0], "m")
             self.waypoint(mid, i, points[0], waypoint)
             self.handle.bodies.append(mid.name)
             parent, origin_prev = mid, points[0]
         body = parent.add_body(name=f"{p}block{i}", pos=[points[-1] - origin_prev, 0, 0])
-        self.hinge(body, f"{p}hinge{i}", i, k_hinge, axis)
+        self.hinge(body, f"{p}hinge{i}", i, points[-1], k_hinge, axis)
         self.piece(body, i, points[-1], blk.x1, points[-1], "d")
         if i + 1 < len(self.blocks):
             nxt = self.blocks[i + 1]
@@ -215,6 +311,49 @@ class _ChainBuilder:
             self.waypoint(body, i, points[-1], waypoint)
         self.handle.bodies.append(body.name)
         return body, points[-1]
+
+    def stop_solref(self) -> list[float]:
+        """Solref of the stops: (2 dt, critical).
+
+        Segments meeting make a contact whose time constant (the blocks' ``contact_solrefs`` rule,
+        0.4-3.6 ms over log E 13.5-17) is at or under MuJoCo's stable floor of two steps at the default
+        2 ms, so the stops take the floor; design-independent, they need no rewrite when a batch swaps
+        designs (``sim.mujoco_c.with_stiffness``).
+        """
+        return [2.0 * self.options.timestep, _CONTACT_DAMPRATIO]
+
+    def gap_share(self, j: int) -> float:
+        """How much of hinge ``j``'s angle closes the gap of a flexure next to it.
+
+        A flexure's all of it; a middle segment's half (it has two flexure roots); an end segment's all
+        (its one root).
+        """
+        if self.blocks[j].kind is BlockKind.FLEXURE or j in (0, len(self.blocks) - 1):
+            return 1.0
+        return 0.5
+
+    def gap_stops(self) -> None:
+        """Limited fixed tendons that stop every flexure's gap where its segments meet.
+
+        A segment's hinge lumps the rotation at its two flexure roots (the calibrated bending axis
+        sits 1.4 mm up, at the roots' height), so the gap across flexure ``i`` closes by
+        ``θ_i + w (θ_{i-1} + θ_{i+1})`` (:meth:`gap_share`: w = 1/2, or 1 for an end segment's one root);
+        that sum is held to :func:`flexure_stops` (:meth:`stop_solref`). Without it, the segments
+        beside a flexure held at its stop bend on, 3-14 rad for a soft finger at 10 N in free space.
+        One hinge per block only: a split chain is left free.
+        """
+        if self.options.hinges_per_block != 1:
+            return
+        for i in range(1, len(self.blocks) - 1):
+            stop = self.stops[i]
+            if not np.all(np.isfinite(stop)):
+                continue
+            ten = self.spec.add_tendon(name=f"{self.prefix}gap{i}")
+            for j in (i - 1, i, i + 1):
+                ten.wrap_joint(self.handle.joints[j], self.gap_share(j))
+            ten.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+            ten.range = stop.tolist()
+            ten.solref_limit = self.stop_solref()
 
     def tip(self, body) -> None:
         """The tip site on the last block's body."""
@@ -252,5 +391,6 @@ def add_chain_finger(
     origin_prev = 0.0
     for i in range(len(blocks)):
         body, origin_prev = builder.link(body, i, origin_prev, k[i], axes[i], wps[i])
+    builder.gap_stops()
     builder.tip(body)
     return handle

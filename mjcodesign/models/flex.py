@@ -38,7 +38,14 @@ from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.tendon_law import tendon_forces
 from mjcodesign.errors import DesignError
 from mjcodesign.models.spec import new_spec
-from mjcodesign.models.types import CONTYPE_FINGER, CONTYPE_WORLD, FingerHandle, FingerModel, SimOptions
+from mjcodesign.models.types import (
+    CONTYPE_FINGER,
+    CONTYPE_WORLD,
+    FingerHandle,
+    FingerModel,
+    SimOptions,
+    tendon_exit_site,
+)
 
 __all__ = [
     "add_flex_finger",
@@ -561,7 +568,7 @@ def linear_tendon_load(
     X = grid_rest(design, handle)
     W = grid_weights(design, n_cells, order, design.waypoints())
     P = W @ X
-    exit_p = design.tendon_exit() - np.array([0.004, 0.0, 0.0])  # the exit site of `mjcf._add_finger`
+    exit_p = tendon_exit_site(design)
     return X, (W.T @ tendon_forces(P, np.zeros_like(P), exit_p, tension, "frictionless")).ravel()
 
 

@@ -23,6 +23,8 @@ __all__ = [
     "LIFT_KP",
     "STIFFNESS_MODELS",
     "PALM_HALF",
+    "TENDON_LEVERS",
+    "tendon_exit_site",
     "FingerModel",
     "TendonMode",
     "SimOptions",
@@ -38,6 +40,14 @@ CONTYPE_WORLD = 1
 
 CONTYPE_FINGER = 2
 """Contact bit of finger geoms: they touch the world and objects, never each other."""
+
+TENDON_LEVERS = ("constant", "path")
+"""How the chain's tendon acts on its hinges (:attr:`SimOptions.tendon_lever`)."""
+
+
+def tendon_exit_site(design: FingerDesign) -> np.ndarray:
+    """Where the tendon leaves the palm, in the finger frame [m]: 4 mm behind the finger's base exit."""
+    return design.tendon_exit() - np.array([0.004, 0.0, 0.0])
 
 
 # Largest opening of one finger from the palm centre [m]: Franka Hand stroke is 80 mm in total.
@@ -123,13 +133,20 @@ class SimOptions:
     (docs/benchmarks.md, time step and armature)."""
     hinges_per_block: int = 1
     """Chain hinges per block: 1, at its middle; or 2, at its quarter points, each twice as stiff (the
-    same small-deflection compliance), with the middle link carrying the block's tendon waypoint. On a
-    single hinge the waypoint sits on the distal body above the hinge and swings back over it as the block
-    bends: the tendon's lever across a soft flexure of random:0 falls from 5.4 mm to 3.4 mm at 0.63 rad,
-    where the FEM, which carries the waypoint on the block's middle section, keeps 5.6 mm; two hinges keep
-    5.8 mm, and the chain's curl stays within 4.4% of the FEM's to 1.4 rad (one hinge: 12-19% off) and
-    6.7% at 3.3 rad (docs/benchmarks.md, large-bend curl). Not the default: grasps with it fold the
-    fingers (same section)."""
+    same small-deflection compliance), with the middle link carrying the block's tendon waypoint. Two
+    hinges keep a spatial tendon's lever as the block bends (the curl within 4.4% of the FEM's to 1.4 rad,
+    6.7% at 3.3 rad); the default single hinge gets the same from :attr:`tendon_lever` ``constant``
+    (within 5.9% to 1.4 rad) and has the flexure stops, which the split chain lacks: its grasps fold a
+    flexure's middle link and lose the tests' box (docs/benchmarks.md, large-bend curl)."""
+    tendon_lever: str = "constant"
+    """How the chain's native tendon acts on its hinges. ``constant`` (default): a fixed tendon,
+    ``ℓ = Σ_j (dℓ/dθ_j)₀ θ_j``, every hinge's lever frozen at the straight finger's
+    (:attr:`FingerHandle.joint_levers`): the same force on the straight finger as ``path``, and the FEM's
+    behaviour at large bends, where each waypoint rides on its block's middle section and its lever stays
+    within 2% (5.50-5.59 mm to 0.63 rad on a soft flexure of random:0). ``path``: a spatial tendon through
+    the waypoints; on one hinge per block a waypoint sits on the distal body above its hinge and swings
+    back over it, the lever falls (5.41 to 3.35 mm at 0.63 rad) and the curl misses the FEM's by 13-19% at
+    1.1-1.4 rad. The point-force mode and the flex models always act at their waypoints."""
     stiffness_model: str = "fem"
     """How block moduli become finger stiffness: ``fem``, calibrated to the converged Warp FEM
     (:mod:`mjcodesign.design.calibration`; the default finger geometry only), or ``beam``,
@@ -148,6 +165,8 @@ class SimOptions:
             raise DesignError("hinge_armature must be a finite inertia >= 0 kg m²")
         if not (0 <= self.poisson < 0.5):
             raise DesignError("poisson must be in [0, 0.5)")
+        if self.tendon_lever not in TENDON_LEVERS:
+            raise DesignError(f"tendon_lever must be one of {TENDON_LEVERS}, got {self.tendon_lever!r}")
         if self.hinges_per_block not in (1, 2) or isinstance(self.hinges_per_block, bool):
             raise DesignError(f"hinges_per_block must be 1 or 2, got {self.hinges_per_block!r}")
 
@@ -172,6 +191,10 @@ class FingerHandle:
     """Chain: hinge names, base to tip."""
     joint_blocks: list[int] = field(default_factory=list)
     """Chain: the block of every hinge in ``joints`` (a block has one, or two with ``hinges_per_block=2``)."""
+    joint_levers: list[float] = field(default_factory=list)
+    """Chain: the waypoint tendon's length change per hinge angle on the straight finger [m/rad], one per
+    hinge in ``joints`` (negative: bending shortens the tendon); the coefficients of a constant-lever
+    tendon (:attr:`SimOptions.tendon_lever`)."""
     bodies: list[str] = field(default_factory=list)
     """Chain: block bodies base to tip; flex: node bodies."""
     flex: str | None = None
