@@ -169,3 +169,29 @@ def test_flexure_stops_are_where_the_segments_touch():
         for edge in (lo, hi):
             assert not _segments_touch(design, i, axes[i], edge * (1 - 1e-3))
             assert _segments_touch(design, i, axes[i], edge * (1 + 1e-3))
+
+
+# MuJoCo's limits are soft: under load a stop at solref (2 dt, 1) yields, measured up to 0.107 rad on a
+# gap and 0.032 rad on a flexure hinge at 50 N (0.021 / 0.004 rad at 10 N), 0.006 rad on a segment bound.
+_TOL_STOP_RAD = 0.12
+
+
+@pytest.mark.parametrize(
+    "name", ["soft", "semi-rigid", ",".join(["14", "17"] * 11), ",".join(["17", "14"] * 11)]
+)
+def test_the_stops_hold_a_finger_pulled_at_the_tension_limit(name):
+    # At the servo's 52 N limit a soft finger has no equilibrium short of its segments touching: every
+    # flexure, every gap (flexure plus its segments' root share) and every segment hinge stays in range.
+    from mjcodesign.models.chain import flexure_stops, hinge_axes
+
+    design = FingerDesign()
+    stops = flexure_stops(design, hinge_axes(design))[:, 1]
+    a = np.array(curl(design, Stiffness.parse(name), "chain", 50.0)["block_angles_rad"])
+    share = np.array([1.0, 1.0, 0.5, 1.0, 0.5, 1.0, 0.5, 1.0, 0.5, 1.0, 1.0])
+    flex, seg = np.arange(1, 11, 2), np.arange(0, 11, 2)
+    gaps = a[flex] + share[flex - 1] * a[flex - 1] + share[flex + 1] * a[flex + 1]
+    bound = np.array([np.nanmin(stops[[j for j in (i - 1, i + 1) if 0 <= j < 11]]) for i in seg])
+    assert np.all(a[flex] <= stops[flex] + _TOL_STOP_RAD)
+    assert np.all(gaps <= stops[flex] + _TOL_STOP_RAD)
+    assert np.all(np.abs(a[seg]) <= bound + _TOL_STOP_RAD)
+    assert a.sum() > 4.0  # and it did curl far: the stops, not the springs, hold it

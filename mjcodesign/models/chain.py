@@ -247,9 +247,8 @@ class _ChainBuilder:
             damping=float(self.options.damping_time * k),
             armature=self.options.hinge_armature,
         )
-        stop = self.stops[i]
-        if self.options.hinges_per_block == 1 and np.all(np.isfinite(stop)):
-            # The flexure's own segments meet (see `gap_stops` for its roots' share).
+        stop = self.hinge_range(i)
+        if stop is not None:
             joint.limited = mujoco.mjtLimited.mjLIMITED_TRUE
             joint.range = (np.degrees(stop) if self.spec.compiler.degree else stop).tolist()
             joint.solref_limit = self.stop_solref()
@@ -311,6 +310,26 @@ class _ChainBuilder:
             self.waypoint(body, i, points[-1], waypoint)
         self.handle.bodies.append(body.name)
         return body, points[-1]
+
+    def hinge_range(self, i: int) -> np.ndarray | None:
+        """Range [rad] of block ``i``'s single hinge, or None (a split chain's hinges are free).
+
+        A flexure's: where its two segments meet (:func:`flexure_stops`). A segment's hinge is its
+        roots' compliance, fitted on small bends; its roots can turn no further than a gap beside them
+        can close, so it is held to ± the smaller inward stop of its flexures. Without that bound a
+        soft finger pulled at the servo's 52 N turned a segment hinge to 5.3 rad while its flexure
+        turned 2.2 rad outwards, each gap within its stop (docs/benchmarks.md, large-bend curl).
+        """
+        if self.options.hinges_per_block != 1:
+            return None
+        if self.blocks[i].kind is BlockKind.FLEXURE:
+            stop = self.stops[i]
+            return stop if np.all(np.isfinite(stop)) else None
+        near = [self.stops[j, 1] for j in (i - 1, i + 1) if 0 <= j < len(self.blocks)]
+        near = [v for v in near if np.isfinite(v)]
+        if not near:
+            return None
+        return np.array([-min(near), min(near)])
 
     def stop_solref(self) -> list[float]:
         """Solref of the stops: (2 dt, critical).
