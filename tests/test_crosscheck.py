@@ -126,6 +126,29 @@ def test_crosscheck_cli_refuses_a_reversed_sweep(capsys):
     assert len(err) == 1 and "below the first" in err[0]
 
 
+_TOL_NATIVE_VS_POINT_RAD = 1e-4  # frictionless point forces equal the spatial tendon (tests/test_tendon.py)
+
+
+def test_crosscheck_curl_runs_the_chain_the_grasps_run():
+    # The curl comparison's chain is the grasps' (native tendon, the default constant lever), and
+    # --tendon-lever path gives the spatial tendon's, which the point forces equal (tests/test_tendon.py).
+    from mjcodesign.cli.crosscheck import _TENDON_LEVERS
+    from mjcodesign.crosscheck.run import model_curl
+    from mjcodesign.design.finger import FingerDesign
+    from mjcodesign.design.stiffness import Stiffness
+    from mjcodesign.models.types import TENDON_LEVERS, SimOptions, TendonMode
+    from mjcodesign.scenarios.static import curl
+
+    assert _TENDON_LEVERS == TENDON_LEVERS
+    design, s = FingerDesign(), Stiffness.parse("random:0")
+    default = model_curl(design, s, "chain", 0.17)
+    assert default["bend_angle_rad"] == curl(design, s, "chain", 0.17)["bend_angle_rad"]
+    path = model_curl(design, s, "chain", 0.17, chain=SimOptions(tendon_lever="path"))
+    point = curl(design, s, "chain", 0.17, tendon_mode=TendonMode.POINT_FORCE)
+    assert path["bend_angle_rad"] == pytest.approx(point["bend_angle_rad"], abs=_TOL_NATIVE_VS_POINT_RAD)
+    assert default["bend_angle_rad"] > 1.1 * path["bend_angle_rad"]  # 1.25 against 1.05 rad (FEM 1.30)
+
+
 def test_grasp_study_case_selection():
     from mjcodesign.cli.crosscheck import select_cases
     from mjcodesign.crosscheck import GRASP_CASES
@@ -144,6 +167,8 @@ def test_grasp_study_case_selection():
         (["--cases", "1,99"], "--cases indices"),
         (["--cases", "two"], "--cases takes"),
         (["--fem-contact-ke", "-5"], "--fem-contact-ke"),
+        (["--tendon-lever", "path"], "--tendon-lever applies to the cantilever and the curl"),
+        (["--hinges-per-block", "2"], "--hinges-per-block applies to the cantilever and the curl"),
     ],
 )
 def test_grasp_study_cli_refuses_bad_selection_before_simulating(capsys, argv, says):

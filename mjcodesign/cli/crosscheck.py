@@ -26,6 +26,10 @@ from mjcodesign.crosscheck import (
     short_settings,
 )
 
+# `mjcodesign.models.types.TENDON_LEVERS`, repeated so that registering the command imports no MuJoCo (a
+# test keeps them equal).
+_TENDON_LEVERS = ("constant", "path")
+
 __all__ = ["add_parser", "add_bench_parser"]
 
 
@@ -111,13 +115,21 @@ def _plain(obj):
     return obj
 
 
-def _cmd_crosscheck(args) -> int:
-    if args.hinges_per_block != 1 and args.scenario not in ("cantilever", "curl"):
-        from mjcodesign.errors import DesignError
+def _chain_options(args):
+    from mjcodesign.models.types import SimOptions
 
-        raise DesignError(
-            f"--hinges-per-block applies to the cantilever and the curl, not to {args.scenario}"
-        )
+    return SimOptions(hinges_per_block=args.hinges_per_block, tendon_lever=args.tendon_lever)
+
+
+def _cmd_crosscheck(args) -> int:
+    for flag, value, default in (
+        ("--hinges-per-block", args.hinges_per_block, 1),
+        ("--tendon-lever", args.tendon_lever, "constant"),
+    ):
+        if value != default and args.scenario not in ("cantilever", "curl"):
+            from mjcodesign.errors import DesignError
+
+            raise DesignError(f"{flag} applies to the cantilever and the curl, not to {args.scenario}")
     if args.scenario == "grasp":
         return _cmd_grasp(args)
     tensions = [float(v) for v in args.tensions.split(",")] if args.tensions else None
@@ -135,7 +147,7 @@ def _cmd_crosscheck(args) -> int:
             tensions=tensions,
             observer=rec,
             on_note=_note,
-            hinges_per_block=args.hinges_per_block,
+            chain=_chain_options(args),
         )
     finally:
         if rec is not None:
@@ -251,6 +263,13 @@ def add_parser(subparsers) -> None:
         choices=(1, 2),
         default=1,
         help="cantilever/curl: chain hinges per block (2: at its quarter points; follows the FEM's large-bend curl)",
+    )
+    p.add_argument(
+        "--tendon-lever",
+        choices=_TENDON_LEVERS,
+        default="constant",
+        help="curl: the chain tendon's lever on each hinge, held at the straight finger's (constant, the "
+        "default) or following the waypoints (path)",
     )
     p.add_argument(
         "--authors-case",

@@ -56,7 +56,7 @@ def crosscheck(
     tensions: list[float] | None = None,
     observer=None,
     on_note: Callable[[str], None] | None = None,
-    hinges_per_block: int = 1,
+    chain=None,
 ) -> tuple[list[dict], dict]:
     """Run ``scenario`` in every backend of ``models``; return (rows, curves for plotting).
 
@@ -69,8 +69,8 @@ def crosscheck(
     every model's rest shape as it is computed (:class:`~mjcodesign.crosscheck.shapes.Shapes` names
     them), so recording costs no extra simulation. ``on_note`` hears one line per model that gave no rest
     state (the CLI prints them on stderr). Curves (curl only) map a model to its ``tension`` [N],
-    ``bend`` [rad] and ``tip`` displacements [m]. ``hinges_per_block``: the chain's hinges per block
-    (`mjcodesign.models.types.SimOptions.hinges_per_block`; the cantilever and the curl).
+    ``bend`` [rad] and ``tip`` displacements [m]. ``chain``: the chain's `mjcodesign.models.types.SimOptions`
+    (its hinges per block and tendon lever; the cantilever and the curl), None for the defaults.
     """
     from mjcodesign.design.stiffness import Stiffness
     from mjcodesign.errors import DesignError
@@ -92,33 +92,30 @@ def crosscheck(
                 tensions=tensions,
                 observer=observer,
                 on_note=on_note,
-                hinges_per_block=hinges_per_block,
+                chain=chain,
             )[0]
         return rows + summary_rows(scenario, design_name, rows), {}
     stiffness = Stiffness.parse(design_name)
     shapes = Shapes(observer, stiffness)
     curves: dict[str, dict] = {}
     if scenario == "cantilever":
-        rows = _cantilever_rows(models, design_name, stiffness, fem_options, shapes, hinges_per_block)
+        rows = _cantilever_rows(models, design_name, stiffness, fem_options, shapes, chain)
     elif scenario == "press":
         rows = press_rows(models, design_name, stiffness, fem_options, tensions, shapes, on_note)
     else:
-        rows, curves = _curl_rows(
-            models, design_name, stiffness, fem_options, tensions, shapes, hinges_per_block
-        )
+        rows, curves = _curl_rows(models, design_name, stiffness, fem_options, tensions, shapes, chain)
     shapes.flush()
     return rows, curves
 
 
 def _cantilever_rows(
-    models, design_name: str, stiffness, fem_options, shapes: Shapes, hinges_per_block: int = 1
+    models, design_name: str, stiffness, fem_options, shapes: Shapes, chain=None
 ) -> list[dict]:
     """Tip deflection of every model under a tip load, against the FEM when it runs.
 
     The FEM itself, and every model when the FEM does not run, against Euler–Bernoulli.
     """
     from mjcodesign.design.finger import FingerDesign
-    from mjcodesign.models.types import SimOptions
     from mjcodesign.scenarios.static import validate_beam
 
     design = FingerDesign()
@@ -140,7 +137,7 @@ def _cantilever_rows(
         else:
             force = None if fem_value is None else fem_value[0]
             res = validate_beam(
-                design, stiffness, m, force=force, options=SimOptions(hinges_per_block=hinges_per_block),
+                design, stiffness, m, force=force, options=chain if m == "chain" else None,
                 observe=shapes.mujoco(label, tip_load=True),
             )  # fmt: skip
             shapes.set_metrics(label, pick(res, BEAM_METRICS), tip_force=[0.0, 0.0, res["force_n"]])
@@ -151,9 +148,7 @@ def _cantilever_rows(
     return sorted(rows, key=lambda r: order[r["model"]])
 
 
-def _curl_rows(
-    models, design_name: str, stiffness, fem_options, tensions, shapes: Shapes, hinges_per_block: int = 1
-):
+def _curl_rows(models, design_name: str, stiffness, fem_options, tensions, shapes: Shapes, chain=None):
     """Bend and tip displacement of every model at each tension, against the FEM; (rows, curves)."""
     from mjcodesign.design.finger import FingerDesign
     from mjcodesign.sim.fem import FemFinger
@@ -177,8 +172,7 @@ def _curl_rows(
             else:
                 label = f"curl/{m}/{t:.4g}N"
                 r = model_curl(
-                    design, stiffness, m, t, observe=shapes.mujoco(label, group=f"curl/{m}"),
-                    hinges_per_block=hinges_per_block,
+                    design, stiffness, m, t, observe=shapes.mujoco(label, group=f"curl/{m}"), chain=chain,
                 )  # fmt: skip
                 shapes.set_metrics(
                     label, curl_metrics(r["tension_n"], r["bend_angle_rad"], r["tip_displacement_m"])
@@ -193,12 +187,13 @@ def _curl_rows(
     return rows, curves
 
 
-def model_curl(
-    design, stiffness, model: str, tension: float, *, observe=None, hinges_per_block: int = 1
-) -> dict:
+def model_curl(design, stiffness, model: str, tension: float, *, observe=None, chain=None) -> dict:
     """Free curl of finger A of a MuJoCo model at ``tension`` [N], as the curl comparison runs it.
 
-    Chain and flex: point-force tendon dynamics to rest (`mjcodesign.scenarios.static.curl`).
+    Chain: its native tendon, dynamics to rest (`mjcodesign.scenarios.static.curl`) under ``chain``
+    (`mjcodesign.models.types.SimOptions`, None for the defaults: the tendon lever held at the straight
+    finger's, as the grasps run it). Flex: point-force tendon dynamics to rest (its native tendon rides
+    on the nearest nodes).
     Flex-quadratic: its linear static solve (`mjcodesign.models.flex.linear_curl`; its dynamics runs at
     3.4 steps/s), valid for bends of a few tenths of a radian only. ``observe(built, data)`` as in
     `mjcodesign.scenarios.static.curl`.
@@ -207,17 +202,10 @@ def model_curl(
     from mjcodesign.models.types import FingerModel, SimOptions, TendonMode
     from mjcodesign.scenarios.static import curl
 
+    if FingerModel(model) is FingerModel.CHAIN:
+        return curl(design, stiffness, model, tension, options=chain, observe=observe)
     if FingerModel(model) is not FingerModel.FLEX_QUADRATIC:
-        opts = SimOptions(hinges_per_block=hinges_per_block)
-        return curl(
-            design,
-            stiffness,
-            model,
-            tension,
-            tendon_mode=TendonMode.POINT_FORCE,
-            options=opts,
-            observe=observe,
-        )
+        return curl(design, stiffness, model, tension, tendon_mode=TendonMode.POINT_FORCE, observe=observe)
     from mjcodesign.models.flex import linear_curl, load_nodes
 
     opts = SimOptions(gravity=False)
