@@ -136,8 +136,8 @@ class SimOptions:
     same small-deflection compliance), with the middle link carrying the block's tendon waypoint. Two
     hinges keep a spatial tendon's lever as the block bends (the curl within 4.4% of the FEM's to 1.4 rad,
     6.7% at 3.3 rad); the default single hinge gets the same from :attr:`tendon_lever` ``constant``
-    (within 5.9% to 1.4 rad) and has the flexure stops, which the split chain lacks: its grasps fold a
-    flexure's middle link and lose the tests' box (docs/benchmarks.md, large-bend curl)."""
+    (within 7.0% on 30 random designs to 1.6 rad) and has the stops, which the split chain lacks: its
+    grasps fold a flexure's middle link and lose the tests' box (docs/benchmarks.md, large-bend curl)."""
     tendon_lever: str = "constant"
     """How the chain's native tendon acts on its hinges. ``constant`` (default): a fixed tendon,
     ``ℓ = Σ_j (dℓ/dθ_j)₀ θ_j``, every hinge's lever frozen at the straight finger's
@@ -145,8 +145,8 @@ class SimOptions:
     behaviour at large bends, where each waypoint rides on its block's middle section and its lever stays
     within 2% (5.50-5.59 mm to 0.63 rad on a soft flexure of random:0). ``path``: a spatial tendon through
     the waypoints; on one hinge per block a waypoint sits on the distal body above its hinge and swings
-    back over it, the lever falls (5.41 to 3.35 mm at 0.63 rad) and the curl misses the FEM's by 13-19% at
-    1.1-1.4 rad. The point-force mode and the flex models always act at their waypoints."""
+    back over it, the lever falls (5.41 to 3.35 mm at 0.63 rad) and the curl misses the FEM's by up to 31%
+    at 1.1-1.6 rad (the default: 7.0%). The point-force mode and the flex models always act at their waypoints."""
     stiffness_model: str = "fem"
     """How block moduli become finger stiffness: ``fem``, calibrated to the converged Warp FEM
     (:mod:`mjcodesign.design.calibration`; the default finger geometry only), or ``beam``,
