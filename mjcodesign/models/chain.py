@@ -202,9 +202,11 @@ class _ChainBuilder:
     blocks: list[Block] = field(init=False)
     solrefs: list[tuple[float, float]] = field(init=False)
     stops: np.ndarray = field(init=False)
+    waypoints: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
         self.blocks = self.design.blocks()
+        self.waypoints = np.asarray(self.design.waypoints(), dtype=float)
         self.stops = flexure_stops(self.design, hinge_axes(self.design, self.options.stiffness_model))
         rows = contact_solrefs(self.blocks, self.young, self.design.density, self.options.timestep)
         self.solrefs = [(float(tau), float(ratio)) for tau, ratio in rows]
@@ -264,12 +266,12 @@ class _ChainBuilder:
         direction, ``ω = -y`` and ``r`` from the hinge to that waypoint. Past the last waypoint (a split
         tip block's distal hinge) the tendon crosses nothing: 0.
         """
-        wps = self.design.waypoints()
+        wps = self.waypoints
         n = len(self.handle.waypoint_sites)
         if n == len(wps):
             return 0.0
-        distal = np.asarray(wps[n], dtype=float)
-        proximal = np.asarray(wps[n - 1] if n else tendon_exit_site(self.design), dtype=float)
+        distal = wps[n]
+        proximal = wps[n - 1] if n else tendon_exit_site(self.design)
         u = (distal - proximal) / np.linalg.norm(distal - proximal)
         r = distal - np.array([x, 0.0, axis])
         return float(u @ np.cross([0.0, -1.0, 0.0], r))
@@ -320,7 +322,7 @@ class _ChainBuilder:
         soft finger pulled at the servo's 52 N turned a segment hinge to 5.3 rad while its flexure
         turned 2.2 rad outwards, each gap within its stop (docs/benchmarks.md, large-bend curl).
         """
-        if self.options.hinges_per_block != 1:
+        if self.split(i):
             return None
         if self.blocks[i].kind is BlockKind.FLEXURE:
             stop = self.stops[i]
@@ -361,11 +363,9 @@ class _ChainBuilder:
         beside a flexure held at its stop bend on, 3-14 rad for a soft finger at 10 N in free space.
         One hinge per block only: a split chain is left free.
         """
-        if self.options.hinges_per_block != 1:
-            return
         for i in range(1, len(self.blocks) - 1):
             stop = self.stops[i]
-            if not np.all(np.isfinite(stop)):
+            if not np.all(np.isfinite(stop)) or any(self.split(j) for j in (i - 1, i, i + 1)):
                 continue
             ten = self.spec.add_tendon(name=f"{self.prefix}gap{i}")
             for j in (i - 1, i, i + 1):
@@ -395,7 +395,6 @@ def add_chain_finger(
     """Add a chain finger under ``parent`` (whose frame is the finger frame) and return its handle."""
     k = hinge_stiffness(design, young, options.stiffness_model)
     axes = hinge_axes(design, options.stiffness_model)
-    wps = design.waypoints()
     handle = FingerHandle(
         prefix=prefix,
         model=FingerModel.CHAIN,
@@ -409,7 +408,7 @@ def add_chain_finger(
     body = parent
     origin_prev = 0.0
     for i in range(len(blocks)):
-        body, origin_prev = builder.link(body, i, origin_prev, k[i], axes[i], wps[i])
+        body, origin_prev = builder.link(body, i, origin_prev, k[i], axes[i], builder.waypoints[i])
     builder.gap_stops()
     builder.tip(body)
     return handle
