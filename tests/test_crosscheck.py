@@ -204,3 +204,12 @@ def test_authors_case_starts_at_the_refined_openings_or_sweeps_in():
     )
     with pytest.raises(DesignError, match="unknown start"):
         authors_case(("chain",), pose_file=pose_file, start="nowhere")
+
+
+def test_locking_correction_outside_the_grasp_is_refused(capsys):
+    from mjcodesign.cli.main import main
+
+    code = main(["crosscheck", "--scenario", "curl", "--models", "chain", "--fem-locking-correction"])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--fem-locking-correction applies to the grasp" in err[0], err

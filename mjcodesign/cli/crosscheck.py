@@ -48,14 +48,11 @@ def _cmd_grasp(args) -> int:
     from pathlib import Path
 
     from mjcodesign.cli.common import user_cache_dir
-    from mjcodesign.sim.fem import FemOptions
 
     if args.authors_case:
         from mjcodesign.crosscheck.authors_case import authors_case
 
-        fem_mesh = FemOptions(
-            h=args.fem_h, h_flexure=args.fem_h_flexure, spine_layers=args.fem_layers, waypoint_layers=False
-        )
+        fem_mesh = _grasp_mesh(args)
         dyn = _fem_dynamics(args)
         rows = authors_case(
             args.models.split(","),
@@ -72,10 +69,7 @@ def _cmd_grasp(args) -> int:
     if args.short:
         settings = short_settings()
     else:
-        mesh = FemOptions(
-            h=args.fem_h, h_flexure=args.fem_h_flexure, spine_layers=args.fem_layers, waypoint_layers=False
-        )
-        settings = {"cases": GRASP_CASES, "fem_options": mesh}
+        settings = {"cases": GRASP_CASES, "fem_options": _grasp_mesh(args)}
         if (dyn := _fem_dynamics(args)) is not None:  # issue 18: the FEM substep and contact of the study
             settings["fem_dynamics"] = dyn
     if args.cases is not None:
@@ -104,6 +98,19 @@ def _cmd_grasp(args) -> int:
     return 0
 
 
+def _grasp_mesh(args):
+    """The FEM grasp's mesh from the ``--fem-*`` mesh flags (linear tets, no waypoint layers)."""
+    from mjcodesign.sim.fem import FemOptions
+
+    return FemOptions(
+        h=args.fem_h,
+        h_flexure=args.fem_h_flexure,
+        spine_layers=args.fem_layers,
+        waypoint_layers=False,
+        locking_correction=args.fem_locking_correction,
+    )
+
+
 def _plain(obj):
     """JSON-ready copy (arrays to lists)."""
     if isinstance(obj, dict):
@@ -130,6 +137,10 @@ def _cmd_crosscheck(args) -> int:
             from mjcodesign.errors import DesignError
 
             raise DesignError(f"{flag} applies to the cantilever and the curl, not to {args.scenario}")
+    if args.fem_locking_correction and args.scenario != "grasp":
+        from mjcodesign.errors import DesignError
+
+        raise DesignError(f"--fem-locking-correction applies to the grasp, not to {args.scenario}")
     if args.scenario == "grasp":
         return _cmd_grasp(args)
     tensions = [float(v) for v in args.tensions.split(",")] if args.tensions else None
@@ -285,6 +296,12 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument(
         "--fem-dt", type=float, default=None, help="grasp: FEM substep [s] (default the paper's 2.5e-6)"
+    )
+    p.add_argument(
+        "--fem-locking-correction",
+        action="store_true",
+        help="grasp: lower the linear tets' block moduli to the converged FEM's block compliances "
+        "(the coarse mesh's flexures are 5x too stiff)",
     )
     p.add_argument(
         "--fem-contact-ke",

@@ -32,6 +32,13 @@ class FemOptions:
     """Warp device."""
     order: int = 1
     """Tet order: 1 (4 nodes, statics and dynamics) or 2 (10 nodes, statics only; far less locking)."""
+    locking_correction: bool = False
+    """Two-finger grasp (linear tets): lower every block's modulus so that the mesh's block compliances
+    under a tip load equal the converged FEM's (`mjcodesign.sim.fem.gripper.locking_shift`). Linear
+    tets lock in bending: on the grasp study's coarse mesh (10 mm, 8 mm flexures, 2 spine layers) the
+    flexures are 5.0-5.1x and the segments 2.7-3.0x too stiff on uniform designs, and a semi-rigid
+    finger curls 4.4x less than the converged FEM and the chain calibrated to it. Default finger
+    geometry only (the calibration's)."""
     waypoint_layers: bool = True
     """Spine layer boundaries through in-spine waypoints (`mjcodesign.sim.fem.mesh.mesh_finger`); turn
     off for explicit dynamics, where their 30 µm layers cut the stable step tenfold."""
