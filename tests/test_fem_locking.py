@@ -16,10 +16,10 @@ from mjcodesign.design.finger import FingerDesign  # noqa: E402
 from mjcodesign.design.stiffness import Stiffness  # noqa: E402
 
 _TOL_LOCKING = 0.02
-"""Relative error of a corrected block's compliance against the converged FEM's. The shift is a
-fixed point taken `LOCKING_ITERATIONS` (3) times; each pass leaves about a tenth of the last pass's error
-(a block's compliance moves a little with its neighbours' moduli): measured ≤ 0.92% on soft,
-semi-rigid and random:0 and random:5."""
+"""Relative error of a corrected block's compliance against the converged FEM's. The shift is a fixed
+point taken `LOCKING_ITERATIONS` (3) times, and a block's compliance moves a little with its
+neighbours' moduli, so some error is left: measured ≤ 0.92% over the seven designs below (soft the
+largest)."""
 _TOL_CURL = 0.10
 """Corrected coarse FEM curl against the chain's, relative: the chain's tolerance against the FEM's
 curl (issue 16; tests/test_calibration.py)."""
@@ -98,3 +98,28 @@ def test_gripper_shift_is_a_constant_of_the_gradient():
     g.set_log_e(other.log_e.ravel())
     assert not np.allclose(g.log_e_shift.numpy(), shift)
     np.testing.assert_allclose(g.log_e_material.numpy(), other.log_e.ravel() + g.log_e_shift.numpy())
+
+
+_TOL_CANTILEVER = 0.05
+"""Issue 18: "the mesh that is within 5% of the refined FEM on the cantilever" (measured with the
+correction: 0.6% on semi-rigid, 1.0% on random:0; without it the coarse mesh bends 0.22-0.24 of it)."""
+
+
+@pytest.mark.parametrize("name", ["semi-rigid", "random:0"])
+def test_corrected_coarse_mesh_is_within_5_percent_of_the_refined_cantilever(name):
+    from mjcodesign.sim.fem import FemOptions
+    from mjcodesign.sim.fem.finger import FemFinger
+    from mjcodesign.sim.fem.gripper import locking_shift
+
+    design = FingerDesign()
+    st = Stiffness.parse(name)
+    # The refined reference: quadratic tets, 4 mm (within 4% of Euler–Bernoulli on uniform designs).
+    ref = FemFinger(design, st, options=FemOptions(h=4e-3, order=2, spine_layers=2)).cantilever()
+    fem = FemFinger(design, st, options=_coarse())
+    assert fem.cantilever(ref.force_n).tip_deflection_m < 0.5 * ref.tip_deflection_m
+    locking_shift(fem, st.log_e.ravel())
+    got = fem.cantilever(ref.force_n).tip_deflection_m
+    assert abs(got - ref.tip_deflection_m) < _TOL_CANTILEVER * ref.tip_deflection_m, (
+        got,
+        ref.tip_deflection_m,
+    )
