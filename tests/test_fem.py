@@ -182,6 +182,10 @@ def test_crosscheck_cli_json(wp, capsys):
     bench = sub.add_parser("bench").add_subparsers(dest="what")
     cli_crosscheck.add_bench_parser(bench)
     assert p.parse_args(["bench", "fem", "--json"]).fem_order == 1
+    from mjcodesign.bench.fem import GRIPPER_MESHES
+
+    for mesh in GRIPPER_MESHES:  # every named mesh of the grasp benchmark can be asked for
+        assert p.parse_args(["bench", "fem", "--gripper", mesh]).gripper == mesh
     args = p.parse_args(
         "crosscheck --scenario cantilever --models chain,fem --design soft --fem-h 4e-3 --fem-layers 2 --json".split()
     )

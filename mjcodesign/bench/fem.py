@@ -19,10 +19,12 @@ GRIPPER_MESHES = {
     "coarse": {"h": 10e-3, "h_flexure": 8e-3, "spine_layers": 2},
     "default": {"h": 4e-3, "spine_layers": 2},
     "fine": {"h": 3e-3, "spine_layers": 4},
+    "corrected": {"h": 10e-3, "h_flexure": 8e-3, "spine_layers": 2, "locking_correction": True},
 }
 """Meshes of the two-finger grasp benchmark: ``coarse`` 396 vertices a finger (the authors' whole mesh had
 432 particles), ``default`` `GRASP_OPTIONS` (1,431), ``fine`` 3,339 (cantilever 0.73 of beam theory on
-the soft finger, docs/benchmarks.md)."""
+the soft finger, docs/benchmarks.md), ``corrected`` the coarse mesh with its locking corrected
+(`FemOptions.locking_correction`): its cantilever within 1% of the refined FEM's (tests/test_fem_locking.py)."""
 _GRASP_MESH_H = 4e-3
 """Cell size [m] of the grasp benchmark's FEM mesh (2 spine layers, 1,431 vertices)."""
 

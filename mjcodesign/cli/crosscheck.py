@@ -332,7 +332,7 @@ def add_bench_parser(bench_subparsers) -> None:
     p.add_argument("--grasp-horizon", type=float, default=0.2, help="dynamic grasp to time [s]")
     p.add_argument(
         "--gripper",
-        choices=("none", "coarse", "default", "fine"),
+        choices=("none", "coarse", "default", "fine", "corrected"),
         default="coarse",
         help="mesh of the whole two-finger grasp to time (mjcodesign.bench.fem.GRIPPER_MESHES), or none",
     )
