@@ -213,3 +213,27 @@ def test_locking_correction_outside_the_grasp_is_refused(capsys):
     assert code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--fem-locking-correction applies to the grasp" in err[0], err
+
+
+def test_chain_margin_moves_the_palm_a_millimetre_each_way():
+    from mjcodesign.crosscheck.grasp import MARGIN_SHIFT, chain_margin
+    from mjcodesign.models.types import FingerModel
+    from mjcodesign.objects import box_object
+    from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
+    from mjcodesign.sim.mujoco_c import MujocoBackend
+
+    obj = box_object((0.04, 0.04, 0.06), 100.0)
+    design = FingerDesign()
+    scene = build_scene(
+        obj, design, Stiffness.preset("semi-rigid"), FingerModel.CHAIN, auto_pose(obj, design)
+    )
+    phases = dict(settle_s=0.004, close_s=0.03, tighten_s=0.05, lift_s=0.05, hold_s=0.03, post_hold_s=0.01)
+    scenario = GraspScenario(**phases, tension=4.0, lift=0.01)
+    nominal = MujocoBackend(nthread=1).run(scene, scenario)
+    # Unmoved, the six rollouts are the nominal one (deterministic, and the scene is rebuilt faithfully).
+    still = chain_margin(scene, scenario, shift=0.0)
+    assert still["same"] == still["of"] == 6 and still["success"] == bool(nominal.success)
+    assert still["rises_m"] == [nominal.lift_height] * 6
+    moved = chain_margin(scene, scenario)
+    assert moved["shift_m"] == MARGIN_SHIFT and moved["of"] == 6 and 0 <= moved["same"] <= 6
+    assert len(set(moved["rises_m"])) > 1  # the palm did move: the six rollouts differ

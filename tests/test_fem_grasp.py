@@ -377,4 +377,7 @@ def test_study_summary_keeps_diverged_cases_out_of_the_valid_agreement():
     assert s["invalid_cases"] == ["c"]
     assert s["success_agreement_valid"] == pytest.approx(2 / 3)
     assert [d["case"] for d in s["disagreements"]] == ["d"]
+    assert s["disagreements"][0]["chain_margin"] is None  # none taken for these records
+    records[3]["chain_margin"] = {"same": 4, "of": 6}
+    assert study_summary(records)["disagreements"][0]["chain_margin"] == {"same": 4, "of": 6}
     assert s["checks"]["fem"][2]["energy"] and not s["checks"]["chain"][2]["energy"]

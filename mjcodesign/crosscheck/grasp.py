@@ -18,7 +18,10 @@ object from it).
 * for every case where they disagree on success: the phase in which the object's paths part
   (`PART_DISTANCE`) and the checks each simulator breaks: the hold force against m·g while the object
   is held (`HOLD_TOL`), the deepest finger penetration during the hold (`MAX_DEPTH`), and the energy
-  bound where the simulator checks it (MuJoCo's `Failure.IMPLAUSIBLE`; the FEM's divergence).
+  bound where the simulator checks it (MuJoCo's `Failure.IMPLAUSIBLE`; the FEM's divergence);
+* and for each disagreement the chain's margin (`chain_margin`): its outcome with the palm moved
+  ±`MARGIN_SHIFT` along each palm axis, which tells a knife-edge case from a real parting (six chain
+  rollouts, a second; the FEM's margin would cost six minutes a case and is not taken).
 """
 
 from __future__ import annotations
@@ -35,10 +38,12 @@ __all__ = [
     "GRASP_MODELS",
     "GraspCase",
     "HOLD_TOL",
+    "MARGIN_SHIFT",
     "MAX_DEPTH",
     "PART_DISTANCE",
     "SHORT_CASES",
     "STUDY_TENSION",
+    "chain_margin",
     "grasp_study",
     "model_runners",
     "short_settings",
@@ -53,6 +58,9 @@ MAX_DEPTH = 2e-3
 """Deepest plausible finger penetration [m] during the hold: the flexures are 2 mm thick."""
 PART_DISTANCE = 5e-3
 """The object's paths in the two simulators have parted once their COMs are this far apart [m]."""
+MARGIN_SHIFT = 1e-3
+"""Palm shift [m] of the chain's margin on a disagreement (`chain_margin`): a pose that lands within a
+millimetre is all a sampler or a robot gives, so an outcome that flips within it is on a knife edge."""
 STUDY_TENSION = 4.0
 """Tendon tension of the study [N]: `mjcodesign.sim.fem.gripper_grasp.GRASP_TENSION` (its reason there),
 written out so that importing this module stays free of MuJoCo (tested equal)."""
@@ -168,10 +176,48 @@ def grasp_study(
         else:
             for name, run in sims.items():
                 rec[name] = run(scene, scenario)
+            if "chain" in rec and "fem" in rec and rec["chain"]["success"] != rec["fem"]["success"]:
+                rec["chain_margin"] = chain_margin(scene, scenario)
         records.append(rec)
         if on_case is not None:
             on_case(rec)
     return records, study_summary(records, models)
+
+
+def chain_margin(scene, scenario, shift: float = MARGIN_SHIFT) -> dict:
+    """The chain's outcome with the palm moved ±``shift`` [m] along each palm axis (six rollouts).
+
+    ``same``: how many of the six keep the unmoved pose's success; ``rises_m``: each one's object rise at
+    the end [m], in the order +x, −x, +y, −y, +z, −z of the palm frame. A disagreement whose chain outcome
+    flips within a millimetre is on a knife edge in the chain itself (module docstring).
+    """
+    import dataclasses
+
+    from mjcodesign.scenarios.grasp import build_scene
+    from mjcodesign.sim.fem.gripper import quat_matrix
+    from mjcodesign.sim.mujoco_c import MujocoBackend
+
+    pose = scene.pose
+    R = quat_matrix(pose.quat)
+    nominal = MujocoBackend(nthread=1).run(scene, scenario)
+    b = scene.built
+    successes, rises = [], []
+    for axis in range(3):
+        for sign in (1.0, -1.0):
+            moved = dataclasses.replace(
+                pose, position=tuple(np.asarray(pose.position) + sign * shift * R[:, axis])
+            )
+            other = build_scene(scene.obj, b.design, b.stiffness, b.finger_model, moved, options=b.options)
+            out = MujocoBackend(nthread=1).run(other, scenario)
+            successes.append(bool(out.success))
+            rises.append(float(out.lift_height))
+    return {
+        "shift_m": shift,
+        "success": bool(nominal.success),
+        "same": int(sum(s == bool(nominal.success) for s in successes)),
+        "of": len(successes),
+        "rises_m": rises,
+    }
 
 
 def model_runners(models, fem_options=None, fem_dynamics=None) -> dict[str, Callable]:
@@ -408,6 +454,7 @@ def _explain(r: dict) -> dict:
         "case": r["case"],
         "chain": a["reason"],
         "fem": b["reason"],
+        "chain_margin": r.get("chain_margin"),
         "parts_in": phase,
         "breaks": {
             m: [k for k, v in _checks(r[m], r["lift"]).items() if k != "held" and v] for m in ("chain", "fem")
