@@ -36,7 +36,7 @@ class FemOptions:
     """Two-finger grasp (linear tets): lower every block's modulus so that the mesh's block compliances
     under a tip load equal the converged FEM's (`mjcodesign.sim.fem.gripper.locking_shift`). Linear
     tets lock in bending: on the grasp study's coarse mesh (10 mm, 8 mm flexures, 2 spine layers) the
-    flexures are 5.0-5.1x and the segments 2.7-3.0x too stiff on uniform designs, and a semi-rigid
+    flexures are 5.1x and the segments 2.7-3.0x too stiff on the presets, and a semi-rigid
     finger curls 4.4x less than the converged FEM and the chain calibrated to it. Default finger
     geometry only (the calibration's)."""
     waypoint_layers: bool = True
