@@ -158,7 +158,8 @@ def test_schedule_follows_mujocos_servos():
     assert np.ptp(fem[:, 0]) > 0.005  # the carriages did move (most of their 19 mm of closing)
 
 
-def test_recorded_forward_equals_taped_steps():
+@pytest.mark.parametrize("order", [1, 2], ids=["linear", "quadratic"])
+def test_recorded_forward_equals_taped_steps(order):
     """The fast forward (recorded launches, reused buffers) and the taped step give bitwise the same states."""
     import warp as wp
 
@@ -167,7 +168,7 @@ def test_recorded_forward_equals_taped_steps():
 
     scene = _box_scene("paper-optimized", 0.0152)  # touching the box's top edge from the start
     scenario = GraspScenario(**_BRIEF, tension=2.0, lift=0.002, impulse=0.0)
-    grasp = FemGrasp(scene, scenario, options=_coarse(), dynamics=FemDynamics(dt=1e-5))
+    grasp = FemGrasp(scene, scenario, options=_coarse(order=order), dynamics=FemDynamics(dt=1e-5))
     s0, n = 400, 200
     full = grasp.run(checkpoints=(s0, s0 + n))
     assert full.frames.n_inside.max() > 0  # contact is exercised
@@ -381,3 +382,19 @@ def test_study_summary_keeps_diverged_cases_out_of_the_valid_agreement():
     records[3]["chain_margin"] = {"same": 4, "of": 6}
     assert study_summary(records)["disagreements"][0]["chain_margin"] == {"same": 4, "of": 6}
     assert s["checks"]["fem"][2]["energy"] and not s["checks"]["chain"][2]["energy"]
+
+
+def test_quadratic_tets_lump_mass_onto_every_node():
+    """HRZ lumping of 10-node tets: every node has mass, and the body's mass and centre of mass are kept."""
+    from mjcodesign.sim.fem import FemFinger
+
+    design = FingerDesign()
+    quad = FemFinger(design, Stiffness.preset("soft"), options=_coarse(order=2))
+    lin = FemFinger(design, Stiffness.preset("soft"), options=_coarse())
+    assert np.all(quad.mass > 0)  # explicit dynamics divides by every node's mass
+    np.testing.assert_allclose(quad.mass.sum(), lin.mass.sum(), rtol=1e-12)  # the same body
+    com = lambda f: f.mass @ f.mesh.vertices / f.mass.sum()  # noqa: E731
+    np.testing.assert_allclose(com(quad), com(lin), atol=1e-12)  # gravity's torque on the finger is kept
+    corners = np.unique(quad.mesh.tets[:, :4])
+    mids = np.setdiff1d(np.arange(quad.mesh.n_vertices), corners)
+    assert quad.mass[mids].mean() > quad.mass[corners].mean()  # midsides carry most (32 vs 6 per tet)

@@ -79,7 +79,12 @@ class FemBody:
         free[m.base] = False
         self.free_dof = np.repeat(free, 3)
         self.mass = np.zeros(n)
-        np.add.at(self.mass, m.tets[:, :4].ravel(), np.repeat(self._vol * design.density / 4.0, 4))
+        tet_mass = self._vol * design.density
+        if o.order == 1:
+            np.add.at(self.mass, m.tets[:, :4].ravel(), np.repeat(tet_mass / 4.0, 4))
+        else:  # HRZ lumping of the 10-node tet: the consistent diagonal (6/420 corners, 32/420 midsides), scaled to m
+            share = np.r_[np.full(4, 6.0), np.full(6, 32.0)] / 216.0
+            np.add.at(self.mass, m.tets.ravel(), (tet_mass[:, None] * share[None]).ravel())
         nd = 3 * m.tets.shape[1]
         dofs = (3 * m.tets[:, :, None] + np.arange(3)).reshape(n_t, nd)
         self._rows = np.repeat(dofs, nd, axis=1).ravel()

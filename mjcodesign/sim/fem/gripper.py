@@ -119,7 +119,7 @@ def locking_shift(finger, log_e: np.ndarray) -> np.ndarray:
 
 
 class FemGripper:
-    """Finger A and finger B of ``stiffness`` as one tet body (A's vertices first), linear tets.
+    """Finger A and finger B of ``stiffness`` as one tet body (A's vertices first), linear or quadratic tets.
 
     ``dt`` [s] is the explicit step that the masses are scaled for.
     """
@@ -128,8 +128,7 @@ class FemGripper:
         self, design: FingerDesign, stiffness: Stiffness, *, options: FemOptions | None = None, dt: float
     ):
         options = options or FemOptions(waypoint_layers=False)
-        if options.order != 1:
-            raise DesignError("the FEM grasp runs explicit dynamics, which needs linear tets (order 1)")
+
         self.design = design
         self.options = options
         self.fingers = tuple(FemFinger(design, stiffness, finger=i, options=options) for i in range(2))
@@ -284,9 +283,16 @@ class FemGripper:
         """(kernel, dim, inputs, outputs) accumulating the elastic forces [N] at ``x`` into ``f``."""
         from mjcodesign.sim.fem import kernels
 
+        if self.options.order == 1:
+            return (
+                kernels.elastic_forces,
+                self.n_tets,
+                [x, self.tets, self.dm_inv, self.vol, self.mu, self.lam],
+                [f],
+            )
         return (
-            kernels.elastic_forces,
-            self.n_tets,
+            kernels.p2_elastic_forces,
+            (self.n_tets, 4),
             [x, self.tets, self.dm_inv, self.vol, self.mu, self.lam],
             [f],
         )

@@ -3,7 +3,8 @@
 `FemGrasp` takes a MuJoCo `mjcodesign.scenarios.grasp.GraspScene` (design, pose, start openings,
 object) and a `GraspScenario`, and steps:
 
-* both fingers (`mjcodesign.sim.fem.gripper.FemGripper`: linear tets, stable Neo-Hookean, ν 0.45,
+* both fingers (`mjcodesign.sim.fem.gripper.FemGripper`: linear tets, or quadratic ones with
+  ``FemOptions(order=2)``; stable Neo-Hookean, ν 0.45,
   one E per block), their base faces clamped to carriages that follow the scenario's opening and lift
   commands through the MuJoCo servos' response (`mjcodesign.sim.fem.schedule`);
 * each finger's uniform-tension tendon (frictionless waypoint law): in force mode the tension ramped as

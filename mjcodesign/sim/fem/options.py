@@ -31,7 +31,9 @@ class FemOptions:
     device: str = "cpu"
     """Warp device."""
     order: int = 1
-    """Tet order: 1 (4 nodes, statics and dynamics) or 2 (10 nodes, statics only; far less locking)."""
+    """Tet order: 1 (4 nodes, statics and dynamics) or 2 (10 nodes, far less locking: statics and the
+    two-finger grasp, with HRZ-lumped masses and forces at four quadrature points; about 10x a linear
+    grasp's time per substep on the coarse mesh; the single-finger rollout is linear only)."""
     locking_correction: bool = False
     """Two-finger grasp (linear tets): lower every block's modulus so that the mesh's block compliances
     under a tip load equal the converged FEM's (`mjcodesign.sim.fem.gripper.locking_shift`). Linear
