@@ -89,6 +89,7 @@ FAMILIES: dict[str, list[Case]] = {
         grasp --object nan.stl                                  | nan | nan.stl
         grasp --object box.stl --pose empty.npz                 | empty.npz | box.stl empty.npz
         grasp --object box.stl --pose random.npz                | random.npz | box.stl random.npz
+        grasp --model fem --object box.stl --tendon position:-5 | ticks | box.stl
     """),
     "view": _cases("""
         view {long}                                             | too long

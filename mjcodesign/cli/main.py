@@ -180,14 +180,19 @@ def build_parser() -> argparse.ArgumentParser:
 def _reaches_warp(args: argparse.Namespace) -> bool:
     """Whether this command can initialise Warp: the FEM, the mjwarp backend, or the poses' SDF (Warp).
 
-    ``grasp`` on MuJoCo C with an ``auto`` or file pose, ``bench grasp`` and ``bench viz`` never reach
-    Warp, and importing it costs ~1.3 s, so they skip it; ``hw`` plans no poses.
+    ``grasp`` of a MuJoCo model (``--model chain|flex``) on MuJoCo C with an ``auto`` or file pose,
+    ``bench grasp`` and ``bench viz`` never reach Warp, and importing it costs ~1.3 s, so they skip it;
+    ``hw`` plans no poses.
     """
     command, what = args.command, getattr(args, "what", None)
     if command == "bench":
         return what in ("fem", "poses", "datagen", "landscape", "optimize")
     if command == "grasp":
-        return "mjwarp" in getattr(args, "backend", "") or getattr(args, "pose", None) == "best"
+        return (
+            getattr(args, "model", None) == "fem"
+            or "mjwarp" in getattr(args, "backend", "")
+            or getattr(args, "pose", None) == "best"
+        )
     return command in ("crosscheck", "poses", "datagen", "evaluate", "optimize", "predict")
 
 
