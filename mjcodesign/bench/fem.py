@@ -24,7 +24,7 @@ GRIPPER_MESHES = {
 """Meshes of the two-finger grasp benchmark: ``coarse`` 396 vertices a finger (the authors' whole mesh had
 432 particles), ``default`` `GRASP_OPTIONS` (1,431), ``fine`` 3,339 (cantilever 0.73 of beam theory on
 the soft finger, docs/benchmarks.md), ``corrected`` the coarse mesh with its locking corrected
-(`FemOptions.locking_correction`): its cantilever within 1% of the refined FEM's (tests/test_fem_locking.py)."""
+(`FemOptions.locking_correction`): its cantilever within 1.3% of the refined FEM's (tests/test_fem_locking.py)."""
 _GRASP_MESH_H = 4e-3
 """Cell size [m] of the grasp benchmark's FEM mesh (2 spine layers, 1,431 vertices)."""
 

@@ -36,6 +36,7 @@ __all__ = [
     "calibration_for",
     "block_compliance",
     "geometry_key",
+    "moment_arms",
 ]
 
 CALIBRATION_FILE = Path(__file__).with_name("fem_calibration.json")
@@ -143,7 +144,7 @@ def _same(a, b) -> bool:
 
 
 @functools.lru_cache(maxsize=32)
-def _moment_arms(design: FingerDesign) -> np.ndarray:
+def moment_arms(design: FingerDesign) -> np.ndarray:
     """L − x_i at every block's middle [m]: a unit tip load's moment there."""
     return design.length - np.array([b.mid for b in design.blocks()])
 
@@ -157,7 +158,7 @@ def block_compliance(design: FingerDesign, young: np.ndarray) -> np.ndarray:
     FEM on the issue's extreme designs).
     """
     phi = calibration_for(design).face_angles(np.asarray(young, dtype=float))
-    c = np.diff(np.r_[0.0, phi]) / _moment_arms(design)
+    c = np.diff(np.r_[0.0, phi]) / moment_arms(design)
     if not np.all(c > 0):
         raise DesignError(f"the reduced FEM gave a non-positive block compliance for E = {young!r}")
     return c
