@@ -112,6 +112,11 @@ FAMILIES: dict[str, list[Case]] = {
         bench viz --repeats 0                                   | --repeats
         bench poses --objects no_such_object_1,no_such_object_2 | no_such_object_1
     """),
+    "crosscheck": _cases("""
+        crosscheck --scenario curl --models chain --tensions 1,-1         | --tensions
+        crosscheck --scenario grasp --models chain --tensions 2,3         | one tension
+        crosscheck --scenario grasp --authors-case --models chain --tensions 2 | authors
+    """),
     "files": _cases("""
         validate beam --force 1e12                              | acceleration
         finger export --out ''                                  | --out

@@ -237,3 +237,26 @@ def test_chain_margin_moves_the_palm_a_millimetre_each_way():
     moved = chain_margin(scene, scenario)
     assert moved["shift_m"] == MARGIN_SHIFT and moved["of"] == 6 and 0 <= moved["same"] <= 6
     assert len(set(moved["rises_m"])) > 1  # the palm did move: the six rollouts differ
+
+
+def test_grasp_study_runs_at_the_tension_given(capsys, tmp_path, monkeypatch):
+    """``crosscheck --scenario grasp --tensions T``: every case's rollouts run at T (the CI version's phases kept)."""
+    import dataclasses
+    import json
+
+    from mjcodesign.cli.main import main
+    from mjcodesign.crosscheck import grasp_study, short_settings
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    argv = ["crosscheck", "--scenario", "grasp", "--short", "--models", "chain", "--json"]
+    assert main([*argv, "--tensions", "2"]) == 0
+    at_2 = json.loads(capsys.readouterr().out)["cases"]
+    assert main(argv) == 0
+    at_4 = json.loads(capsys.readouterr().out)["cases"]
+    assert [c["tension"] for c in at_2] == [2.0, 2.0] and [c["tension"] for c in at_4] == [4.0, 4.0]
+    settings = short_settings()
+    settings["scenario"] = dataclasses.replace(settings["scenario"], tension=2.0)
+    direct, _ = grasp_study(models=("chain",), cache_dir=tmp_path / "mjcodesign", **settings)
+    for cli, lib, four in zip(at_2, direct, at_4, strict=True):
+        assert cli["chain"]["body_force"] == list(lib["chain"]["body_force"])  # the same rollout
+        assert cli["chain"]["body_force"] != four["chain"]["body_force"]  # and the tension reached it

@@ -108,6 +108,16 @@ def finite_float(low: float, *, strict: bool = False) -> Callable[[str], float]:
     return parse
 
 
+def finite_floats(low: float, *, strict: bool = False) -> Callable[[str], list[float]]:
+    """The argparse type of a comma-separated list of :func:`finite_float` values."""
+    one = finite_float(low, strict=strict)
+
+    def parse(text: str) -> list[float]:
+        return [one(v) for v in text.split(",")]
+
+    return parse
+
+
 def parse_design(text: str):
     """The :class:`~mjcodesign.design.stiffness.Stiffness` for ``--design`` (preset, random:SEED, log E)."""
     from mjcodesign.design import Stiffness

@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import sys
 
-from mjcodesign.cli.common import emit, finite_float
+from mjcodesign.cli.common import emit, finite_float, finite_floats
 from mjcodesign.cli.viz import add_recording_flags, open_recorder
 from mjcodesign.crosscheck import (
     GRASP_CASES,
@@ -48,7 +48,15 @@ def _cmd_grasp(args) -> int:
     from pathlib import Path
 
     from mjcodesign.cli.common import user_cache_dir
+    from mjcodesign.errors import DesignError
 
+    if args.tensions is not None and (args.authors_case or len(args.tensions) != 1):
+        what = (
+            "the authors' case keeps its mapped 4 N"
+            if args.authors_case
+            else "the grasp study takes one tension"
+        )
+        raise DesignError(f"--tensions: {what}, got {len(args.tensions)} value(s)")
     if args.authors_case:
         from mjcodesign.crosscheck.authors_case import authors_case
 
@@ -74,6 +82,13 @@ def _cmd_grasp(args) -> int:
             settings["fem_dynamics"] = dyn
     if args.cases is not None:
         settings["cases"] = select_cases(settings["cases"], args.cases)
+    if args.tensions is not None:  # the study's scenario at another tension (the CI version's phases kept)
+        import dataclasses
+
+        from mjcodesign.scenarios.grasp import GraspScenario
+
+        base = settings.get("scenario") or GraspScenario()
+        settings["scenario"] = dataclasses.replace(base, tension=args.tensions[0])
 
     done: list[dict] = []
 
@@ -143,7 +158,7 @@ def _cmd_crosscheck(args) -> int:
         raise DesignError(f"--fem-locking-correction applies to the grasp, not to {args.scenario}")
     if args.scenario == "grasp":
         return _cmd_grasp(args)
-    tensions = [float(v) for v in args.tensions.split(",")] if args.tensions else None
+    tensions = args.tensions
     if args.plot and parse_sweep(args.design) is not None:
         from mjcodesign.errors import DesignError
 
@@ -254,7 +269,12 @@ def add_parser(subparsers) -> None:
         help="preset name, random:SEED, 11/22 comma-separated log E, or random:A..B (a sweep of seeds A to B, "
         "ending with per-model worst and median |rel_diff| rows)",
     )
-    p.add_argument("--tensions", default=None, help="curl tensions [N], comma-separated (press: the first)")
+    p.add_argument(
+        "--tensions",
+        type=finite_floats(0.0, strict=True),
+        default=None,
+        help="curl tensions [N], comma-separated (press: the first; grasp: the study's one tension, default 4)",
+    )
     p.add_argument("--plot", default=None, help="curl: write tip paths and bend against tension to this PNG")
     p.add_argument(
         "--cases",

@@ -167,6 +167,7 @@ def grasp_study(
             "design": case.design,
             "mass_kg": obj.mass,
             "lift": scenario.lift,
+            "tension": scenario.tension,
         }
         try:
             pose = to_gripper_pose(poses[case.obj], case.pose)
