@@ -313,7 +313,7 @@ class TendonMotors:
     # ---- transactions ----
 
     def _retry(self, what: str, once: Callable[[], _T]) -> _T:
-        last = ""
+        last: _Comm | None = None
         for attempt in range(self.config.retries):
             if attempt:
                 # A late answer to the failed attempt would be read as the reply to the next one.
@@ -321,10 +321,10 @@ class TendonMotors:
             try:
                 return once()
             except _Comm as exc:
-                last = str(exc)
+                last = exc
         raise HardwareError(
             f"serial link to the tendon motors lost: {what} failed {self.config.retries} times ({last})"
-        )
+        ) from last
 
     def _ping(self, motor: FingerMotor) -> int:
         def once() -> int:
@@ -335,9 +335,10 @@ class TendonMotors:
 
         try:
             return self._retry(f"ping of {motor.label}", once)
-        except HardwareError:
+        except HardwareError as exc:
             raise HardwareError(
-                f"tendon motor {motor.label} (ID {motor.dxl_id}) did not answer on {self.config.port}"
+                f"tendon motor {motor.label} (ID {motor.dxl_id}) did not answer on {self.config.port} "
+                f"({self.config.retries} attempts; {exc.__cause__ or 'no reply'})"
             ) from None
 
     def _write(self, motor: FingerMotor, item: str, size: int, value: int) -> None:
