@@ -39,6 +39,7 @@ def _parse() -> argparse.Namespace:
     p.add_argument("--gravity", type=float, default=9.81, help="[m/s²], FEM only")
     p.add_argument("--free-space", action="store_true", help="raise the palm 150 mm: nothing to grasp")
     p.add_argument("--order", type=int, choices=(1, 2), default=1, help="FEM tets (1: locking-corrected)")
+    p.add_argument("--locked", action="store_true", help="linear tets without the locking correction")
     p.add_argument("--tendon-offset", type=float, default=0.0, help="raise every waypoint [m] (both)")
     p.add_argument("--angles", default="", help="comma-separated times [s] for the flexure angles")
     return p.parse_args()
@@ -125,7 +126,7 @@ def main() -> None:
     dynamics = FemDynamics(**dyn)
     options = FemOptions(
         h=10e-3, h_flexure=8e-3, spine_layers=2, waypoint_layers=False,
-        locking_correction=args.order == 1, order=args.order,
+        locking_correction=args.order == 1 and not args.locked, order=args.order,
     )  # fmt: skip
     times = [float(t) for t in args.angles.split(",")] if args.angles else []
 
