@@ -365,15 +365,17 @@ def test_killed_runs_resume_to_the_same_dataset(reference, config, work):
             stdout=subprocess.DEVNULL,
             stderr=subprocess.PIPE,
         )
-        wait_for = int(rng.integers(1, 3))  # objects prepared or shards written in this run
+        wait_for = 1  # an object prepared or a shard written in this run
         deadline = time.monotonic() + 120
         while proc.poll() is None and time.monotonic() < deadline:
             if sum(e["kind"] in ("object", "shard") for e in _events(log)) >= wait_for:
                 break
             time.sleep(0.01)
-        # A random moment within 0.1 s: the tasks left take about 1 s on 2 cores (events 0.04-0.3 s
-        # apart), so each killed run leaves work for the next and the test kills at least _KILLS times.
-        time.sleep(float(rng.uniform(0.0, 0.1)))
+        # A random moment within 0.05 s of that event (events come 0.04-0.3 s apart), so a killed run
+        # consumes one or two events and leaves work for the next: the test kills at least _KILLS
+        # times. (Waiting for up to two events and then up to 0.1 s once let the runs finish the whole
+        # dataset after only two kills in a fresh-clone suite run.)
+        time.sleep(float(rng.uniform(0.0, 0.05)))
         killed = proc.poll() is None
         if killed:
             proc.send_signal(signal.SIGKILL)
