@@ -353,3 +353,16 @@ def test_poses_out_says_what_it_wrote_on_stderr(tmp_path):
     assert r.returncode == 0, r.stderr
     n = len(json.loads(r.stdout)["poses"])  # stdout: the JSON alone
     assert out.is_file() and r.stderr.strip().splitlines()[-1] == f"wrote {n} poses of box to {out}", r.stderr
+
+
+def test_finite_floats_parses_a_list_and_refuses_any_bad_element():
+    import argparse
+
+    from mjcodesign.cli.common import finite_floats
+
+    positive = finite_floats(0.0, strict=True)
+    assert positive("1,2.5,1e-3") == [1.0, 2.5, 0.001]
+    assert finite_floats(0.0)("0,3") == [0.0, 3.0]  # not strict: the bound itself is allowed
+    for text in ("1,x", "0", "2,-1", "nan", "1,inf", "", "1,,2"):
+        with pytest.raises(argparse.ArgumentTypeError, match="finite number > 0"):
+            positive(text)
