@@ -202,7 +202,8 @@ def chain_margin(scene, scenario, shift: float = MARGIN_SHIFT, *, nominal: bool 
     pose = scene.pose
     R = quat_matrix(pose.quat)
     if nominal is None:
-        nominal = bool(MujocoBackend(nthread=1).run(scene, scenario).success)
+        nominal = MujocoBackend(nthread=1).run(scene, scenario).success
+    nominal = bool(nominal)
     b = scene.built
     successes, rises = [], []
     for axis in range(3):
@@ -216,8 +217,8 @@ def chain_margin(scene, scenario, shift: float = MARGIN_SHIFT, *, nominal: bool 
             rises.append(float(out.lift_height))
     return {
         "shift_m": shift,
-        "success": bool(nominal),
-        "same": int(sum(s == bool(nominal) for s in successes)),
+        "success": nominal,
+        "same": int(sum(s == nominal for s in successes)),
         "of": len(successes),
         "rises_m": rises,
     }

@@ -130,7 +130,6 @@ class FemGripper:
         self, design: FingerDesign, stiffness: Stiffness, *, options: FemOptions | None = None, dt: float
     ):
         options = options or FemOptions(waypoint_layers=False)
-
         self.design = design
         self.options = options
         self.fingers = tuple(FemFinger(design, stiffness, finger=i, options=options) for i in range(2))
@@ -284,18 +283,10 @@ class FemGripper:
         from mjcodesign.sim.fem import kernels
 
         if self.options.order == 1:
-            return (
-                kernels.elastic_forces,
-                self.n_tets,
-                [x, self.tets, self.dm_inv, self.vol, self.mu, self.lam],
-                [f],
-            )
-        return (
-            kernels.p2_elastic_forces,
-            (self.n_tets, 4),
-            [x, self.tets, self.dm_inv, self.vol, self.mu, self.lam],
-            [f],
-        )
+            kernel, dim = kernels.elastic_forces, self.n_tets
+        else:  # one thread per tet and quadrature point
+            kernel, dim = kernels.p2_elastic_forces, (self.n_tets, 4)
+        return kernel, dim, [x, self.tets, self.dm_inv, self.vol, self.mu, self.lam], [f]
 
     def place(self, pose: GripperPose, openings) -> Placement:
         """The rest meshes at the palm ``pose`` with the carriages at ``openings`` [m] (lift 0)."""
