@@ -41,6 +41,12 @@ def _parse() -> argparse.Namespace:
     p.add_argument("--order", type=int, choices=(1, 2), default=1, help="FEM tets (1: locking-corrected)")
     p.add_argument("--locked", action="store_true", help="linear tets without the locking correction")
     p.add_argument("--tendon-offset", type=float, default=0.0, help="raise every waypoint [m] (both)")
+    p.add_argument(
+        "--no-flexure-guides", action="store_true", help="FEM: the tendon straight across every gap (printed)"
+    )
+    p.add_argument(
+        "--tendon-law", choices=("frictionless", "paper"), default="frictionless", help="FEM tendon"
+    )
     p.add_argument("--angles", default="", help="comma-separated times [s] for the flexure angles")
     return p.parse_args()
 
@@ -127,6 +133,7 @@ def main() -> None:
     options = FemOptions(
         h=10e-3, h_flexure=8e-3, spine_layers=2, waypoint_layers=False,
         locking_correction=args.order == 1 and not args.locked, order=args.order,
+        flexure_guides=not args.no_flexure_guides, tendon_law=args.tendon_law,
     )  # fmt: skip
     times = [float(t) for t in args.angles.split(",")] if args.angles else []
 

@@ -116,6 +116,8 @@ FAMILIES: dict[str, list[Case]] = {
         crosscheck --scenario curl --models chain --tensions 1,-1         | --tensions
         crosscheck --scenario grasp --models chain --tensions 2,3         | one tension
         crosscheck --scenario grasp --authors-case --models chain --tensions 2 | authors
+        crosscheck --scenario curl --models chain --fem-tendon-law paper  | --fem-tendon-law
+        crosscheck --scenario grasp --models chain --fem-tendon-law taut  | --fem-tendon-law
     """),
     "files": _cases("""
         validate beam --force 1e12                              | acceleration

@@ -398,3 +398,45 @@ def test_quadratic_tets_lump_mass_onto_every_node():
     corners = np.unique(quad.mesh.tets[:, :4])
     mids = np.setdiff1d(np.arange(quad.mesh.n_vertices), corners)
     assert quad.mass[mids].mean() > quad.mass[corners].mean()  # midsides carry most (32 vs 6 per tet)
+
+
+@pytest.mark.parametrize(
+    ("law", "guides"), [("frictionless", True), ("paper", True), ("frictionless", False)]
+)
+def test_tendon_kernel_applies_the_reference_law(law, guides):
+    """The grasp's tendon kernel against `mjcodesign.design.tendon_law.tendon_forces` on a bent finger.
+
+    Both fingers' waypoints from the mesh weights (segments only without flexure guides), the section
+    axes from the spine's top and bottom vertices, the law evaluated in numpy and spread back by the
+    same weights (virtual work).
+    """
+    from mjcodesign.design.tendon_law import tendon_forces
+    from mjcodesign.sim.fem import FemDynamics
+    from mjcodesign.sim.fem.gripper_grasp import FemGrasp
+
+    scene = _box_scene("soft", 0.0152)
+    options = _coarse(tendon_law=law, flexure_guides=guides)
+    grasp = FemGrasp(
+        scene, GraspScenario(**_BRIEF, tension=2.0), options=options, dynamics=FemDynamics(dt=1e-5)
+    )
+    g = grasp.gripper
+    assert g.n_waypoints == (g.n_blocks if guides else (g.n_blocks + 1) // 2)
+    rest = grasp.placement.vertices
+    rng = np.random.default_rng(0)
+    x = rest + 2e-3 * rng.standard_normal(rest.shape)  # every waypoint and section moved by ~mm
+    s = grasp.schedule.n_steps  # the tendon at its full tension
+    got = grasp.tendon_forces(x, s)
+    tension = grasp.tendon_history()[0][s]
+    assert tension.min() > 0.0
+    offsets = grasp.schedule.offsets(grasp.placement.axes)[s - 1]
+    want = np.zeros_like(x)
+    m = g.n_waypoints
+    for f in range(2):
+        rows = slice(f * m, (f + 1) * m)
+        idx, w = g.waypoint_idx[rows], g.waypoint_w[rows]
+        points = np.einsum("bk,bkj->bj", w, x[idx])
+        top, bottom = g.waypoint_section[rows].T
+        exit_point = grasp.placement.exits[f] + offsets[f]
+        forces = tendon_forces(points, x[top] - x[bottom], exit_point, tension[f], law)
+        np.add.at(want, idx.ravel(), (w[..., None] * forces[:, None, :]).reshape(-1, 3))
+    np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)

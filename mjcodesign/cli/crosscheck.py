@@ -25,6 +25,7 @@ from mjcodesign.crosscheck import (
     plot_curves,
     short_settings,
 )
+from mjcodesign.design.tendon_law import TENDON_VARIANTS
 
 # `mjcodesign.models.types.TENDON_LEVERS`, repeated so that registering the command imports no MuJoCo (a
 # test keeps them equal).
@@ -123,6 +124,7 @@ def _grasp_mesh(args):
         spine_layers=args.fem_layers,
         waypoint_layers=False,
         locking_correction=args.fem_locking_correction,
+        tendon_law=args.fem_tendon_law,
     )
 
 
@@ -152,10 +154,14 @@ def _cmd_crosscheck(args) -> int:
             from mjcodesign.errors import DesignError
 
             raise DesignError(f"{flag} applies to the cantilever and the curl, not to {args.scenario}")
-    if args.fem_locking_correction and args.scenario != "grasp":
-        from mjcodesign.errors import DesignError
+    for flag, given in (
+        ("--fem-locking-correction", args.fem_locking_correction),
+        ("--fem-tendon-law", args.fem_tendon_law != "frictionless"),
+    ):
+        if given and args.scenario != "grasp":
+            from mjcodesign.errors import DesignError
 
-        raise DesignError(f"--fem-locking-correction applies to the grasp, not to {args.scenario}")
+            raise DesignError(f"{flag} applies to the grasp, not to {args.scenario}")
     if args.scenario == "grasp":
         return _cmd_grasp(args)
     tensions = args.tensions
@@ -322,6 +328,13 @@ def add_parser(subparsers) -> None:
         action="store_true",
         help="grasp: lower the linear tets' block moduli to the converged FEM's block compliances "
         "(the coarse mesh's flexures are 5x too stiff)",
+    )
+    p.add_argument(
+        "--fem-tendon-law",
+        choices=TENDON_VARIANTS,
+        default="frictionless",
+        help="grasp: the FEM tendon's force, a frictionless tendon's (it compresses the finger) or the "
+        "authors' law (across each section, a push at the tip)",
     )
     p.add_argument(
         "--fem-contact-ke",

@@ -219,21 +219,27 @@ class FemBody:
         return K
 
     # -- loads ------------------------------------------------------------------------------------
-    def _section_normal_rows(self) -> sp.csr_matrix:
-        """Rows giving each block's section axis (top − bottom of the spine at y = 0, x = block mid)."""
+    def section_pairs(self) -> np.ndarray:
+        """Each block's spine section at its middle (y = 0): (top vertex, bottom vertex), (n_blocks, 2)."""
         v = self.mesh.vertices
         t = self.design.flexure_thickness
-        rows = []
+        out = []
         for b in self.design.blocks():
             on = (np.abs(v[:, 0] - b.mid) < 1e-9) & (np.abs(v[:, 1]) < 1e-9)
             top = np.flatnonzero(on & (np.abs(v[:, 2] - t) < 1e-9))
             bot = np.flatnonzero(on & (np.abs(v[:, 2]) < 1e-9))
             if len(top) != 1 or len(bot) != 1:
                 raise DesignError(f"mesh has no spine section at the middle of block {b.index}")
-            r = np.zeros(len(v))
-            r[top[0]], r[bot[0]] = 1.0, -1.0
-            rows.append(r)
-        return sp.kron(sp.csr_matrix(np.array(rows)), sp.eye(3), format="csr")
+            out.append((top[0], bot[0]))
+        return np.array(out, dtype=np.int32)
+
+    def _section_normal_rows(self) -> sp.csr_matrix:
+        """Rows giving each block's section axis (top − bottom of the spine at y = 0, x = block mid)."""
+        pairs = self.section_pairs()
+        rows = np.zeros((len(pairs), self.mesh.n_vertices))
+        rows[np.arange(len(pairs)), pairs[:, 0]] = 1.0
+        rows[np.arange(len(pairs)), pairs[:, 1]] = -1.0
+        return sp.kron(sp.csr_matrix(rows), sp.eye(3), format="csr")
 
     def tendon_load(self, tension: float, variant: str = "frictionless") -> Callable:
         """A configuration-dependent load ``x -> (f (n, 3), J = ∂f/∂x (3n, 3n))`` of the tendon [N]."""

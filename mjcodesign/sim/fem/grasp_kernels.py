@@ -58,15 +58,19 @@ def _waypoint(
 def gripper_tendon(
     x_in: _V3, idx_in: wp.array2d(dtype=wp.int32), w_in: wp.array2d(dtype=wp.float64), n_blocks_in: int,
     exit_in: _V3, offset_in: wp.array2d(dtype=wp.vec3d), tension_in: wp.array2d(dtype=wp.float64),
-    step_in: int,
+    step_in: int, section_in: wp.array(dtype=wp.vec2i), paper_in: int,
     f_out: _V3,
 ):  # fmt: on
-    """Frictionless tendon of each finger [N], one thread per waypoint (finger = waypoint // n_blocks).
+    """Uniform-tension tendon of each finger [N], one thread per waypoint (finger = waypoint // n_blocks).
 
-    Waypoint i takes T (u(P_{i−1} − P_i) + u(P_{i+1} − P_i)), the tip T u(P_{i−1} − P_i), with T the
-    finger's ``tension_in[step_in]``; the first span starts at the finger's exit point ``exit_in``
-    moved with its base to the start of the substep (``offset_in[step_in − 1]``). The force is spread
-    back to the vertices by the waypoint weights (virtual work).
+    Frictionless (``paper_in`` 0): waypoint i takes T (u(P_{i−1} − P_i) + u(P_{i+1} − P_i)), the tip
+    T u(P_{i−1} − P_i), with T the finger's ``tension_in[step_in]``; the first span starts at the
+    finger's exit point ``exit_in`` moved with its base to the start of the substep
+    (``offset_in[step_in − 1]``). The authors' law (``paper_in`` 1,
+    `mjcodesign.design.tendon_law.tendon_forces` ``paper``): the first waypoint takes nothing, the
+    middle ones the frictionless force less its part along their section's axis n (spine top minus
+    bottom, vertices ``section_in``), the tip T n. The force is spread back to the vertices by the
+    waypoint weights (virtual work).
     """
     b = wp.tid()
     finger = b // n_blocks_in
@@ -79,6 +83,14 @@ def gripper_tendon(
     f = tension * unit(prev - p)
     if i < n_blocks_in - 1:
         f = f + tension * unit(_waypoint(x_in, idx_in, w_in, b + 1) - p)
+    if paper_in != 0:
+        n = unit(x_in[section_in[b][0]] - x_in[section_in[b][1]])
+        if i == 0:
+            f = wp.vec3d()
+        elif i == n_blocks_in - 1:
+            f = tension * n
+        else:
+            f = f - wp.dot(f, n) * n
     for k in range(idx_in.shape[1]):
         wp.atomic_add(f_out, idx_in[b, k], w_in[b, k] * f)
 

@@ -18,7 +18,7 @@ from typing import NamedTuple
 import mujoco
 import numpy as np
 
-from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.finger import BlockKind, FingerDesign
 from mjcodesign.design.stiffness import LOG_E_MAX, Stiffness
 from mjcodesign.errors import DesignError
 from mjcodesign.models.spec import finger_frame_quat
@@ -175,6 +175,15 @@ class FemGripper:
         self.pinned[a.mesh.base + n] = 1
         self.finger_of = np.repeat(np.arange(2, dtype=np.int32), n)
         idx, w = a.waypoint_table()
+        section = a.section_pairs()
+        if not options.flexure_guides:  # the printed finger: holes through the segments only
+            keep = [b.index for b in design.blocks() if b.kind is BlockKind.SEGMENT]
+            idx, w, section = idx[keep], w[keep], section[keep]
+        self.waypoint_section = np.vstack([section, section + n])
+        """The spine section (top, bottom vertex) at each waypoint's block middle: the axis of the authors'
+        tendon law (`FemOptions.tendon_law`)."""
+        self.n_waypoints = len(idx)
+        """Tendon waypoints per finger (the rows of ``waypoint_idx`` / ``waypoint_w`` for each finger)."""
         self.waypoint_idx = np.vstack([idx, idx + n])
         self.waypoint_w = np.vstack([w, w])
         self.gaps = self._gap_pairs()

@@ -140,11 +140,12 @@ class FemGrasp:
         self._tendon = [
             arr(g.waypoint_idx, wp.int32),
             arr(g.waypoint_w, wp.float64),
-            g.n_blocks,
+            g.n_waypoints,
             arr(pl.exits, wp.vec3d),
             self._offsets,
             arr(sch.tension, wp.float64),
         ]
+        self._law = [arr(g.waypoint_section, wp.vec2i), int(g.options.tendon_law == "paper")]
         self._gaps = [
             arr(g.gaps.vertex, wp.int32),
             arr(g.gaps.quad, wp.vec4i),
@@ -252,7 +253,7 @@ class FemGrasp:
         out = [
             (*g.force_launch(a.x, buf.f), True),
             *servo,
-            (k.gripper_tendon, 2 * g.n_blocks, [a.x, *self._tendon, s], [buf.f], True),
+            (k.gripper_tendon, 2 * g.n_waypoints, [a.x, *self._tendon, s, *self._law], [buf.f], True),
             (k.gap_contact, len(g.gaps.vertex), [a.x, *self._gaps], [buf.f], True),
             (
                 k.object_query,
@@ -457,7 +458,7 @@ class FemGrasp:
         From the exit point (moved with its base) through the waypoints, as the kernels measure it.
         """
         g = self.gripper
-        nb = g.n_blocks
+        nb = g.n_waypoints
         pts = np.einsum("bk,bkj->bj", g.waypoint_w, np.asarray(x)[g.waypoint_idx])
         offsets = self.schedule.offsets(self.placement.axes)[s]
         out = np.empty(2)
@@ -465,6 +466,25 @@ class FemGrasp:
             path = np.vstack([self.placement.exits[f] + offsets[f], pts[f * nb : (f + 1) * nb]])
             out[f] = np.linalg.norm(np.diff(path, axis=0), axis=1).sum()
         return out
+
+    def tendon_forces(self, x: np.ndarray, s: int) -> np.ndarray:
+        """The tendons' vertex forces [N] (n, 3) at positions ``x`` (n, 3) in substep ``s`` (≥ 1).
+
+        One launch of the step's own tendon kernel (`FemOptions.tendon_law`, force mode: the
+        tension table's row ``s``).
+        """
+        wp = self.gripper.wp
+        dev = self.gripper.device
+        xa = wp.array(np.asarray(x, dtype=float), dtype=wp.vec3d, device=dev)
+        f = wp.zeros(len(x), dtype=wp.vec3d, device=dev)
+        wp.launch(
+            self.kernels.gripper_tendon,
+            dim=2 * self.gripper.n_waypoints,
+            inputs=[xa, *self._tendon, int(s), *self._law],
+            outputs=[f],
+            device=dev,
+        )
+        return f.numpy()
 
     def tendon_history(self) -> tuple[np.ndarray, np.ndarray | None]:
         """The last run's tendon tensions and, in position mode, tendon rates.

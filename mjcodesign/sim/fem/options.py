@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mjcodesign.design.tendon_law import TENDON_VARIANTS
 from mjcodesign.errors import DesignError
 
 __all__ = ["FemOptions", "FemDynamics"]
@@ -16,7 +17,7 @@ _POISSON = 0.45
 
 @dataclass(frozen=True)
 class FemOptions:
-    """Mesh and material options of the FEM finger."""
+    """Mesh, material and tendon options of the FEM finger."""
 
     h: float = 1e-3
     """Cell size along x and z [m]."""
@@ -41,6 +42,16 @@ class FemOptions:
     flexures are 5.1x and the segments 2.7-3.0x too stiff on the presets, and a semi-rigid
     finger curls 4.4x less than the converged FEM and the chain calibrated to it. Default finger
     geometry only (the calibration's)."""
+    flexure_guides: bool = True
+    """Two-finger grasp: the tendon passes a guide on every flexure (a rigid lever on its mid-section,
+    `mjcodesign.sim.fem.mesh`), as the chain's flexure site does. False: only the segments guide it
+    and it crosses each gap in a straight line, as in the printed finger (holes through the segments
+    only)."""
+    tendon_law: str = "frictionless"
+    """Two-finger grasp: ``frictionless``, the exact force of a frictionless tendon at its waypoints (it
+    compresses the finger by T); ``paper``, the authors' law (`mjcodesign.design.tendon_law`): middle
+    waypoints keep only the part across their section's axis, the first takes nothing and the tip a
+    push T along its section's axis, so the finger is not compressed."""
     waypoint_layers: bool = True
     """Spine layer boundaries through in-spine waypoints (`mjcodesign.sim.fem.mesh.mesh_finger`); turn
     off for explicit dynamics, where their 30 µm layers cut the stable step tenfold."""
@@ -48,6 +59,8 @@ class FemOptions:
     def __post_init__(self) -> None:
         if self.order not in (1, 2):
             raise DesignError(f"tet order must be 1 or 2, got {self.order}")
+        if self.tendon_law not in TENDON_VARIANTS:
+            raise DesignError(f"unknown tendon law {self.tendon_law!r}; choose from {TENDON_VARIANTS}")
         if not 0.0 <= self.poisson < 0.5:
             raise DesignError(f"Poisson's ratio must be in [0, 0.5), got {self.poisson}")
 
