@@ -81,6 +81,28 @@ def test_held_box_vertical_force_equals_its_weight(held):
     assert abs(f[2] / (m * _G) - 1.0) < _TOL_WEIGHT, f[2] / (m * _G)
     assert np.linalg.norm(f[:2]) < _TOL_LATERAL * m * _G, f
     assert np.isfinite(run.frames.pos).all() and np.isfinite(run.final_x).all()
+    assert run.energy.plausible and run.energy.total_work > 0.0, run.energy
+
+
+@pytest.mark.parametrize(("start", "plausible"), [(0.0152, True), (0.008, False)])
+def test_energy_bound_flags_fingers_started_inside_the_object(start, plausible):
+    """Fingers that start deep inside the box get pushed out by the penalty with no work to pay for it.
+
+    At 15.2 mm from the box's axis the fingers start outside it; at 8 mm (the box is 40 mm wide) their
+    inner faces start up to ~5 mm deep, and the penalty's stored energy (ke·d²/2 over the contact patches,
+    tens of mJ) is released as the box and the fingers fly apart, where the drivers put in far less.
+    """
+    from mjcodesign.sim.fem import FemDynamics
+    from mjcodesign.sim.fem.gripper_grasp import FemGrasp
+
+    scene = _box_scene("semi-rigid", start)
+    grasp = FemGrasp(
+        scene, GraspScenario(**_BRIEF, tension=2.0), options=_coarse(), dynamics=FemDynamics(dt=1e-5)
+    )
+    run = grasp.run()
+    assert run.energy.plausible is plausible, run.energy
+    assert (Failure.IMPLAUSIBLE in run.outcome.failures[:1]) is not plausible, run.outcome.reason
+    assert np.isfinite(run.outcome.body_force).all() and np.isfinite(run.outcome.displacement).all()
 
 
 def test_critically_damped_contact_still_holds_the_weight(held):

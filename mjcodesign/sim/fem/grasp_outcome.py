@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mjcodesign.scenarios.energy import EnergyBalance
 from mjcodesign.scenarios.outcome import Failure, Outcome, failed_outcome
 
 __all__ = ["Frames", "FemGraspRun", "LOSS_WEIGHT", "LOSS_PENALTY", "grade", "paper_loss"]
@@ -115,6 +116,8 @@ class FemGraspRun:
     wall_time_s: float
     starts: dict = field(default_factory=dict)
     """First MuJoCo step of every phase, and ``end`` (frame k is the state after MuJoCo step k − 1)."""
+    energy: EnergyBalance | None = None
+    """The energy bound over the run (`mjcodesign.sim.fem.grasp_energy`)."""
     checkpoints: dict = field(default_factory=dict, repr=False)
     """Substep → its start state (numpy x, v, pos, rot, vel, omega; the previous substep's normal load
     on the object [N]), if asked for."""
@@ -133,11 +136,16 @@ def grade(
     finger: bool,
     scenario,
     path: np.ndarray,
+    *,
+    energy: EnergyBalance | None = None,
+    mujoco_dt: float = 0.0,
 ) -> Outcome:
     """The outcome of measured outputs, with MuJoCo's failure kinds, order and reasons.
 
     ``body_force`` (6) and ``displacement`` (3) in the palm frame, ``rise`` [m] of the COM, the flags
-    at the end; ``path``: the COM at the outcome's sample times.
+    at the end; ``path``: the COM at the outcome's sample times; ``energy``: the rollout's energy bound
+    (`mjcodesign.sim.fem.grasp_energy`), whose breach is `Failure.IMPLAUSIBLE`, listed first (its
+    reason reads times in MuJoCo steps of ``mujoco_dt`` [s]).
     """
     if not (np.all(np.isfinite(body_force)) and np.all(np.isfinite(displacement)) and np.isfinite(rise)):
         return failed_outcome(Failure.DIVERGED, "diverged: non-finite outcome")
@@ -152,6 +160,8 @@ def grade(
         (float(np.linalg.norm(body_force[3:])) <= _FORCE_EPS, Failure.ZERO_FORCE, "zero finger force"),
     )
     hits = [(kind, text) for hit, kind, text in checks if hit]
+    if energy is not None and not energy.plausible:
+        hits.insert(0, (Failure.IMPLAUSIBLE, energy.reason(mujoco_dt)))
     return Outcome(
         success=not hits,
         body_force=tuple(body_force),

@@ -297,6 +297,32 @@ class FemGripper:
             kernel, dim = kernels.p2_elastic_forces, (self.n_tets, 4)
         return kernel, dim, [x, self.tets, self.dm_inv, self.vol, self.mu, self.lam], [f]
 
+    def elastic_forces(self, x: np.ndarray) -> np.ndarray:
+        """Elastic vertex forces [N] (n_vertices, 3) at positions ``x`` [m] (n_vertices, 3)."""
+        wp = self.wp
+        xw = wp.array(np.asarray(x, dtype=float), dtype=wp.vec3d, device=self.device)
+        f = wp.zeros(self.n_vertices, dtype=wp.vec3d, device=self.device)
+        kernel, dim, inputs, outputs = self.force_launch(xw, f)
+        wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=self.device)
+        return f.numpy()
+
+    def energy(self, x: np.ndarray) -> float:
+        """Elastic energy [J] of both fingers at positions ``x`` [m] (n_vertices, 3)."""
+        from mjcodesign.sim.fem import kernels
+
+        wp = self.wp
+        xw = wp.array(np.asarray(x, dtype=float), dtype=wp.vec3d, device=self.device)
+        e = wp.zeros(1, dtype=wp.float64, device=self.device)
+        if self.options.order == 1:
+            kernel, dim = kernels.elastic_energy, self.n_tets
+        else:
+            kernel, dim = kernels.p2_elastic_energy, (self.n_tets, 4)
+        wp.launch(
+            kernel, dim=dim, inputs=[xw, self.tets, self.dm_inv, self.vol, self.mu, self.lam], outputs=[e],
+            device=self.device,
+        )  # fmt: skip
+        return float(e.numpy()[0])
+
     def place(self, pose: GripperPose, openings) -> Placement:
         """The rest meshes at the palm ``pose`` with the carriages at ``openings`` [m] (lift 0)."""
         R = quat_matrix(pose.quat)

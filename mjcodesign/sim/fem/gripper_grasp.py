@@ -7,7 +7,9 @@ object) and a `GraspScenario`, and steps:
   ``FemOptions(order=2)``; stable Neo-Hookean, ν 0.45,
   one E per block), their base faces clamped to carriages that follow the scenario's opening and lift
   commands through the MuJoCo servos' response (`mjcodesign.sim.fem.schedule`);
-* each finger's uniform-tension tendon (frictionless waypoint law): in force mode the tension ramped as
+* each finger's uniform-tension tendon (frictionless waypoint law, or the authors' law with
+  ``FemOptions(tendon_law="paper")``; a guide on every flexure, or the printed finger's segments only
+  with ``flexure_guides=False``): in force mode the tension ramped as
   the scenario ramps it; in position mode the XL330 servo's pull-only spring on the FEM's own tendon
   length, T = clip(k (ℓ − ℓ*), 0, T_max) (`tendon_servo`), plus the motor's back-EMF damper b ℓ̇,
   integrated implicitly along the tendon (`tendon_damping`: b·dt over the tendon's effective mass is
@@ -23,7 +25,8 @@ Time step and stabilisation: the paper's 2.5 µs (`FemDynamics`), semi-implicit 
 the true mass; `FemGripper.added_mass_fraction`); friction turns viscous below the speed at which one
 step could reverse a sliding velocity (of the vertex, or of the object shared by all its contacts).
 A blow-up (non-finite state, a speed over 100 m/s, an inverted tet) ends the run as a `DIVERGED`
-outcome naming the time and phase; the state is checked at every MuJoCo step.
+outcome naming the time and phase; the state is checked at every MuJoCo step. A run that gains energy
+the drivers did not put in is `IMPLAUSIBLE` (`mjcodesign.sim.fem.grasp_energy`), as MuJoCo's.
 
 The forward pass replays recorded launches (`wp.launch(..., record_cmd=True)`): a plain launch costs
 ~60 µs of Python here, a recorded one ~6 µs, and only the substep index changes between steps.
@@ -38,15 +41,23 @@ from typing import NamedTuple
 
 import numpy as np
 
+from mjcodesign.scenarios.energy import EnergyBalance
 from mjcodesign.scenarios.grasp import GraspScenario, GraspScene
 from mjcodesign.scenarios.outcome import Failure, failed_outcome
 from mjcodesign.sim.fem.free_object import GROUND_CONTACT, FreeObject
+from mjcodesign.sim.fem.grasp_energy import EnergyLedger
 from mjcodesign.sim.fem.grasp_outcome import FemGraspRun, Frames, grade
 from mjcodesign.sim.fem.gripper import FemGripper, quat_matrix
 from mjcodesign.sim.fem.options import FemDynamics, FemOptions
 from mjcodesign.sim.fem.schedule import grasp_schedule
 
 __all__ = ["FemGrasp", "GRASP_OPTIONS", "GRASP_TENSION"]
+
+_ENERGY_SAMPLES_PER_STEP = 10
+"""Samples of the energy bound per MuJoCo step. The drivers' power rings with the fingers' vibration, so
+a trapezoid over whole MuJoCo steps aliases it: box/pose0/semi-rigid at 4 µs broke the bound by 0.43 mJ
+of 3.1 mJ put in (14%) at one sample a 2 ms step, and kept it (excess ≤ 0) at 10 and at 50 a step;
+10 a step cost 10% of the rollout's wall time there."""
 
 GRASP_TENSION = 4.0
 """Default tendon tension of the FEM grasp [N] (the gradient's baseline; the grasp study's
@@ -127,6 +138,8 @@ class FemGrasp:
         self.schedule = sch = grasp_schedule(scene, scenario, dyn.dt)
         self.object = obj = FreeObject(scene.obj, device=dev)
         self.placement = pl = g.place(scene.pose, scene.start_openings)
+        self.energy_stride = max(1, sch.per_step // _ENERGY_SAMPLES_PER_STEP)
+        """Substeps between the energy bound's samples (`mjcodesign.sim.fem.grasp_energy`)."""
         f64 = wp.float64
         arr = lambda a, t: wp.array(a, dtype=t, device=dev)  # noqa: E731
         gravity = np.asarray(dyn.gravity, dtype=float)
@@ -361,6 +374,8 @@ class FemGrasp:
         )
         frames = Frames.empty(sch.n_steps // J + 1)
         frames.record(0, 0.0, states[0], buf, initial=True)
+        ledger = EnergyLedger(self)
+        self._sample(ledger, 0, states[0])
         kept: dict[int, tuple] = {}
         failure = None
         n_steps = sch.n_steps if steps is None else min(int(steps), sch.n_steps)
@@ -385,10 +400,24 @@ class FemGrasp:
                 failure = self._blow_up(states[1 - p], s * sch.dt)
                 if failure is not None:
                     break
+            if s % self.energy_stride == 0:
+                self._sample(ledger, s, states[1 - p])
         final = states[s % 2]
-        return self._finish(frames.cut(s // J + 1), hold_sum.numpy().copy(), final, s, kept, failure, t0)
+        return self._finish(
+            frames.cut(s // J + 1), hold_sum.numpy().copy(), final, s, kept, failure, t0, ledger.balance()
+        )
 
-    def _finish(self, frames: Frames, hold_sum, final: State, s_done: int, kept, failure, t0) -> FemGraspRun:
+    @staticmethod
+    def _sample(ledger: EnergyLedger, s: int, st: State) -> None:
+        """Feed the state at the end of substep ``s`` to the energy ledger."""
+        ledger.sample(
+            s, st.x.numpy(), st.v.numpy(), st.pos.numpy()[0], st.rot.numpy()[0], st.vel.numpy()[0],
+            st.omega.numpy()[0],
+        )  # fmt: skip
+
+    def _finish(
+        self, frames: Frames, hold_sum, final: State, s_done: int, kept, failure, t0, energy: EnergyBalance
+    ) -> FemGraspRun:
         """The run's record and outcome (`mjcodesign.sim.fem.grasp_outcome.grade`)."""
         sch = self.schedule
         J = sch.per_step
@@ -406,8 +435,9 @@ class FemGrasp:
             rise = float(frames.pos[-1, 2] - frames.pos[0, 2])
             path = frames.pos[[s // J for s in sch.samples]]
             outcome = grade(
-                body_force, rel[1] - rel[0], rise, ground > 0, bool((depth > 0).any()), self.scenario, path
-            ).with_wall_time(wall)
+                body_force, rel[1] - rel[0], rise, ground > 0, bool((depth > 0).any()), self.scenario, path,
+                energy=energy, mujoco_dt=J * sch.dt,
+            ).with_wall_time(wall)  # fmt: skip
         return FemGraspRun(
             outcome=outcome,
             frames=frames,
@@ -422,6 +452,7 @@ class FemGrasp:
             wall_time_s=wall,
             starts=dict(sch.starts),
             checkpoints=kept,
+            energy=energy,
         )
 
     def _blow_up(self, st: State, t: float) -> str | None:
