@@ -297,6 +297,9 @@ def test_position_mode_servo_holds_its_spring_law():
     expected = np.clip(drive.stiffness * (length - (slack - drive.pull)), 0.0, drive.max_tension)
     assert tension[-1].min() > 0.0  # the tendon is taut: the law is tested off its clip
     np.testing.assert_allclose(tension[-1], expected, rtol=_TOL_SERVO_LAW)
+    # The energy bound reads the tension the servo wrote (the table is NaN ahead of the run).
+    assert np.isfinite(run.energy.total_work) and run.energy.plausible, run.energy
+    assert Failure.IMPLAUSIBLE not in run.outcome.failures, run.outcome.reason
     with pytest.raises(UnsupportedError):
         loss_gradient(grasp)
 

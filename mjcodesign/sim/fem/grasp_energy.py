@@ -64,12 +64,19 @@ class EnergyLedger:
         body = 0.5 * o.mass * float(vel @ vel) + rot - o.mass * float(self.gravity @ pos)
         return kinetic + potential + g.energy(x) + body
 
-    def _powers(self, x, v, vel, f_int, s: int) -> np.ndarray:
-        """(tendon, base, push) power [W] at the state (x, v) under the drivers of substep ``s``."""
+    def _powers(self, x, v, vel, f_int, s: int, now: int) -> np.ndarray:
+        """(tendon, base, push) power [W] at the state (x, v) after substep ``now``, drivers of substep ``s``.
+
+        In position mode the servo writes a substep's tension as it steps, so the tendon takes the
+        last one written (``now``; none before the first substep).
+        """
         grasp = self.grasp
         sch = grasp.schedule
         s = min(max(s, 1), sch.n_steps)
-        tendon = float(np.sum(grasp.tendon_forces(x, s)[self.free] * v[self.free]))
+        row = min(s, now) if grasp.position_mode else s
+        tendon = 0.0
+        if row >= 1:
+            tendon = float(np.sum(grasp.tendon_forces(x, row)[self.free] * v[self.free]))
         rate = (self.offsets[s] - self.offsets[s - 1]) / sch.dt
         base = -float(np.sum(f_int * rate[self.pinned_finger]))
         return np.array([tendon, base, float(sch.push[s] @ vel)])
@@ -82,14 +89,14 @@ class EnergyLedger:
             self.start = e
         else:
             s0, p0 = self.last
-            ends = self._powers(x, v, vel, f_int, s)  # the drivers that brought it here
+            ends = self._powers(x, v, vel, f_int, s, s)  # the drivers that brought it here
             trap = 0.5 * (p0 + ends) * (s - s0) * self.grasp.schedule.dt
             self.work += float(max(trap[0], 0.0) + max(trap[1], 0.0) + trap[2])
             excess = e - self.start - self.work
             if excess > self.excess:
                 self.excess, self.at, self.work_then = excess, s, self.work
                 self.speed = float(np.linalg.norm(vel))
-        self.last = (s, self._powers(x, v, vel, f_int, s + 1))  # the drivers that take it on
+        self.last = (s, self._powers(x, v, vel, f_int, s + 1, s))  # the drivers that take it on
 
     def balance(self) -> EnergyBalance:
         """The bound over the samples so far: its largest excess, with the work and time of it."""
