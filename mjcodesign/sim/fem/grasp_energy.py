@@ -42,8 +42,9 @@ class EnergyLedger:
         self.grasp = grasp
         self.free = ~g.pinned.astype(bool)
         self.pinned_finger = g.finger_of[~self.free]
-        self.inertial = g.inertial[self.free]
-        self.weight = g.mass[self.free, None] * np.asarray(grasp.dyn.gravity, dtype=float)[None]
+        self.finger = g.finger_of
+        self.inertial = g.inertial * self.free  # the clamped vertices' motion is prescribed: left out
+        self.weight = (g.mass * self.free)[:, None] * np.asarray(grasp.dyn.gravity, dtype=float)[None]
         self.offsets = grasp.schedule.offsets(grasp.placement.axes)
         self.gravity = np.asarray(grasp.dyn.gravity, dtype=float)
         self.start = None
@@ -54,49 +55,59 @@ class EnergyLedger:
         self.work_then = 0.0
         self.speed = 0.0
 
-    def _energy(self, x, v, pos, quat_xyzw, vel, omega) -> float:
+    def _energy(self, x, v, pos, quat_xyzw, vel, omega, xw) -> float:
         g = self.grasp.gripper
         o = self.grasp.object
-        kinetic = 0.5 * float(np.sum(self.inertial * np.sum(v[self.free] ** 2, axis=1)))
-        potential = -float(np.sum(self.weight * x[self.free]))
+        kinetic = 0.5 * float(self.inertial @ np.einsum("ij,ij->i", v, v))
+        potential = -float(np.einsum("ij,ij->", self.weight, x))
         R = quat_matrix(np.r_[quat_xyzw[3], quat_xyzw[:3]])
         rot = 0.5 * float(omega @ (R @ o.inertia @ R.T) @ omega)
         body = 0.5 * o.mass * float(vel @ vel) + rot - o.mass * float(self.gravity @ pos)
-        return kinetic + potential + g.energy(x) + body
+        return kinetic + potential + g.energy(xw) + body
 
-    def _powers(self, x, v, vel, f_int, s: int, now: int) -> np.ndarray:
-        """(tendon, base, push) power [W] at the state (x, v) after substep ``now``, drivers of substep ``s``.
+    def _powers(self, tendon: np.ndarray, f_int, vel, s: int) -> np.ndarray:
+        """(tendon, base, push) power [W] under the drivers of substep ``s``; ``tendon``: each finger's."""
+        sch = self.grasp.schedule
+        s = min(max(s, 1), sch.n_steps)
+        rate = (self.offsets[s] - self.offsets[s - 1]) / sch.dt
+        base = 0.0 if f_int is None else -float(np.sum(f_int * rate[self.pinned_finger]))
+        return np.array([float(tendon.sum()), base, float(sch.push[s] @ vel)])
 
-        In position mode the servo writes a substep's tension as it steps, so the tendon takes the
-        last one written (``now``; none before the first substep).
+    def sample(self, s: int, st) -> None:
+        """The grasp's state ``st`` at the end of substep ``s``: the work since the last sample, the excess.
+
+        The tendons' force is the kernel's at substep ``s`` (in position mode the tension the servo
+        last wrote; none before the first substep); in force mode the next substep's is the same force
+        scaled by its tension (both laws are linear in T).
         """
         grasp = self.grasp
         sch = grasp.schedule
-        s = min(max(s, 1), sch.n_steps)
-        row = min(s, now) if grasp.position_mode else s
-        tendon = 0.0
-        if row >= 1:
-            tendon = float(np.sum(grasp.tendon_forces(x, row)[self.free] * v[self.free]))
-        rate = (self.offsets[s] - self.offsets[s - 1]) / sch.dt
-        base = -float(np.sum(f_int * rate[self.pinned_finger]))
-        return np.array([tendon, base, float(sch.push[s] @ vel)])
-
-    def sample(self, s: int, x, v, pos, quat_xyzw, vel, omega) -> None:
-        """The state at the end of substep ``s`` (numpy): the work since the last sample, and the excess."""
-        e = self._energy(x, v, pos, quat_xyzw, vel, omega)
-        f_int = self.grasp.gripper.elastic_forces(x)[~self.free]
+        x, v = st.x.numpy(), st.v.numpy()
+        pos, quat, vel, omega = (a.numpy()[0] for a in (st.pos, st.rot, st.vel, st.omega))
+        e = self._energy(x, v, pos, quat, vel, omega, st.x)
+        row, nxt = min(s, sch.n_steps), min(s + 1, sch.n_steps)
+        f_int = None  # the clamp's force, needed only while a base moves
+        if any(np.any(self.offsets[k] != self.offsets[max(k - 1, 0)]) for k in (max(row, 1), nxt)):
+            f_int = grasp.gripper.elastic_forces(st.x)[~self.free]
+        tendon = np.zeros(2)
+        if row >= 1 and not (sch.tension[row] == 0.0).all():  # NaN (position mode) is computed
+            p = np.einsum("ij,ij->i", grasp.tendon_forces(st.x, row), v) * self.free
+            tendon = np.bincount(self.finger, weights=p, minlength=2)
         if self.start is None:
             self.start = e
         else:
             s0, p0 = self.last
-            ends = self._powers(x, v, vel, f_int, s, s)  # the drivers that brought it here
-            trap = 0.5 * (p0 + ends) * (s - s0) * self.grasp.schedule.dt
+            ends = self._powers(tendon, f_int, vel, s)  # the drivers that brought it here
+            trap = 0.5 * (p0 + ends) * (s - s0) * sch.dt
             self.work += float(max(trap[0], 0.0) + max(trap[1], 0.0) + trap[2])
             excess = e - self.start - self.work
             if excess > self.excess:
                 self.excess, self.at, self.work_then = excess, s, self.work
                 self.speed = float(np.linalg.norm(vel))
-        self.last = (s, self._powers(x, v, vel, f_int, s + 1, s))  # the drivers that take it on
+        if not grasp.position_mode:
+            t_now, t_next = sch.tension[max(row, 1)], sch.tension[nxt]
+            tendon = np.where(t_now > 0, tendon * t_next / np.where(t_now > 0, t_now, 1.0), 0.0)
+        self.last = (s, self._powers(tendon, f_int, vel, nxt))  # the drivers that take it on
 
     def balance(self) -> EnergyBalance:
         """The bound over the samples so far: its largest excess, with the work and time of it."""

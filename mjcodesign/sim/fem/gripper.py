@@ -297,21 +297,26 @@ class FemGripper:
             kernel, dim = kernels.p2_elastic_forces, (self.n_tets, 4)
         return kernel, dim, [x, self.tets, self.dm_inv, self.vol, self.mu, self.lam], [f]
 
-    def elastic_forces(self, x: np.ndarray) -> np.ndarray:
-        """Elastic vertex forces [N] (n_vertices, 3) at positions ``x`` [m] (n_vertices, 3)."""
-        wp = self.wp
-        xw = wp.array(np.asarray(x, dtype=float), dtype=wp.vec3d, device=self.device)
-        f = wp.zeros(self.n_vertices, dtype=wp.vec3d, device=self.device)
+    def _warp(self, x):
+        """``x`` as a Warp vec3d array (a Warp array as it is, numpy copied)."""
+        if isinstance(x, self.wp.array):
+            return x
+        return self.wp.array(np.asarray(x, dtype=float), dtype=self.wp.vec3d, device=self.device)
+
+    def elastic_forces(self, x) -> np.ndarray:
+        """Elastic vertex forces [N] (n_vertices, 3) at positions ``x`` [m] (n_vertices, 3; numpy or Warp)."""
+        xw = self._warp(x)
+        f = self.wp.zeros(self.n_vertices, dtype=self.wp.vec3d, device=self.device)
         kernel, dim, inputs, outputs = self.force_launch(xw, f)
-        wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=self.device)
+        self.wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=self.device)
         return f.numpy()
 
-    def energy(self, x: np.ndarray) -> float:
-        """Elastic energy [J] of both fingers at positions ``x`` [m] (n_vertices, 3)."""
+    def energy(self, x) -> float:
+        """Elastic energy [J] of both fingers at positions ``x`` [m] (n_vertices, 3; numpy or Warp)."""
         from mjcodesign.sim.fem import kernels
 
         wp = self.wp
-        xw = wp.array(np.asarray(x, dtype=float), dtype=wp.vec3d, device=self.device)
+        xw = self._warp(x)
         e = wp.zeros(1, dtype=wp.float64, device=self.device)
         if self.options.order == 1:
             kernel, dim = kernels.elastic_energy, self.n_tets
