@@ -119,11 +119,15 @@ class FemFinger(FemStatics):
         position=(0.0, 0.0, 0.0),
         base_velocity=(0.0, 0.0, 0.0),
         frames: int = 10,
+        scale_mass: bool = False,
     ) -> np.ndarray:
         """Explicit dynamics from rest; the finger frame placed at ``rotation``/``position`` in the world.
 
         The base face moves at ``base_velocity`` [m/s] (lift); the ground is the plane z = 0. Returns the
         tip vertex's world position [m] at ``frames + 1`` evenly spaced times, shape (frames + 1, 3).
+        ``scale_mass``: selective mass scaling for ``dynamics.dt`` (`FemBody.stable_mass`, the ground
+        contact's stiffness included; gravity on the true mass), as the two-finger grasp has, for
+        outcomes that do not depend on inertia at a step past the stable one.
         """
         if self.options.order != 1:
             raise DesignError("explicit dynamics supports linear tets only (order=1)")
@@ -131,7 +135,7 @@ class FemFinger(FemStatics):
         dyn = dynamics or FemDynamics()
         R = np.eye(3) if rotation is None else np.asarray(rotation, dtype=float)
         x0 = self.mesh.vertices @ R.T + np.asarray(position, dtype=float)
-        step = _GroundStep(self, x0, dyn)
+        step = _GroundStep(self, x0, dyn, scale_mass=scale_mass)
         xa = wp.array(x0, dtype=wp.vec3d, device=self.options.device)
         xb, va, vb = wp.zeros_like(xa), wp.zeros_like(xa), wp.zeros_like(xa)
         n_steps = max(1, int(round(duration / dyn.dt)))
@@ -153,12 +157,12 @@ class FemFinger(FemStatics):
 class _GroundStep:
     """One explicit step of a placed finger with the ground as its only obstacle (no rigid object).
 
-    Holds the constant inputs of `mjcodesign.sim.fem.contact_kernels.integrate`: the true masses (no
-    mass scaling), their weights, lumped contact areas, the clamped base and its rest positions, and an
-    object face index of −1 everywhere.
+    Holds the constant inputs of `mjcodesign.sim.fem.contact_kernels.integrate`: the true masses (or,
+    with ``scale_mass``, the selectively scaled ones), the true weights, lumped contact areas, the clamped
+    base and its rest positions, and an object face index of −1 everywhere.
     """
 
-    def __init__(self, fem: FemFinger, x0: np.ndarray, dyn: FemDynamics):
+    def __init__(self, fem: FemFinger, x0: np.ndarray, dyn: FemDynamics, *, scale_mass: bool = False):
         from mjcodesign.sim.fem import contact_kernels
 
         wp = self.wp = fem.wp
@@ -172,8 +176,9 @@ class _GroundStep:
         self.f = wp.zeros(n, dtype=wp.vec3d, device=dev)
         self.f_object = wp.zeros(n, dtype=wp.vec3d, device=dev)
         self.impulse = wp.zeros(1, dtype=wp.float64, device=dev)
+        inertial = fem.stable_mass(dyn.dt, dyn.contact_ke * area) if scale_mass else fem.mass
         self.constants = [
-            wp.array(fem.mass, dtype=wp.float64, device=dev),
+            wp.array(inertial, dtype=wp.float64, device=dev),
             wp.array(weight, dtype=wp.vec3d, device=dev),
             wp.array(area, dtype=wp.float64, device=dev),
             wp.array(pinned, dtype=wp.int32, device=dev),
