@@ -45,7 +45,7 @@ class EnergyLedger:
         self.finger = g.finger_of
         self.inertial = g.inertial * self.free  # the clamped vertices' motion is prescribed: left out
         self.weight = (g.mass * self.free)[:, None] * np.asarray(grasp.dyn.gravity, dtype=float)[None]
-        self.offsets = grasp.schedule.offsets(grasp.placement.axes)
+        self.offsets = grasp.base_offsets
         self.gravity = np.asarray(grasp.dyn.gravity, dtype=float)
         self.start = None
         self.last = None

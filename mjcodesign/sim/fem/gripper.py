@@ -287,17 +287,24 @@ class FemGripper:
         if rescale_mass:
             self._scale_mass()
 
-    def force_launch(self, x, f) -> tuple:
-        """(kernel, dim, inputs, outputs) accumulating the elastic forces [N] at ``x`` into ``f``."""
+    def _elastic_launch(self, name: str, x, out) -> tuple:
+        """(kernel, dim, inputs, outputs) of the elastic kernel ``name`` at ``x`` into ``out``.
+
+        Linear tets: one thread per tet; quadratic: the ``p2_`` kernel, per tet and quadrature point.
+        """
         from mjcodesign.sim.fem import kernels
 
         if self.options.order == 1:
-            kernel, dim = kernels.elastic_forces, self.n_tets
-        else:  # one thread per tet and quadrature point
-            kernel, dim = kernels.p2_elastic_forces, (self.n_tets, 4)
-        return kernel, dim, [x, self.tets, self.dm_inv, self.vol, self.mu, self.lam], [f]
+            kernel, dim = getattr(kernels, name), self.n_tets
+        else:
+            kernel, dim = getattr(kernels, f"p2_{name}"), (self.n_tets, 4)
+        return kernel, dim, [x, self.tets, self.dm_inv, self.vol, self.mu, self.lam], [out]
 
-    def _warp(self, x):
+    def force_launch(self, x, f) -> tuple:
+        """(kernel, dim, inputs, outputs) accumulating the elastic forces [N] at ``x`` into ``f``."""
+        return self._elastic_launch("elastic_forces", x, f)
+
+    def warp_positions(self, x):
         """``x`` as a Warp vec3d array (a Warp array as it is, numpy copied)."""
         if isinstance(x, self.wp.array):
             return x
@@ -305,7 +312,7 @@ class FemGripper:
 
     def elastic_forces(self, x) -> np.ndarray:
         """Elastic vertex forces [N] (n_vertices, 3) at positions ``x`` [m] (n_vertices, 3; numpy or Warp)."""
-        xw = self._warp(x)
+        xw = self.warp_positions(x)
         f = self.wp.zeros(self.n_vertices, dtype=self.wp.vec3d, device=self.device)
         kernel, dim, inputs, outputs = self.force_launch(xw, f)
         self.wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=self.device)
@@ -313,19 +320,9 @@ class FemGripper:
 
     def energy(self, x) -> float:
         """Elastic energy [J] of both fingers at positions ``x`` [m] (n_vertices, 3; numpy or Warp)."""
-        from mjcodesign.sim.fem import kernels
-
-        wp = self.wp
-        xw = self._warp(x)
-        e = wp.zeros(1, dtype=wp.float64, device=self.device)
-        if self.options.order == 1:
-            kernel, dim = kernels.elastic_energy, self.n_tets
-        else:
-            kernel, dim = kernels.p2_elastic_energy, (self.n_tets, 4)
-        wp.launch(
-            kernel, dim=dim, inputs=[xw, self.tets, self.dm_inv, self.vol, self.mu, self.lam], outputs=[e],
-            device=self.device,
-        )  # fmt: skip
+        e = self.wp.zeros(1, dtype=self.wp.float64, device=self.device)
+        kernel, dim, inputs, outputs = self._elastic_launch("elastic_energy", self.warp_positions(x), e)
+        self.wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=self.device)
         return float(e.numpy()[0])
 
     def place(self, pose: GripperPose, openings) -> Placement:

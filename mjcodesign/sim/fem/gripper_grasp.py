@@ -149,7 +149,9 @@ class FemGrasp:
         # per vertex: (inertial, true) mass, contact area, rest position, (pinned, finger)
         self._vertices = [arr(np.column_stack([g.inertial, g.mass]), wp.vec2d), arr(g.area, wp.float64)]
         self._vertices += [arr(pl.vertices, wp.vec3d), flags]
-        self._offsets = arr(sch.offsets(pl.axes), wp.vec3d)
+        self.base_offsets = sch.offsets(pl.axes)
+        """Each finger's base offset from its placement at the end of every substep [m], (n_steps + 1, 2, 3)."""
+        self._offsets = arr(self.base_offsets, wp.vec3d)
         self._surface = [obj.mesh_points, obj.mesh_faces, f64(obj.inv_mass_bound)]
         self._tendon = [
             arr(g.waypoint_idx, wp.int32),
@@ -484,7 +486,7 @@ class FemGrasp:
         g = self.gripper
         nb = g.n_waypoints
         pts = np.einsum("bk,bkj->bj", g.waypoint_w, np.asarray(x)[g.waypoint_idx])
-        offsets = self.schedule.offsets(self.placement.axes)[s]
+        offsets = self.base_offsets[s]
         out = np.empty(2)
         for f in range(2):
             path = np.vstack([self.placement.exits[f] + offsets[f], pts[f * nb : (f + 1) * nb]])
@@ -499,9 +501,7 @@ class FemGrasp:
         """
         wp = self.gripper.wp
         dev = self.gripper.device
-        xa = (
-            x if isinstance(x, wp.array) else wp.array(np.asarray(x, dtype=float), dtype=wp.vec3d, device=dev)
-        )
+        xa = self.gripper.warp_positions(x)
         f = wp.zeros(len(x), dtype=wp.vec3d, device=dev)
         wp.launch(
             self.kernels.gripper_tendon,
