@@ -166,7 +166,7 @@ class RerunRecorder:
         m = r.model
         dt = m.opt.timestep
         scene = r.scene
-        log_e = np.asarray(scene.built.stiffness.log_e) if r.model is scene.built.model else _log_e_of(r)
+        log_e = r.log_e
         steps = logged_steps(len(r.states), dt, r.starts, self.decimation)
         ks, at_frame, at_phase, entries = _time_points(steps, r.starts, len(r.states))
         b = ColumnBatch(ks * dt, TIMELINE)
@@ -381,22 +381,6 @@ def _time_points(steps: np.ndarray, starts: dict[str, int], n_steps: int):
 def _lengths(rows) -> list[int]:
     """Items per row of a ragged list."""
     return [len(row) for row in rows]
-
-
-def _log_e_of(r: Rollout) -> np.ndarray:
-    """The ln E of a rollout whose model replaces the scene's: read back from the chain's hinge stiffness."""
-    from mjcodesign.design.beam import block_effective_ei
-
-    built = r.scene.built
-    if built.finger_model.is_flex:
-        raise ValueError("a flex rollout must run the scene's own model: its stiffness is compiled in")
-    out = np.empty(np.shape(built.stiffness.log_e))
-    for i, h in enumerate(built.fingers):
-        for j, (name, blk) in enumerate(zip(h.joints, built.design.blocks(), strict=True)):
-            jid = mujoco.mj_name2id(r.model, mujoco.mjtObj.mjOBJ_JOINT, name)
-            # k = E I / l is linear in E: E = k / (EI(E=1) / l).
-            out[i, j] = np.log(r.model.jnt_stiffness[jid] * blk.length / block_effective_ei(blk, 1.0))
-    return out
 
 
 def _site(m: mujoco.MjModel, name: str) -> int:

@@ -203,7 +203,18 @@ class MjwarpBackend:
             finite = np.all(np.isfinite(states[w]), axis=1)
             valid = len(finite) if finite.all() else int(np.argmin(finite))  # up to the first bad state
             observer.rollout(
-                Rollout(labels[w], sc, scenario, sc.model, x0[w], states[w][:valid], ctrl[w], starts, outs[w])
+                Rollout(
+                    labels[w],
+                    sc,
+                    scenario,
+                    sc.model,
+                    sc.built.stiffness.log_e,
+                    x0[w],
+                    states[w][:valid],
+                    ctrl[w],
+                    starts,
+                    outs[w],
+                )
             )
         return outs
 

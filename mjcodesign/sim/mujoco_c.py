@@ -351,7 +351,18 @@ class MujocoBackend:
         for i in good if observer is not None else ():
             sc = scenes[i]
             observer.rollout(
-                Rollout(labels[i], sc, scenario, sc.model, x0[i], states[i], ctrl[i], starts, outs[i])
+                Rollout(
+                    labels[i],
+                    sc,
+                    scenario,
+                    sc.model,
+                    sc.built.stiffness.log_e,
+                    x0[i],
+                    states[i],
+                    ctrl[i],
+                    starts,
+                    outs[i],
+                )
             )
         return outs
 
@@ -367,6 +378,7 @@ def _observe(
                 sc,
                 scenario,
                 m,
+                sc.built.stiffness.log_e,
                 x0,
                 states,
                 ctrl,
@@ -394,7 +406,11 @@ def _diverged(states: np.ndarray, x0: np.ndarray, dt: float) -> np.ndarray:
 
 
 def scene_with_model(scene: GraspScene, m: mujoco.MjModel) -> GraspScene:
-    """The scene with another model of the same structure (ids unchanged)."""
+    """The scene with another model of the same structure (ids unchanged), under the scene's design.
+
+    ``built`` (its design, ``built.stiffness``) is kept: a rollout of the result is handed to an observer
+    as that design. For another design use :func:`scene_with_design`.
+    """
     if m is scene.model:
         return scene
     other = copy.copy(scene)

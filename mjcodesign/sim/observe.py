@@ -55,6 +55,9 @@ class Rollout:
     scenario: GraspScenario
     model: mujoco.MjModel
     """The model that ran: the scene's, or a copy with another design's stiffness."""
+    log_e: np.ndarray
+    """ln(E / Pa) of the design that ran, per finger and block, shape (2, n_blocks): what the backend
+    was given (``scene.built.stiffness``), never read back from the model."""
     x0: np.ndarray
     """Initial state, ``mjSTATE_FULLPHYSICS``, shape (nstate,)."""
     states: np.ndarray
@@ -72,6 +75,9 @@ class Rollout:
     steps of :meth:`Capture.capture_steps` that the simulator could take; empty otherwise."""
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "log_e", np.asarray(self.log_e, dtype=float))
+        if self.log_e.ndim != 2:
+            raise ValueError(f"log_e must have shape (n_fingers, n_blocks), got {self.log_e.shape}")
         if self.states.ndim != 2 or self.states.shape[1] != self.x0.size:
             raise ValueError(f"states must have shape (nstep, {self.x0.size}), got {self.states.shape}")
         if len(self.states) > len(self.ctrl):
