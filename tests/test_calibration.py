@@ -1,8 +1,9 @@
 """The finger stiffness calibrated to the FEM, pinned against recorded FEM numbers.
 
-``docs/calibration_fem.json`` holds full quadratic-tet solves of designs the calibration never saw, on
-the mesh the shipped reduced model was built from (2 mm cells, 4 spine layers);
-``docs/calibration_fem_converged.json`` the two alternating extremes on the converged mesh (8 layers).
+``mjcodesign/bench/calibration_fem.json`` (package data) holds full quadratic-tet solves of designs the
+calibration never saw, on the mesh the shipped reduced model was built from (2 mm cells, 4 spine
+layers); ``calibration_fem_converged.json`` beside it the two alternating extremes on the converged mesh
+(8 layers).
 Both were written by `mjcodesign.crosscheck.calibration.record_fem`; the tests compare with them
 instead of rerunning the FEM (1–6 min a solve here).
 """
@@ -14,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mjcodesign.bench.calibration import CONVERGED, REFERENCE
 from mjcodesign.design.beam import cantilever_tip_deflection
 from mjcodesign.design.calibration import block_compliance, calibration_for
 from mjcodesign.design.finger import FingerDesign
@@ -22,9 +24,9 @@ from mjcodesign.errors import DesignError
 from mjcodesign.models.types import SimOptions
 from mjcodesign.scenarios.static import AUTO_DEFLECTION, curl, validate_beam
 
-_DOCS = Path(__file__).resolve().parents[1] / "docs"
-_REFERENCE = json.loads((_DOCS / "calibration_fem.json").read_text())
-_CONVERGED = json.loads((_DOCS / "calibration_fem_converged.json").read_text())
+_DATA = Path(__file__).resolve().parent / "data"
+_REFERENCE = json.loads(REFERENCE.read_text())
+_CONVERGED = json.loads(CONVERGED.read_text())
 _TOL_CANTILEVER = 0.05  # issue 16's target: every model within 5% of the converged FEM, every design
 _TOL_CURL = 0.10  # issue 16's target on the curl (here its small-bend limit: bend and tip)
 _TOL_REDUCED = 0.01  # reduced FEM vs the full FEM it reduces, unseen designs (measured below 1e-3)
@@ -112,10 +114,10 @@ def test_two_hinges_per_block_keep_the_linear_calibration(name):
 
 def _large_curls(files=("sweep", "sweep_two_hinge", "alt14_17", "alt17_14")):
     """FEM curls up to ~1.4 rad recorded by ``crosscheck --scenario curl`` (quadratic tets, the CLI's 4-mm
-    mesh): random:0..1 (docs/crosscheck_curl_sweep.json), random:2..5 (…_sweep_two_hinge.json), the
+    mesh; ``tests/data/``): random:0..1 (crosscheck_curl_sweep.json), random:2..5 (…_sweep_two_hinge.json), the
     alternating extremes 14,17,… and 17,14,… (…_alt14_17.json, …_alt17_14.json) and, with ``fem_random6_29``,
     random:6..29 (the FEM's rows of four sweeps)."""
-    rows = [r for f in files for r in json.loads((_DOCS / f"crosscheck_curl_{f}.json").read_text())]
+    rows = [r for f in files for r in json.loads((_DATA / f"crosscheck_curl_{f}.json").read_text())["rows"]]
     fem = {(r["design"], r["metric"]): r["reference"] for r in rows if r.get("reference") is not None}
     out = []
     for (design, metric), bend in sorted(fem.items()):

@@ -1,10 +1,10 @@
 import json
-from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
 
+from mjcodesign.bench.calibration import REFERENCE
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.models.builder import build_finger
@@ -71,7 +71,7 @@ def test_curl_is_deterministic():
 
 # Flex against the FEM under the tendon, small bend (first order): bend = T ∂φ/∂T, tip = T ∂u/∂T.
 _TOL_FLEX_CURL = 0.10  # issue 16's curl target
-_FEM = json.loads((Path(__file__).resolve().parents[1] / "docs" / "calibration_fem.json").read_text())
+_FEM = json.loads(REFERENCE.read_text())
 
 
 @pytest.mark.xfail(

@@ -1,7 +1,8 @@
 """The stiffness calibration checked against FEM numbers it was not fitted to.
 
-For every design recorded in ``docs/calibration_fem.json`` (converged quadratic-tet solves of designs
-outside the training set: the alternating extremes, the presets and random seeds; written by
+For every design recorded in ``calibration_fem.json`` (package data beside this module: converged
+quadratic-tet solves of designs outside the training set: the alternating extremes, the presets and
+random seeds; written by
 :func:`mjcodesign.crosscheck.calibration.record_fem`), each MuJoCo model's cantilever (tip load giving
 δ = 1% of L, as ``validate beam``) against the FEM's, and beam theory's for comparison. Curl rows come
 from ``curl`` entries of the same file (nonlinear FEM curls) when present. Also times the calibration
@@ -25,9 +26,9 @@ from mjcodesign.scenarios.static import AUTO_DEFLECTION, validate_beam
 
 __all__ = ["bench_calibration", "REFERENCE", "CONVERGED", "TOL_CANTILEVER", "TOL_CURL"]
 
-REFERENCE = Path(__file__).resolve().parents[2] / "docs" / "calibration_fem.json"
-"""The recorded FEM numbers on the shipped reduced model's mesh (repository ``docs/``)."""
-CONVERGED = Path(__file__).resolve().parents[2] / "docs" / "calibration_fem_converged.json"
+REFERENCE = Path(__file__).resolve().parent / "calibration_fem.json"
+"""The recorded FEM numbers on the shipped reduced model's mesh (package data, with its provenance)."""
+CONVERGED = Path(__file__).resolve().parent / "calibration_fem_converged.json"
 """The recorded FEM numbers on the converged mesh (8 spine layers)."""
 TOL_CANTILEVER = 0.05
 """Issue 16's target: a model within 5% of the converged FEM on the cantilever, every design."""

@@ -5,7 +5,7 @@ designs (`Stiffness.random` seeds ``TRAIN_SEEDS``, both fingers: 16 designs), re
 displacements and sensitivities (:func:`mjcodesign.crosscheck.fem_linear.reduce`), fits the hinge axes
 (:func:`fit_axis_heights`), and writes
 ``fem_calibration.json``. :func:`record_fem` solves designs the fit never saw and writes their FEM
-outputs as JSON (``docs/calibration_fem.json``): the reference the tests and the ``calibration``
+outputs as JSON (``mjcodesign/bench/calibration_fem.json``): the reference the tests and the ``calibration``
 benchmark compare against, so neither reruns the FEM (one solve takes 1–2 min here).
 """
 

