@@ -81,9 +81,8 @@ def score_candidates(
 
     Returns the scores (candidate order) and the estimates used (COM, volume, mass, point count).
     """
-    from mjcodesign.surrogate import GraspBatch, Poses, load_surrogate
-
     from mjcodesign.data.cloud import fingers_box, to_gripper
+    from mjcodesign.surrogate import GraspBatch, Poses, load_surrogate
 
     sur = load_surrogate(checkpoint)
     n = int(sur.meta["dataset"]["cloud_points"])

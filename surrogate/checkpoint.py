@@ -19,11 +19,10 @@ import os
 import uuid
 from pathlib import Path
 
+from mjcodesign.errors import MjcodesignError, OutputError
 from mjcodesign.surrogate.data import OUTPUT_NAMES, Normalizer
 from mjcodesign.surrogate.inference import Surrogate
 from mjcodesign.surrogate.model import GraspNet, ModelConfig
-
-from mjcodesign.errors import MjcodesignError, OutputError
 
 __all__ = [
     "CHECKPOINT_FORMAT",

@@ -11,8 +11,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from mjcodesign.surrogate.checkpoint import load_surrogate
-from mjcodesign.surrogate.inference import GraspBatch, Poses, Surrogate
 
 from mjcodesign.data import partial_cloud
 from mjcodesign.data.cloud import to_gripper
@@ -23,6 +21,8 @@ from mjcodesign.jobs import resolve_pose
 from mjcodesign.models.types import GripperPose
 from mjcodesign.objects import load_object
 from mjcodesign.poses import scene_offset
+from mjcodesign.surrogate.checkpoint import load_surrogate
+from mjcodesign.surrogate.inference import GraspBatch, Poses, Surrogate
 
 __all__ = ["pose_matrix", "predict_grasp", "training_density"]
 

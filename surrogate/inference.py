@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+
+from mjcodesign.errors import DesignError, StiffnessError
 from mjcodesign.surrogate.data import (
     N_LOG_E,
     N_REGRESSION,
@@ -37,8 +39,6 @@ from mjcodesign.surrogate.data import (
     normalize_clouds,
 )
 from mjcodesign.surrogate.model import GraspNet
-
-from mjcodesign.errors import DesignError, StiffnessError
 
 __all__ = ["DesignLoss", "DesignGradient", "GraspBatch", "Poses", "Prediction", "Surrogate", "success_score"]
 

@@ -18,6 +18,7 @@ per output, and its classifier for the contact, on 22 ln E, COM, density, ``up``
 from __future__ import annotations
 
 import numpy as np
+
 from mjcodesign.surrogate.data import N_REGRESSION, OUTPUT_NAMES, GraspData
 from mjcodesign.surrogate.inference import success_score
 

@@ -15,10 +15,10 @@ import dataclasses
 from dataclasses import dataclass
 
 import torch
-from mjcodesign.surrogate.data import N_OUTPUTS
 from torch import nn
 
 from mjcodesign.errors import DesignError
+from mjcodesign.surrogate.data import N_OUTPUTS
 
 __all__ = ["GraspNet", "ModelConfig"]
 

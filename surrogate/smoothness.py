@@ -21,8 +21,6 @@ import dataclasses
 
 import numpy as np
 import torch
-from mjcodesign.surrogate.data import N_LOG_E, GraspData
-from mjcodesign.surrogate.inference import DesignLoss, GraspBatch, Poses, Surrogate
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
@@ -32,6 +30,8 @@ from mjcodesign.models.types import FingerModel, GripperPose
 from mjcodesign.scenarios.drive import TendonPosition
 from mjcodesign.scenarios.grasp import GraspScenario
 from mjcodesign.sim import get_backend
+from mjcodesign.surrogate.data import N_LOG_E, GraspData
+from mjcodesign.surrogate.inference import DesignLoss, GraspBatch, Poses, Surrogate
 
 __all__ = ["design_lines", "smoothness"]
 

@@ -23,6 +23,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import torch
+from torch import nn
+
+from mjcodesign.errors import DesignError
 from mjcodesign.surrogate.data import (
     N_REGRESSION,
     GraspData,
@@ -33,9 +36,6 @@ from mjcodesign.surrogate.data import (
     pose_batches,
 )
 from mjcodesign.surrogate.model import GraspNet, ModelConfig
-from torch import nn
-
-from mjcodesign.errors import DesignError
 
 _CONTACT_WEIGHT = 1.0  # the contact's cross-entropy against one L1 term of a z-scored output
 PRECISIONS = ("fp32", "bf16")

@@ -21,6 +21,9 @@ def tiny_checkpoint(tmp_path_factory):
     """A tiny surrogate trained here on a small generated dataset (two shapes, 2 poses x 6 designs)."""
     torch = pytest.importorskip("torch")
     import trimesh
+
+    from mjcodesign.data import DatagenConfig, generate, parse_density_spec
+    from mjcodesign.scenarios.grasp import GraspScenario
     from mjcodesign.surrogate import (
         ModelConfig,
         OptimizerConfig,
@@ -31,9 +34,6 @@ def tiny_checkpoint(tmp_path_factory):
         split,
         train,
     )
-
-    from mjcodesign.data import DatagenConfig, generate, parse_density_spec
-    from mjcodesign.scenarios.grasp import GraspScenario
 
     work = tmp_path_factory.mktemp("tiny_surrogate")
     files = []

@@ -14,11 +14,11 @@ import sys
 import numpy as np
 import pytest
 import torch
-from mjcodesign.surrogate import GraspBatch, Normalizer, Poses, Surrogate
 from numpy.testing import assert_array_equal
 from torch import nn
 
 from mjcodesign.codesign import Mode, OptimizeConfig, Phase, PoseSelection, PoseSet, log_e_of, optimize, z_of
+from mjcodesign.surrogate import GraspBatch, Normalizer, Poses, Surrogate
 
 cli_main = importlib.import_module("mjcodesign.cli.main")
 
@@ -199,11 +199,11 @@ def _run(*args, tmp_path):
 def candidates(tmp_path_factory):
     """A candidate file of one box (the top-down auto pose, twice)."""
     import trimesh
-    from mjcodesign.surrogate.grasp import pose_matrix
 
     from mjcodesign.objects import load_object
     from mjcodesign.poses import Candidates
     from mjcodesign.scenarios.grasp import auto_pose
+    from mjcodesign.surrogate.grasp import pose_matrix
 
     d = tmp_path_factory.mktemp("codesign")
     trimesh.creation.box(extents=(0.05, 0.04, 0.06)).export(d / "box.stl")

@@ -10,13 +10,41 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-PKG = ROOT / "mjcodesign"
 
-# Layer of each top-level part of mjcodesign/: a module may import only from its own layer's part or a
-# lower layer (the pipeline: design -> models -> objects -> scenarios -> poses -> sim -> jobs -> ...).
+
+def _setuptools() -> dict:
+    import tomllib
+
+    return tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
+
+
+def _package_dirs() -> dict[str, Path]:
+    """Every package of the distribution and its folder, the root folders of ``package-dir`` included."""
+    cfg = _setuptools()
+    mapped = cfg.get("package-dir", {})
+    out = {}
+    for pkg in cfg["packages"]:
+        # A package sits in its own mapped folder, or under its nearest mapped parent, or at its dotted path.
+        parts = pkg.split(".")
+        for i in range(len(parts), 0, -1):
+            head = ".".join(parts[:i])
+            if head in mapped:
+                out[pkg] = ROOT / mapped[head] / Path(*parts[i:])
+                break
+        else:
+            out[pkg] = ROOT / Path(*parts)
+    return out
+
+
+# Layer of each top-level part of the distribution: a module may import only from its own layer's part or
+# a lower layer (the pipeline: design -> models -> objects -> scenarios -> poses -> sim -> jobs -> data ->
+# surrogate -> co-design -> evaluation -> deploy). viz observes: it sits above everything, so nothing
+# may import it (the CLI finds it through an entry point).
 LAYERS = {
-    "errors": 0,
+    "errors": -1,
+    "outputs": 0,
     "optional": 0,
+    "models_xml": 0,
     "design": 1,
     "models": 2,
     "fabrication": 2,
@@ -27,20 +55,23 @@ LAYERS = {
     "jobs": 7,
     "data": 8,
     "crosscheck": 8,
-    "codesign": 9,
-    "evaluation": 10,
-    "bench": 11,
-    "cli": 12,
+    "surrogate": 9,
+    "codesign": 10,
+    "evaluation": 11,
+    "bench": 12,
+    "hardware": 13,
+    "cli": 14,
+    "viz": 15,
 }
 
 
 def _modules() -> dict[str, Path]:
+    """Every module of the distribution by its installed name (``mjcodesign.viz.recorder``, ...)."""
     mods = {}
-    for f in PKG.rglob("*.py"):
-        parts = list(f.relative_to(ROOT).with_suffix("").parts)
-        if parts[-1] == "__init__":
-            parts = parts[:-1]
-        mods[".".join(parts)] = f
+    for pkg, folder in _package_dirs().items():
+        for f in folder.glob("*.py"):
+            name = pkg if f.stem == "__init__" else f"{pkg}.{f.stem}"
+            mods[name] = f
     return mods
 
 
@@ -72,8 +103,34 @@ def _part(module: str) -> str:
 
 def test_every_part_has_a_layer():
     parts = {_part(m) for m in _modules()} - {""}
-    # mjcodesign.viz, .hardware, .surrogate and .models_xml install from the repository root.
     assert parts <= set(LAYERS), parts - set(LAYERS)
+
+
+def test_the_root_folders_are_mapped():
+    """surrogate/, hardware/, viz/ and models_xml/ install as mjcodesign.*, and the checks walk them."""
+    mods = _modules()
+    for part in ("surrogate", "hardware", "viz", "models_xml"):
+        assert f"mjcodesign.{part}" in mods, part
+    assert "mjcodesign.viz.recorder" in mods and "mjcodesign.hardware.tendon" in mods
+    # Every .py file under a package folder is one of the walked modules (no folder missed).
+    walked = {f.resolve() for f in mods.values()}
+    for folder in _package_dirs().values():
+        assert {f.resolve() for f in folder.glob("*.py")} <= walked, folder
+
+
+def test_the_graph_sees_a_planted_cycle(tmp_path):
+    """The cycle check follows imports across the root folders (a relative import included)."""
+    a, b = tmp_path / "a.py", tmp_path / "b.py"
+    a.write_text("from mjcodesign.hardware import b\n")
+    b.write_text("from . import a\n")
+    edges = _imports({"mjcodesign.hardware.a": a, "mjcodesign.hardware.b": b})
+    assert ("mjcodesign.hardware.a", "mjcodesign.hardware.b", "") in edges
+    assert ("mjcodesign.hardware.b", "mjcodesign.hardware.a", "") in edges
+
+
+def test_nothing_imports_viz():
+    bad = [f"{a} -> {b}" for a, b, _ in _imports(_modules()) if _part(b) == "viz" and _part(a) != "viz"]
+    assert not bad, bad
 
 
 def test_no_import_cycles():
@@ -141,7 +198,7 @@ def test_no_private_names_across_modules():
 
 
 def test_every_package_lists_its_public_names():
-    for init in PKG.rglob("__init__.py"):
+    for init in (folder / "__init__.py" for folder in _package_dirs().values()):
         tree = ast.parse(init.read_text(encoding="utf-8"))
         names = [
             t.id for n in tree.body if isinstance(n, ast.Assign) for t in n.targets if isinstance(t, ast.Name)
@@ -151,13 +208,15 @@ def test_every_package_lists_its_public_names():
 
 def test_every_package_is_in_the_distribution():
     """A wheel holds only the packages pyproject lists: a new folder must be listed, its data too."""
-    import tomllib
-
-    cfg = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
-    listed = set(cfg["packages"])
-    found = {".".join(f.parent.relative_to(ROOT).parts) for f in PKG.rglob("__init__.py")}
-    assert found <= listed, sorted(found - listed)
+    cfg = _setuptools()
+    dirs = _package_dirs()
+    folder_of = {folder.resolve(): pkg for pkg, folder in dirs.items()}
+    roots = {ROOT / "mjcodesign"} | {ROOT / d for d in cfg.get("package-dir", {}).values()}
+    found = {f.parent.resolve() for r in roots for f in r.rglob("__init__.py")}
+    missing = sorted(str(d) for d in found if d not in folder_of)
+    assert not missing, f"package folders not listed in pyproject: {missing}"
     data = cfg.get("package-data", {})
-    for f in PKG.rglob("*.json"):
-        pkg = ".".join(f.parent.relative_to(ROOT).parts)
-        assert "*.json" in data.get(pkg, []), f"{f} is not package data of {pkg}"
+    for r in roots:
+        for f in r.rglob("*.json"):
+            pkg = folder_of.get(f.parent.resolve())
+            assert pkg and "*.json" in data.get(pkg, []), f"{f} is not package data of {pkg}"

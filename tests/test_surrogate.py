@@ -16,6 +16,11 @@ import sys
 import numpy as np
 import pytest
 import torch
+from numpy.testing import assert_array_equal
+
+from mjcodesign.cli import surrogate as cli_surrogate
+from mjcodesign.data import DatagenConfig, generate, parse_density_spec
+from mjcodesign.scenarios.grasp import GraspScenario
 from mjcodesign.surrogate import (
     DesignLoss,
     GraspBatch,
@@ -35,11 +40,6 @@ from mjcodesign.surrogate import (
 )
 from mjcodesign.surrogate.data import GraspDataset, pose_batches
 from mjcodesign.surrogate.train import PRECISIONS, grasp_loss
-from numpy.testing import assert_array_equal
-
-from mjcodesign.cli import surrogate as cli_surrogate
-from mjcodesign.data import DatagenConfig, generate, parse_density_spec
-from mjcodesign.scenarios.grasp import GraspScenario
 
 cli_main = importlib.import_module("mjcodesign.cli.main")  # the package's `main` attribute is the function
 _BUILD_PARSER = cli_main.build_parser
@@ -443,10 +443,9 @@ def test_smoothness_slope_correlation_is_none_where_undefined():
 
 
 def test_smoothness_rebuilds_either_tendon_drive_from_the_manifest():
-    from mjcodesign.surrogate.smoothness import _scenario
-
     from mjcodesign.data.config import _tendon_dict
     from mjcodesign.scenarios.drive import TendonForce, TendonPosition
+    from mjcodesign.surrogate.smoothness import _scenario
 
     keep = (
         "settle_s",

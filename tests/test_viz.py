@@ -262,6 +262,7 @@ def test_captured_states_equal_replayed_ones(tmp_path):
     import dataclasses
 
     import mujoco
+
     from mjcodesign.viz.recorder import RerunRecorder, logged_steps
     from mjcodesign.viz.replay import Replay, parts_of
 
@@ -321,9 +322,8 @@ def test_diverged_rollout_is_recorded_up_to_its_failure(tmp_path):
 def test_recordings_leave_no_threads_behind(tmp_path):
     """A closed recorder ends its stream's threads: a process writing many recordings keeps its count."""
     pytest.importorskip("rerun")
-    from mjcodesign.viz.recorder import RerunRecorder
-
     from mjcodesign.errors import OutputError
+    from mjcodesign.viz.recorder import RerunRecorder
 
     def threads() -> int:
         return len(os.listdir("/proc/self/task"))
@@ -344,9 +344,8 @@ def test_recording_replaces_an_old_file_and_reports_a_failed_write(tmp_path):
     """close() writes the file: over an older one (replaced, not appended to), through a symlink,
     and a write that fails raises OutputError naming the file."""
     pytest.importorskip("rerun")
-    from mjcodesign.viz.recorder import RerunRecorder
-
     from mjcodesign.errors import OutputError
+    from mjcodesign.viz.recorder import RerunRecorder
 
     old = tmp_path / "grasp.rrd"
     old.write_bytes(b"not a recording" * 10_000)
@@ -410,9 +409,8 @@ def test_contact_arrows_at_contacts(recorded):
 
 def test_run_batch_hands_every_design_to_the_observer(tmp_path):
     pytest.importorskip("rerun")
-    from mjcodesign.viz.colormap import stiffness_rgb
-
     from mjcodesign.sim.observe import load_observer
+    from mjcodesign.viz.colormap import stiffness_rgb
 
     scene = _scene()
     designs = ["soft", "semi-rigid"]
@@ -453,11 +451,11 @@ def test_rollout_is_coloured_by_the_design_that_ran(tmp_path, hinges):
     import copy
 
     import mujoco
-    from mjcodesign.viz.colormap import stiffness_rgb
 
     from mjcodesign.models.types import SimOptions
     from mjcodesign.sim import scene_with_model
     from mjcodesign.sim.observe import load_observer
+    from mjcodesign.viz.colormap import stiffness_rgb
 
     obj = box_object((_BOX,) * 3, _RHO)
     design = Stiffness.preset("paper-optimized")
@@ -486,9 +484,8 @@ def test_rollout_is_coloured_by_the_design_that_ran(tmp_path, hinges):
 
 def test_flex_fingers_deform_and_are_coloured(tmp_path):
     pytest.importorskip("rerun")
-    from mjcodesign.viz.colormap import stiffness_rgb
-
     from mjcodesign.sim.observe import load_observer
+    from mjcodesign.viz.colormap import stiffness_rgb
 
     scene = _scene(model=FingerModel.FLEX)
     scenario = GraspScenario(
@@ -593,10 +590,9 @@ def test_crosscheck_press_records_contact_forces_and_plate(tmp_path):
 
 def test_tet_snapshot_is_a_closed_coloured_surface(tmp_path):
     pytest.importorskip("rerun")
-    from mjcodesign.viz.colormap import stiffness_rgb
-
     from mjcodesign.sim.fem import mesh_finger
     from mjcodesign.sim.observe import Snapshot, load_observer
+    from mjcodesign.viz.colormap import stiffness_rgb
 
     mesh = mesh_finger(FingerDesign(), h=6e-3, spine_layers=2)
     log_e = Stiffness.preset("paper-optimized").log_e[0]

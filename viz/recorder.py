@@ -28,13 +28,13 @@ from pathlib import Path
 import mujoco
 import numpy as np
 import rerun as rr
+
+from mjcodesign.errors import OutputError
+from mjcodesign.sim.observe import Rollout, Snapshot
 from mjcodesign.viz.batch import ColumnBatch, rgba32
 from mjcodesign.viz.colormap import legend_markdown, legend_ticks, stiffness_rgb
 from mjcodesign.viz.geometry import BOX_TRIANGLES, box_corners, finger_surfaces, tet_surface
 from mjcodesign.viz.replay import ModelParts, Replay, block_colours, grab, parts_of
-
-from mjcodesign.errors import OutputError
-from mjcodesign.sim.observe import Rollout, Snapshot
 
 __all__ = ["RerunRecorder", "DEFAULT_FRAME_RATE", "TIMELINE", "logged_steps"]
 

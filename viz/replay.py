@@ -13,12 +13,12 @@ from typing import NamedTuple
 
 import mujoco
 import numpy as np
-from mjcodesign.viz.batch import rgba32
-from mjcodesign.viz.colormap import NEUTRAL_RGB, stiffness_rgb
-from mjcodesign.viz.geometry import Surface, body_geom_surface, finger_surfaces
 
 from mjcodesign.scenarios.grasp import STATE_SPEC, control_spec
 from mjcodesign.sim.observe import Rollout
+from mjcodesign.viz.batch import rgba32
+from mjcodesign.viz.colormap import NEUTRAL_RGB, stiffness_rgb
+from mjcodesign.viz.geometry import Surface, body_geom_surface, finger_surfaces
 
 __all__ = ["ModelParts", "parts_of", "Contacts", "Frames", "GRABBED", "Replay", "grab", "block_colours"]
 

@@ -65,9 +65,19 @@ def write_json(result, out: str | os.PathLike, *, indent: int | None = 2) -> Non
         raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from exc
 
 
-def run_benchmark(name: str, *, out: str | os.PathLike | None = None, **kwargs) -> dict:
-    """Run the benchmark ``name`` with ``kwargs``; write its JSON to ``out`` when given; return it."""
+def run_benchmark(
+    name: str, *, out: str | os.PathLike | None = None, command: str | None = None, **kwargs
+) -> dict:
+    """Run the benchmark ``name`` with ``kwargs``; write its JSON to ``out`` when given; return it.
+
+    The result carries ``"provenance"`` (:func:`~mjcodesign.bench.record.provenance`): ``command`` (the
+    command line that ran it, when given), date, installed version and commit, machine and load.
+    """
+    from mjcodesign.bench.record import provenance
+
     result = benchmark(name)(**kwargs)
+    if isinstance(result, dict):
+        result["provenance"] = provenance(name, command=command)
     if out:
         write_json(result, out)
     return result

@@ -501,6 +501,7 @@ def run_bench(args: argparse.Namespace) -> int:
 
     res = run_benchmark(
         "grasp",
+        command=args.command_line,
         model=args.model,
         source=args.object,
         rollouts=args.rollouts,

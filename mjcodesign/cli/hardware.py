@@ -71,9 +71,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     g.add_argument("--dxl", help="serial port of the tendon motors")
     g.add_argument("--pose", type=path_text, default="auto", help="pose file (.npz/.npy of 4x4) or 'auto'")
     g.add_argument(
-        "--cloud", type=_paths, help="point cloud file (.ply/.npz/.npy), or one per camera, comma-separated (merged)"
+        "--cloud",
+        type=_paths,
+        help="point cloud file (.ply/.npz/.npy), or one per camera, comma-separated (merged)",
     )
-    g.add_argument("--calib", type=_paths, help="camera-to-base calibration (.json/.npz/.npy), or one per --cloud, comma-separated")
+    g.add_argument(
+        "--calib",
+        type=_paths,
+        help="camera-to-base calibration (.json/.npz/.npy), or one per --cloud, comma-separated",
+    )
     g.add_argument("--ticks", type=int, default=1000, help="tendon pull [ticks of 4096]")
     g.add_argument("--lift", type=float, default=0.10, help="lift height [m]")
     g.add_argument("--speed", type=float, default=0.1, help="franky speed factor (0, 1]")
@@ -82,10 +88,18 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     g.add_argument("--no-realtime", action="store_true", help="allow a non-realtime kernel")
     g.add_argument("--dry-run", action="store_true", help="print the plan, touch nothing")
     g.add_argument(
-        "--surrogate", type=_path, default=None, help="surrogate checkpoint: run the candidate it predicts best"
+        "--surrogate",
+        type=_path,
+        default=None,
+        help="surrogate checkpoint: run the candidate it predicts best",
     )
     g.add_argument("--design", default=None, help="the printed design (preset, 22 ln E or a design file)")
-    g.add_argument("--density", type=finite_float(0.0, strict=True), default=100.0, help="object density the surrogate assumes [kg/m³]")
+    g.add_argument(
+        "--density",
+        type=finite_float(0.0, strict=True),
+        default=100.0,
+        help="object density the surrogate assumes [kg/m³]",
+    )
     g.add_argument("--json", action="store_true", help="print the report as JSON")
     _add_motor_args(g)
 
@@ -118,15 +132,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         default=150.0,
         help="watchdog: past this, print every thread's stack and exit 1 (a hang in a peer) [s]",
     )
-    st.add_argument("--surrogate", type=_path, default=None, help="surrogate checkpoint: choose the grasp with it")
-    st.add_argument("--design", default=None, help="the design the surrogate scores (preset, 22 ln E or a file)")
+    st.add_argument(
+        "--surrogate", type=_path, default=None, help="surrogate checkpoint: choose the grasp with it"
+    )
+    st.add_argument(
+        "--design", default=None, help="the design the surrogate scores (preset, 22 ln E or a file)"
+    )
 
     hw.set_defaults(func=run)
     return hw
 
 
 def _motors(args: argparse.Namespace) -> tuple:
-    from .tendon import FingerMotor
+    from mjcodesign.hardware.tendon import FingerMotor
 
     names = "ABCDEFGH"
     return tuple(
@@ -136,9 +154,9 @@ def _motors(args: argparse.Namespace) -> tuple:
 
 
 def _grasp(args: argparse.Namespace) -> int:
-    from .arm import Workspace
-    from .grasp import RobotGraspJob, run_job
-    from .pipeline import GraspReport, GraspSettings
+    from mjcodesign.hardware.arm import Workspace
+    from mjcodesign.hardware.grasp import RobotGraspJob, run_job
+    from mjcodesign.hardware.pipeline import GraspReport, GraspSettings
 
     box = args.workspace
     ws = Workspace() if box is None else Workspace(box[:3], box[3:])
@@ -175,7 +193,7 @@ def _grasp(args: argparse.Namespace) -> int:
 
 
 def _tendon(args: argparse.Namespace) -> int:
-    from .tendon import TendonConfig, TendonMotors, raise_on_signals
+    from mjcodesign.hardware.tendon import TendonConfig, TendonMotors, raise_on_signals
 
     config = TendonConfig(port=args.dxl, motors=_motors(args), latency_ms=args.latency_ms)
     config.check_pull(args.ticks)  # refuse before opening the port
@@ -191,7 +209,7 @@ def _status(args: argparse.Namespace) -> int:
     if not (args.robot or args.dxl):
         raise HardwareError("give --robot and/or --dxl")
     if args.dxl:
-        from .tendon import TendonConfig, TendonMotors
+        from mjcodesign.hardware.tendon import TendonConfig, TendonMotors
 
         with TendonMotors(
             TendonConfig(port=args.dxl, motors=_motors(args), latency_ms=args.latency_ms)
@@ -199,7 +217,7 @@ def _status(args: argparse.Namespace) -> int:
             pos = motors.slack
         print("tendon motors: " + ", ".join(f"ID {i} at {p} ticks" for i, p in pos.items()))
     if args.robot:
-        from .arm import ArmConfig, FrankaArm
+        from mjcodesign.hardware.arm import ArmConfig, FrankaArm
 
         with FrankaArm(ArmConfig(host=args.robot, realtime=not args.no_realtime)) as arm:
             xyz = ", ".join(f"{v:.3f}" for v in arm.pose()[:3, 3])
@@ -208,7 +226,7 @@ def _status(args: argparse.Namespace) -> int:
 
 
 def _emulate(args: argparse.Namespace) -> int:
-    from .dxl_emulator import XL330Emulator
+    from mjcodesign.hardware.dxl_emulator import XL330Emulator
 
     with XL330Emulator(ids=args.ids, speed_ticks_s=args.speed) as emu:
         print(emu.port, flush=True)
@@ -224,12 +242,14 @@ def _emulate(args: argparse.Namespace) -> int:
 def _selftest(args: argparse.Namespace) -> int:
     import faulthandler
 
-    from .selftest import run_selftest
+    from mjcodesign.hardware.selftest import run_selftest
 
     if not args.timeout_s > 0:
         raise HardwareError(f"--timeout-s must be positive, got {args.timeout_s}")
     if (args.surrogate is None) != (args.design is None):
-        raise HardwareError("--surrogate and --design go together: the surrogate scores candidates for that design")
+        raise HardwareError(
+            "--surrogate and --design go together: the surrogate scores candidates for that design"
+        )
     if args.surrogate is not None and not args.surrogate.is_dir():
         raise HardwareError(f"--surrogate: {args.surrogate} is not a checkpoint folder")
     if args.design is not None:

@@ -35,6 +35,7 @@ def _cmd_landscape(args) -> int:
         kw["designs"] = _names(args.designs)
     res = run_benchmark(
         "landscape",
+        command=args.command_line,
         out=args.out,
         **kw,
         tendons=_names(args.tendons),
@@ -67,7 +68,7 @@ def _cmd_calibration(args) -> int:
         kw["references"] = (args.reference,)
     if args.designs:
         kw["designs"] = _names(args.designs)
-    res = run_benchmark("calibration", out=args.out, on_progress=_note, **kw)
+    res = run_benchmark("calibration", command=args.command_line, out=args.out, on_progress=_note, **kw)
     if args.json:
         print(json.dumps(res))
     else:

@@ -6,6 +6,7 @@ import argparse
 import contextlib
 import importlib.util
 import json
+import shlex
 import sys
 import warnings
 
@@ -81,7 +82,7 @@ def _cmd_bench_finger(args) -> int:
             bar.update(task, completed=done, description=f"bench finger: {model}")
 
         curl = {"models": args.models, "seconds": args.seconds, "flex_cells": args.flex_cells}
-        res = run_benchmark("finger", out=args.out, progress=progress, **curl)
+        res = run_benchmark("finger", command=args.command_line, out=args.out, progress=progress, **curl)
     if args.json:
         print(json.dumps(res))
     else:
@@ -147,6 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
     from mjcodesign.cli import evaluate as cli_evaluate
     from mjcodesign.cli import fabrication as cli_fabrication
     from mjcodesign.cli import grasp as cli_grasp
+    from mjcodesign.cli import hardware as cli_hardware
     from mjcodesign.cli import landscape as cli_landscape
     from mjcodesign.cli import optimize as cli_optimize
     from mjcodesign.cli import poses as cli_poses
@@ -170,10 +172,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_optimize.add_parser(sub)
     cli_surrogate.add_parser(sub)
     cli_evaluate.add_parser(sub)
-
-    from mjcodesign.hardware.cli import add_parser as add_hardware
-
-    add_hardware(sub)
+    cli_hardware.add_parser(sub)
     return p
 
 
@@ -233,6 +232,8 @@ def main(argv: list[str] | None = None) -> int:
     """
     parser = build_parser()
     args = parser.parse_args(argv)
+    # The command line as run, for the records the command writes (the library never reads argv).
+    args.command_line = shlex.join(["mjcodesign", *(sys.argv[1:] if argv is None else argv)])
     if _reaches_warp(args) and importlib.util.find_spec("warp") is not None:
         try:
             quiet_warp()  # once, before the library's wp.init(), which is then silent

@@ -194,6 +194,7 @@ def run_bench(args: argparse.Namespace) -> int:
     objects = None if args.objects is None else tuple(n.strip() for n in args.objects.split(",") if n.strip())
     res = run_benchmark(
         "optimize",
+        command=args.command_line,
         out=args.out,
         checkpoint=args.ckpt,
         poses=args.poses,

@@ -223,6 +223,7 @@ def run_bench(args: argparse.Namespace) -> int:
     names = list(named_set(args.objects)) if args.objects in OBJECT_SETS else args.objects.split(",")
     res = run_benchmark(
         "poses",
+        command=args.command_line,
         objects=names,
         per_object=args.per_object,
         seed=args.seed,

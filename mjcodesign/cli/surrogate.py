@@ -286,7 +286,7 @@ def run_bench(args: argparse.Namespace) -> int:
 
     if args.threads:
         torch.set_num_threads(args.threads)
-    res = run_benchmark("surrogate", out=args.out, repeats=args.repeats)
+    res = run_benchmark("surrogate", command=args.command_line, out=args.out, repeats=args.repeats)
     if args.json:
         print(json.dumps(res))
     else:

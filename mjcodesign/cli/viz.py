@@ -245,6 +245,7 @@ def _cmd_bench_viz(args) -> int:
         )
     res = run_benchmark(
         "viz",
+        command=args.command_line,
         out=args.out,
         names=args.cases.split(","),
         decimations=decimations,

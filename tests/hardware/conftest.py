@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+
 from mjcodesign.hardware.dxl_emulator import XL330Emulator
 from mjcodesign.hardware.tendon import port_handler
 

@@ -6,6 +6,8 @@ import json
 
 import numpy as np
 import pytest
+
+from mjcodesign.errors import HardwareError, PoseError
 from mjcodesign.hardware.arm import Workspace
 from mjcodesign.hardware.camera import (
     FileCamera,
@@ -27,8 +29,6 @@ from mjcodesign.hardware.pipeline import (
 )
 from mjcodesign.hardware.selftest import BOX_CENTRE, BOX_SIZE, sample_box_surface
 from mjcodesign.hardware.tendon import FingerMotor, TendonConfig
-
-from mjcodesign.errors import HardwareError, PoseError
 
 GEO = GripperGeometry()
 TOP_DOWN = np.diag([1.0, -1.0, -1.0, 1.0])

@@ -6,6 +6,7 @@ import os
 import time
 
 import pytest
+
 from mjcodesign.hardware.dxl_emulator import XL330Emulator, crc16, stuff, unstuff
 from mjcodesign.hardware.xl330 import ADDR, XL330_MODEL_NUMBER
 

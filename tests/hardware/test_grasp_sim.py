@@ -13,6 +13,7 @@ pytest.importorskip("franky")
 pytest.importorskip("franky_sim")
 pytest.importorskip("dynamixel_sdk")
 
+from mjcodesign.errors import HardwareError  # noqa: E402
 from mjcodesign.hardware.camera import save_point_cloud
 from mjcodesign.hardware.dxl_emulator import emulator_process
 from mjcodesign.hardware.grasp import RobotGraspJob, run_job
@@ -25,8 +26,6 @@ from mjcodesign.hardware.selftest import (
     sample_box_surface,
     torque_over_bus,
 )
-
-from mjcodesign.errors import HardwareError  # noqa: E402
 
 IDS = (1, 2)
 T_BASE_CAMERA = np.array([[1.0, 0, 0, 0.2], [0, -1, 0, 0.1], [0, 0, -1, 0.7], [0, 0, 0, 1]])
@@ -147,6 +146,7 @@ def test_hand_command_past_its_timeout_is_stopped_and_reported():
 
 def test_arm_that_does_not_stop_is_parked_not_waited_for(monkeypatch):
     import franky
+
     from mjcodesign.hardware import arm as arm_module
     from mjcodesign.hardware.arm import ArmConfig, FrankaArm
 

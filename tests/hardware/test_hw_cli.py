@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from mjcodesign.hardware.dxl_emulator import XL330Emulator
 from mjcodesign.hardware.selftest import BOX_CENTRE, BOX_SIZE, sample_box_surface
 from mjcodesign.hardware.tendon import TendonConfig

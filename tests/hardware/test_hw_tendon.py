@@ -8,10 +8,10 @@ import threading
 import time
 
 import pytest
-from mjcodesign.hardware.dxl_emulator import XL330Emulator
-from mjcodesign.hardware.tendon import FingerMotor, TendonConfig, TendonMotors, raise_on_signals
 
 from mjcodesign.errors import HardwareError
+from mjcodesign.hardware.dxl_emulator import XL330Emulator
+from mjcodesign.hardware.tendon import FingerMotor, TendonConfig, TendonMotors, raise_on_signals
 
 pytest.importorskip("dynamixel_sdk")
 

@@ -12,7 +12,7 @@ HEAVY = ("franky", "franky_sim", "dynamixel_sdk", "pyrealsense2", "serial", "muj
 
 def test_import_is_light():
     code = (
-        "import sys, mjcodesign.hardware, mjcodesign.hardware.cli, mjcodesign.hardware.selftest; "
+        "import sys, mjcodesign.hardware, mjcodesign.cli.hardware, mjcodesign.hardware.selftest; "
         f"print([m for m in {HEAVY!r} if m in sys.modules])"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True)

@@ -5,12 +5,12 @@ import json
 
 import numpy as np
 import pytest
-from mjcodesign.hardware.camera import GripperGeometry, crop_to_gripper, load_point_cloud, save_point_cloud
-from mjcodesign.hardware.selftest import BOX_CENTRE, BOX_SIZE, sample_box_surface
-from mjcodesign.hardware.surrogate_select import palm_frame, score_candidates
 
 from mjcodesign.data.cloud import fingers_box, to_gripper
 from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.hardware.camera import GripperGeometry, crop_to_gripper, load_point_cloud, save_point_cloud
+from mjcodesign.hardware.selftest import BOX_CENTRE, BOX_SIZE, sample_box_surface
+from mjcodesign.hardware.surrogate_select import palm_frame, score_candidates
 
 _GEO = GripperGeometry()
 # The hardware box and the simulator's differ by the fingers' length (136 mm vs 136.35 mm): points
@@ -103,9 +103,8 @@ def test_surrogate_needs_a_design(tmp_path, capsys):
 
 def test_clouds_of_two_cameras_are_merged_in_the_base_frame(tmp_path, capsys):
     """Two cameras each see half the box; the merged cloud plans like the whole one."""
-    from mjcodesign.hardware.camera import transform_points
-
     from mjcodesign.cli.main import main
+    from mjcodesign.hardware.camera import transform_points
 
     cloud = sample_box_surface(BOX_SIZE, BOX_CENTRE, 3000, seed=5)
     halves = (cloud[cloud[:, 1] >= BOX_CENTRE[1]], cloud[cloud[:, 1] < BOX_CENTRE[1]])
