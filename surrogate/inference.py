@@ -13,7 +13,7 @@ the object, and a non-zero finger force during the hold. From the predicted outp
   object's rise over the lift is ``lift + up · Δq``: lifted when ``up · Δq ≥ −(1 − lifted_fraction)
   · lift``;
 * no ground contact: its predicted probability is below 0.5;
-* finger force: a held object's hold force equals its weight (CV 0.005–0.11, shared/NOTES.md), and a
+* finger force: a held object's hold force equals its weight (CV 0.005–0.11 in the authors' data), and a
   regression never predicts an exact zero, so the force must reach half the weight.
 
 :func:`success_score` is the smallest of the three margins, each scaled to O(1): success is a score

@@ -27,12 +27,12 @@ from mjcodesign.scenarios.static import AUTO_DEFLECTION, curl, validate_beam
 _DATA = Path(__file__).resolve().parent / "data"
 _REFERENCE = json.loads(REFERENCE.read_text())
 _CONVERGED = json.loads(CONVERGED.read_text())
-_TOL_CANTILEVER = 0.05  # issue 16's target: every model within 5% of the converged FEM, every design
-_TOL_CURL = 0.10  # issue 16's target on the curl (here its small-bend limit: bend and tip)
+_TOL_CANTILEVER = 0.05  # the target: every model within 5% of the converged FEM, every design
+_TOL_CURL = 0.10  # the target on the curl (here its small-bend limit: bend and tip)
 _TOL_REDUCED = 0.01  # reduced FEM vs the full FEM it reduces, unseen designs (measured below 1e-3)
-_CALIBRATION_CPU_S = 1e-3  # issue 16: calibrating a new design costs at most 1 ms
+_CALIBRATION_CPU_S = 1e-3  # the target: calibrating a new design costs at most 1 ms
 _PINNED = ("alt14_17", "alt17_14", "random:1", "random:4", "soft")
-"""The issue's table: the two alternating extremes, the worst random designs, a uniform one."""
+"""The pinned table: the two alternating extremes, the worst random designs, a uniform one."""
 
 
 def _recorded(name, reference=_REFERENCE):
@@ -73,7 +73,7 @@ def test_cantilever_matches_the_recorded_fem(model, name):
 @pytest.mark.parametrize("name", ["alt14_17", "alt17_14"])
 def test_chain_cantilever_matches_the_converged_fem(name):
     # The shipped reduced model is of the 4-layer mesh; the converged (8-layer) FEM is 2.7% softer on
-    # soft segments with stiff flexures. The chain must still be within the issue's 5% of it.
+    # soft segments with stiff flexures. The chain must still be within the 5% target of it.
     stiffness, rec = _recorded(name, _CONVERGED)
     design = FingerDesign()
     force = AUTO_DEFLECTION * design.length / rec["tip"]["tip_face_z"]
@@ -127,7 +127,7 @@ def _large_curls(files=("sweep", "sweep_two_hinge", "alt14_17", "alt17_14")):
     return out
 
 
-_LARGE_CURL_MAX_RAD = 1.45  # issue 16: curl within 10% "up to about 1.3 rad" (largest bends here: 1.08-1.42)
+_LARGE_CURL_MAX_RAD = 1.45  # the target: curl within 10% "up to about 1.3 rad" (largest bends here: 1.08-1.42)
 
 
 @pytest.mark.parametrize(("name", "tension", "bend", "tip"), _large_curls())

@@ -12,7 +12,7 @@ from mjcodesign.errors import DesignError, UnsupportedError
 
 
 def test_fem_backend_is_a_simulator_that_refuses_bad_input():
-    # The FEM runs the grasp since issue 18 (tests/test_fem_grasp.py); what it refuses is typed: a scene or
+    # The FEM runs the grasp (tests/test_fem_grasp.py); what it refuses is typed: a scene or
     # scenario of the wrong type, and an observer (it has no MuJoCo states to replay)
     from mjcodesign.errors import MjcodesignError
     from mjcodesign.models.types import FingerModel

@@ -254,7 +254,7 @@ def test_held_objects_feel_their_weight(reference, config):
     # A held, static object: the fingers' force on it balances gravity, |F| = m g whatever the design
     # (NOTES: coefficient of variation 0.005-0.11). The box at its top-down pose, as a shard.
     (task,), mass = _auto_tasks(config, reference.manifest["objects"][1], 400.0)
-    # Designs that hold the box: on the FEM-calibrated chain (issue 16) the config's three random designs
+    # Designs that hold the box: on the FEM-calibrated chain the config's three random designs
     # sweep it out while tightening in this short scenario (docs/benchmarks.md, the soft finger's failure)
     holders = tuple(tuple(Stiffness.preset(n).as_list()) for n in ("semi-rigid", "paper-optimized"))
     (res,) = Worker().run([dataclasses.replace(task, log_e=holders)])
@@ -411,7 +411,7 @@ def test_killed_runs_resume_to_the_same_dataset(reference, config, work):
 
 def test_ray_gives_the_same_dataset(reference, config, work, monkeypatch):
     pytest.importorskip("ray")
-    # Ray on loopback only (shared/NOTES.md); no usage reporting.
+    # Ray on loopback only; no usage reporting.
     monkeypatch.setenv("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
     monkeypatch.setenv("RAY_USAGE_STATS_ENABLED", "0")
     res = generate(config, work / "ray", ray="local", cache_dir=work / "cache")
@@ -430,7 +430,7 @@ def test_mjwarp_rows_match_mujoco_c(reference, config):
     # pairs are the worlds of one MJWarp call on the CPU, and the rows go through the dataset's row builder.
     # Random designs do not hold to this tolerance: on these two poses, 32 random designs moved the
     # object up to 29 mm apart (marginal grasps that slip), 1 in 32 disagreed on success.
-    # With the tendon's lever held constant (issue 16) every uniform and random design tried holds this
+    # With the tendon's lever held constant every uniform and random design tried holds this
     # box at 10 N (measured: log E 13.5-17, random:0..23), so the failing rows come from a second run at
     # 1 N, where log E 14.0 and 15.0 curl too little to lift it. At 2-3 N the fingers brush this box
     # and float32 MJWarp parted from MuJoCo C (2.1 mm in the box's final x at 3 N, failure kinds at 2 N:

@@ -11,8 +11,8 @@ from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.scenarios.press import PRESS_METRICS
 from mjcodesign.sim.fem import mesh_finger
 
-_TOL_BEAM = 0.05  # FEM vs Euler–Bernoulli tip deflection (issue 4)
-_TOL_CURL = 0.10  # chain vs FEM bend angle and tip displacement (issue 4)
+_TOL_BEAM = 0.05  # FEM vs Euler–Bernoulli tip deflection
+_TOL_CURL = 0.10  # chain vs FEM bend angle and tip displacement
 _PRESS_MARGIN = 0.2  # distal-third share, uniform-height minus uniform-pressure (measured 0.27–0.37)
 _TOL_LINEAR = 0.05  # flex linear static curl vs its dynamics at 0.3 rad (geometric terms ~ θ²/2 ≈ 5%)
 _TOL_GRAD = 1e-4  # adjoint gradient vs central differences (FD step 1e-4 in ln E: error ~1e-8 rel)
@@ -292,7 +292,7 @@ def test_press_uniform_height_loads_the_tip(press_results):
 
 _CALIBRATED = (
     "with the chain and flex stiffness calibrated to the converged FEM (SimOptions.stiffness_model "
-    "'fem', issue 16's default; README 'Limits': the flex models' tendon curl misses the FEM)"
+    "'fem', the default; README 'Limits': the flex models' tendon curl misses the FEM)"
 )
 
 
@@ -321,7 +321,7 @@ def test_press_chain_matches_fem(press_results):
             ),
         ),
         # flex-quadratic (linear solve): 22.5 mN (+11%), distal 0.65 (-13%) under beam stiffness; within
-        # 10% on every metric since the stiffness is calibrated to the FEM (issue 16)
+        # 10% on every metric since the stiffness is calibrated to the FEM
         pytest.param(4, id="flex-quadratic-linear"),
     ],
 )
@@ -424,7 +424,7 @@ _CURL_MISSES = {
     ("semi-rigid", "flex-quadratic"): 0.2871,
     ("soft", "flex-quadratic"): 0.2871,
 }
-"""Bend [rad] the flex models reached on 2026-12-01 with the stiffness calibrated to the FEM (issue 16):
+"""Bend [rad] the flex models reached on 2026-12-01 with the stiffness calibrated to the FEM:
 10-20% short of the recorded FEM (the soft flex reached 0.298 under beam stiffness, within 10%)."""
 
 

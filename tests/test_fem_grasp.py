@@ -21,7 +21,7 @@ from mjcodesign.scenarios.outcome import Failure  # noqa: E402
 
 _G = 9.81
 _TOL_WEIGHT = 0.05
-"""Issue 18: a held object's vertical finger force equals m·g within 5% (measured 0.2–0.7%)."""
+"""The target: a held object's vertical finger force equals m·g within 5% (measured 0.2–0.7%)."""
 _TOL_LATERAL = 0.05
 """Horizontal finger force on the held box as a fraction of m·g (closed form 0; measured < 1%)."""
 _TOL_SERVO = 2e-4
@@ -218,7 +218,7 @@ def test_l_opt_gradient_matches_central_differences(locking):
     # With the locking correction the moduli are ln E plus a constant shift: the gradient passes through it.
     mesh = _coarse(locking_correction=locking)
     grasp = FemGrasp(scene, scenario, options=mesh, dynamics=dyn)
-    # The library entry point (issue 21's baseline) from the design, object and pose, on the same mesh.
+    # The library entry point (the co-design's baseline) from the design, object and pose, on the same mesh.
     loss, grad, out, _ = fem_grasp_loss_and_grad(
         scene.built.stiffness,
         scene.obj,

@@ -22,7 +22,7 @@ neighbours' moduli, so some error is left: measured ≤ 0.43% over the nine desi
 alternating 13.5, 17, … the largest; soft 0.27%)."""
 _TOL_CURL = 0.10
 """Corrected coarse FEM curl against the chain's, relative: the chain's tolerance against the FEM's
-curl (issue 16; tests/test_calibration.py)."""
+curl (tests/test_calibration.py)."""
 _ALTERNATING = ("13.5,17,13.5,17,13.5,17,13.5,17,13.5,17,13.5", "17,13.5,17,13.5,17,13.5,17,13.5,17,13.5,17")
 """The extreme alternating designs: every block next to one 30x stiffer or softer."""
 _DESIGNS = (
@@ -112,7 +112,7 @@ def test_gripper_shift_is_a_constant_of_the_gradient():
 
 
 _TOL_CANTILEVER = 0.05
-"""Issue 18: "the mesh that is within 5% of the refined FEM on the cantilever" (measured with the
+"""The target: "the mesh that is within 5% of the refined FEM on the cantilever" (measured with the
 correction: 1.1% on semi-rigid, 1.3% on random:0; without it the coarse mesh bends 0.22-0.24 of it)."""
 
 

@@ -33,7 +33,7 @@ def _pose(obj):
 @pytest.mark.slow
 def test_mjwarp_matches_mujoco_c():
     obj = box_object((0.05,) * 3, 400.0)
-    # With the tendon's lever held constant (issue 16) every design tried holds this box at 10 N (uniform
+    # With the tendon's lever held constant every design tried holds this box at 10 N (uniform
     # log E 13.5-17 and random:0..23, measured), so the failure branch runs at 3 N, where none grips it:
     # log E 15.0 never touches it ("zero finger force"), 16.0 touches it and leaves it on the ground
     # (paths 5e-8 and 6e-8 m apart, measured). Not used: 17.0 touches it marginally (1.1 mm apart in

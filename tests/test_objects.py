@@ -131,7 +131,7 @@ def test_ycb_object_loads():
     assert 0.01 < obj.mass < 0.05  # 4.8e-5 m³ at 400 kg/m³: 19 g
 
 
-# --- #17: repair with libraries made for it, sweep slab, names, seeds, sets -----------------------
+# --- repair with libraries made for it, sweep slab, names, seeds, sets -----------------------
 
 
 def _edge_touching_boxes() -> trimesh.Trimesh:

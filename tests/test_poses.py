@@ -349,7 +349,7 @@ def test_start_openings_are_relative_to_the_palm(box):
     )
 
 
-# --- #17: grid distance, ray pairs, provenance, candidate files, bad files ------------------------
+# --- grid distance, ray pairs, provenance, candidate files, bad files ------------------------
 
 
 def test_grid_distance_within_its_bound_of_the_sphere(tmp_path):

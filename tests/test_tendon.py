@@ -70,7 +70,7 @@ def test_curl_is_deterministic():
 
 
 # Flex against the FEM under the tendon, small bend (first order): bend = T ∂φ/∂T, tip = T ∂u/∂T.
-_TOL_FLEX_CURL = 0.10  # issue 16's curl target
+_TOL_FLEX_CURL = 0.10  # the curl target
 _FEM = json.loads(REFERENCE.read_text())
 
 

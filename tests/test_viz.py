@@ -1,4 +1,4 @@
-"""Rerun recordings of grasps and crosscheck shapes, read back and checked against the rollouts (issue 6).
+"""Rerun recordings of grasps and crosscheck shapes, read back and checked against the rollouts.
 
 Everything that needs ``rerun-sdk`` is skipped without it; the import and error-mapping tests run always.
 """
@@ -31,7 +31,7 @@ _BOX = 0.05  # box side [m]
 _RHO = 400.0  # heavy preset [kg/m³]: a 50 g box the chain gripper holds
 # A short grasp (1.47 s simulated) that still closes, tightens, lifts 3 cm and holds. The lift's end sets
 # the held box rocking in the grip, and the test reads the hold's second half, so the hold must outlast
-# the ringing. With the tendon's lever held constant (issue 16; no spatial tendon's restoring geometric
+# the ringing. With the tendon's lever held constant (no spatial tendon's restoring geometric
 # stiffness) the box rocks longer: |F| on it (paper-optimized, every 5th step) spans 0.94-1.11 of its mean
 # in the second half of a 0.4-s hold, 0.93-1.09 (0.6 s), 0.98-1.04 (0.8 s), 0.98-1.02 (1.0 s); the
 # outcome's mean is m g within 0.3%. (The spatial tendon's chain spanned 0.98-1.02 after 0.4 s.)

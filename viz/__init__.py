@@ -1,7 +1,7 @@
 """Rerun visualisation of grasp rollouts and crosscheck shapes (needs ``rerun-sdk``).
 
 The core never imports this package: it finds :class:`RerunRecorder` through the ``mjcodesign.observers``
-entry point ``rerun`` (:func:`mjcodesign.observe.load_observer`).
+entry point ``rerun`` (:func:`mjcodesign.sim.observe.load_observer`).
 """
 
 from mjcodesign.viz.colormap import stiffness_rgb

@@ -16,7 +16,7 @@ import numpy as np
 __all__ = ["Surface", "finger_surfaces", "body_geom_surface", "tet_surface", "box_corners", "BOX_TRIANGLES"]
 
 _CHAIN_GEOM = re.compile(r"^([AB])_b(\d+)_[pd]$")
-"""Chain block pieces are named ``{finger}_b{block}_{p|d}`` (:mod:`mjcodesign.chain`)."""
+"""Chain block pieces are named ``{finger}_b{block}_{p|d}`` (:mod:`mjcodesign.models.chain`)."""
 _BOX_CORNERS = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
 BOX_TRIANGLES = np.array(
     [
@@ -124,7 +124,7 @@ def _geom_names(m: mujoco.MjModel) -> list[str]:
 def finger_surfaces(m: mujoco.MjModel, fingers, block_edges: np.ndarray) -> dict[str, Surface]:
     """One surface per finger, keyed by its letter (``A``, ``B``), from its flex or its block geoms.
 
-    ``fingers`` are the model's :class:`~mjcodesign.mjcf.FingerHandle`; ``block_edges`` the inner
+    ``fingers`` are the model's :class:`~mjcodesign.models.types.FingerHandle`; ``block_edges`` the inner
     block boundaries along the finger [m] (``[b.x1 for b in blocks[:-1]]``).
     """
     parsed = [_CHAIN_GEOM.match(name) for name in _geom_names(m)]

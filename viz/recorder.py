@@ -2,7 +2,7 @@
 
 A grasp rollout is logged on the ``sim_time`` timeline [s] in one Arrow record batch (:mod:`viz.batch`),
 which Rerun splits into one chunk per entity. Its logged states come from the simulator while it
-stepped (:class:`mjcodesign.observe.Capture`), or are replayed from the states (``mj_setState`` +
+stepped (:class:`mjcodesign.sim.observe.Capture`), or are replayed from the states (``mj_setState`` +
 ``mj_forward``) when it could not take them (batched rollouts):
 
 * ``/designs/{label}``: the offset (runs side by side along world x), the outcome (JSON text) and
@@ -68,7 +68,7 @@ def logged_steps(n_steps: int, dt: float, starts: dict[str, int], decimation: in
     """Steps whose states are logged, sorted, unique and below ``n_steps``.
 
     Every ``decimation``-th step, the grasp (the last step before the lift) and the last step, so that
-    the two states :attr:`~mjcodesign.scenario.Outcome.displacement` compares are always logged.
+    the two states :attr:`~mjcodesign.scenarios.Outcome.displacement` compares are always logged.
     ``decimation`` None logs :data:`DEFAULT_FRAME_RATE` states per simulated second.
     """
     every = decimation or max(1, int(round(1.0 / (DEFAULT_FRAME_RATE * dt))))
@@ -147,7 +147,7 @@ class RerunRecorder:
 
     # -- observer protocol ------------------------------------------------------------------------
     def capture_steps(self, n_steps: int, timestep: float, starts: dict[str, int]) -> set[int]:
-        """The initial state and the logged steps (:class:`mjcodesign.observe.Capture`)."""
+        """The initial state and the logged steps (:class:`mjcodesign.sim.observe.Capture`)."""
         return {-1, *logged_steps(n_steps, timestep, starts, self.decimation).tolist()}
 
     def capture(self, model: mujoco.MjModel, data: mujoco.MjData) -> tuple:

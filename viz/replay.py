@@ -184,7 +184,7 @@ class Replay:
         ctrl, spec = r.ctrl, control_spec()
         for t in ts:
             row = r.captured.get(int(t))
-            if row is None:  # as mjcodesign.scenario.outcome_from_states: the state under the next control
+            if row is None:  # as mjcodesign.scenarios.outcome.outcome_from_states: the state under the next control
                 mujoco.mj_setState(m, d, r.x0 if t < 0 else r.states[t], STATE_SPEC)
                 mujoco.mj_setState(m, d, ctrl[min(t + 1, len(ctrl) - 1)], spec)
                 mujoco.mj_forward(m, d)

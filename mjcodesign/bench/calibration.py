@@ -31,9 +31,9 @@ REFERENCE = Path(__file__).resolve().parent / "calibration_fem.json"
 CONVERGED = Path(__file__).resolve().parent / "calibration_fem_converged.json"
 """The recorded FEM numbers on the converged mesh (8 spine layers)."""
 TOL_CANTILEVER = 0.05
-"""Issue 16's target: a model within 5% of the converged FEM on the cantilever, every design."""
+"""The target: a model within 5% of the converged FEM on the cantilever, every design."""
 TOL_CURL = 0.10
-"""Issue 16's target: within 10% on curl bend and tip up to about 1.3 rad."""
+"""The target: within 10% on curl bend and tip up to about 1.3 rad."""
 _TIMING_DESIGNS = 1000
 
 

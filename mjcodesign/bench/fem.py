@@ -4,7 +4,7 @@ The two-finger grasp (`_bench_gripper`) times one whole grasp of the paper's sce
 (`mjcodesign.sim.fem.gripper_grasp.FemGrasp`, 0.70 s at 2.5 µs: 280,800 substeps) forward and forward
 plus the L_opt gradient (`mjcodesign.sim.fem.grasp_adjoint.loss_gradient`), wall and process CPU time,
 on a mesh given by name (`GRIPPER_MESHES`). Throughput is vertices × substeps per second; the authors'
-simulator ran 0.17 M/s here (shared/NOTES.md).
+simulator ran 0.17 M/s on this project's 2-core machine.
 """
 
 from __future__ import annotations

@@ -59,7 +59,7 @@ _DELTA_V = 0.5
 """Δv [m/s] of the fixed-Δv disturbance: the default 0.0179 N·s on the 35 g potted-meat can."""
 _SWEEP_TENDONS = ("force:2", "force:4", "force:25", "position:500", "position:1500")
 _SWEEP_DENSITIES = (10.0, 400.0)
-"""10 kg/m³: the authors' density 2 at real size for equal grip-to-weight (shared/NOTES.md)."""
+"""10 kg/m³: the authors' density 2 at real size for equal grip-to-weight."""
 
 
 def _group(name: str) -> str:

@@ -23,7 +23,7 @@ import numpy as np
 __all__ = ["VizCase", "CASES", "bench_viz", "OVERHEAD_BUDGET"]
 
 OVERHEAD_BUDGET = 0.2
-"""Issue 6: at the default decimation, recording may add at most 20% to the rollout time."""
+"""The budget: at the default decimation, recording may add at most 20% to the rollout time."""
 _BOX = 0.04  # box side [m]: the paper-optimized chain misses it (auto pose), the cheapest rollout
 _BOX_HELD = 0.05  # box side [m]: 50 g at the heavy density, held through lift and disturbance
 _RHO = 400.0  # heavy preset [kg/m³]

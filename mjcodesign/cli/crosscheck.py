@@ -79,7 +79,7 @@ def _cmd_grasp(args) -> int:
         settings = short_settings()
     else:
         settings = {"cases": GRASP_CASES, "fem_options": _grasp_mesh(args)}
-        if (dyn := _fem_dynamics(args)) is not None:  # issue 18: the FEM substep and contact of the study
+        if (dyn := _fem_dynamics(args)) is not None:  # the FEM substep and contact of the study
             settings["fem_dynamics"] = dyn
     if args.cases is not None:
         settings["cases"] = select_cases(settings["cases"], args.cases)

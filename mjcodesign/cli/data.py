@@ -21,7 +21,7 @@ __all__ = ["add_parser", "add_bench_parser", "run_datagen", "run_info", "run_ben
 
 _MODELS = ("chain", "flex")
 _BENCH_OBJECTS = "012_strawberry,013_apple,010_potted_meat_can"
-# Ray on this machine binds its external address unless told otherwise (shared/NOTES.md).
+# Ray binds its external address unless told otherwise; these keep a local instance on loopback.
 _RAY_LOCAL_ENV = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0", "RAY_USAGE_STATS_ENABLED": "0"}
 
 

@@ -66,7 +66,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         "larger scene) mapped to real size (its 0.2 and 0.4 map to 0.036 and 0.072)",
     )
     p.add_argument("--tension", type=float, default=None, help="tendon tension per finger [N]")
-    # --tendon (issue 16): the tendon drive, parsed by mjcodesign.scenarios.parse_tendon.
+    # --tendon: the tendon drive, parsed by mjcodesign.scenarios.parse_tendon.
     p.add_argument(
         "--tendon",
         default=None,
@@ -188,7 +188,7 @@ def grasp(
         )
     obj, rho, gripper_pose = prepared
     kwargs = {k: v for k, v in (("tension", tension), ("lift", lift), ("impulse", impulse)) if v is not None}
-    if tendon is not None:  # --tendon (issue 16)
+    if tendon is not None:  # --tendon
         from mjcodesign.scenarios import parse_tendon
 
         if tension is not None:

@@ -94,13 +94,13 @@ def add_bench_parser(bench_subparsers) -> argparse.ArgumentParser:
         "--anygrasp", default=None, help="folder of the authors' pose_info/*.npz, imported beside the sampler"
     )
     p.add_argument("--no-sim", action="store_true", help="skip the MuJoCo grasps")
-    p.add_argument(  # #17: does any design of a fixed set hold each pose?
+    p.add_argument(  # does any design of a fixed set hold each pose?
         "--designs",
         default="semi-rigid",
         help="designs to grasp with, comma-separated presets or random:N (the first is reported), or "
         "fixed11: semi-rigid, soft, paper-optimized, random:0..7 (counts the poses every design lets fall)",
     )
-    p.add_argument(  # #17: the convex hull is an explicit choice
+    p.add_argument(  # the convex hull is an explicit choice
         "--allow-open", action="store_true", help="use the convex hull of a mesh that no repair can close"
     )
     p.add_argument("--json", action="store_true")
@@ -139,7 +139,7 @@ def poses(
         if cloud.ndim != 2 or cloud.shape[1] != 6:
             raise PoseError(f"{point_cloud}: point cloud must have shape (n, 6), got {cloud.shape}")
         points, normals = cloud[:, :3], cloud[:, 3:]
-    # #17: the object with its convex pieces (cached), so that the candidates' start-opening check
+    # the object with its convex pieces (cached), so that the candidates' start-opening check
     # sees the geometry the grasp scene collides with.
     obj = load_grasp_object(source, 100.0, seed=seed, allow_open=allow_open, cache_dir=user_cache_dir())
     if T is not None:
@@ -191,7 +191,7 @@ def run(args: argparse.Namespace) -> int:
         # On stderr: with --json, stdout holds the JSON alone.
         print(f"wrote {len(cands.as_dicts())} poses of {obj.name} to {out}", file=sys.stderr)
     result = {"object": obj.name, "poses": cands.as_dicts(), "rejected": cands.rejected}
-    if cands.source != "sampler":  # #17: an import names its file and every row it refused
+    if cands.source != "sampler":  # an import names its file and every row it refused
         result.update(source=cands.source, refused=cands.refused_dicts())
     if args.json:
         print(json.dumps(result))

@@ -1,6 +1,6 @@
 """The one case the authors' own simulator was run on here, in the chain and the Warp FEM.
 
-Their result (shared/NOTES.md; warp 1.6.1, their scripts, unmodified): ``006_mustard_bottle`` at their
+Their result (their scripts, unmodified, run on warp 1.6.1): ``006_mustard_bottle`` at their
 AnyGrasp pose 0 after their pose refinement, density 2 in their 5×-scaled scene, tendon force 100 in
 their units, uniform designs:
 
@@ -33,7 +33,7 @@ _OBJECT = "006_mustard_bottle"
 _TENSION = 100.0 / 25.0
 """[N] their 100 at 5× lengths, equal bending (E unchanged: T ∝ L²)."""
 _DENSITY = 10.0
-"""[kg/m³] their 2 at 5× lengths and T/25: equal grip to weight (shared/NOTES.md)."""
+"""[kg/m³] their 2 at 5× lengths and T/25: equal grip to weight."""
 _LIFT = 0.1676 / 5.0
 """[m] their finger base rise, 0.1676 of their units."""
 _POSES = Path("shared/reference/codesign-soft-gripper/pose_info")

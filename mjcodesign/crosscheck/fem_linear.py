@@ -14,8 +14,8 @@ functionals of the displacement (:data:`OUTPUTS`).
 :func:`reduce` projects the ``K_b`` onto the span of solved designs' displacements and their sensitivities
 to each block's modulus (Galerkin): the reduced
 model ``K_r(E) = Σ_b E_b Vᵀ K_b V`` is exact in the same affine form and solves a design in ~0.1 ms
-(:class:`mjcodesign.design.calibration.ReducedFem`). Its error is checked on designs that were not in
-the basis (``docs/benchmarks.md``, calibration).
+(:class:`mjcodesign.design.calibration.CalibratedFem`). Its error is checked on designs that were not in
+the basis (``mjcodesign bench calibration``).
 """
 
 from __future__ import annotations

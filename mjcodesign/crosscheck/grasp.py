@@ -51,9 +51,9 @@ __all__ = [
 ]
 
 GRASP_MODELS = ("chain", "fem")
-"""The models the grasp study compares (the flex grasp does not hold: docs/benchmarks.md)."""
+"""The models the grasp study compares (the flex grasp does not hold: see the benchmarks)."""
 HOLD_TOL = 0.05
-"""A held object's mean vertical finger force may differ from m·g by this fraction (issue 18)."""
+"""A held object's mean vertical finger force may differ from m·g by this fraction."""
 MAX_DEPTH = 2e-3
 """Deepest plausible finger penetration [m] during the hold: the flexures are 2 mm thick."""
 PART_DISTANCE = 5e-3

@@ -16,7 +16,7 @@ SCENARIOS = ("cantilever", "curl", "press")
 MODELS = ("chain", "flex", "flex-quadratic", "fem")
 """The finger models it compares: the MuJoCo models and the Warp FEM."""
 TOL_CROSS = 0.10
-"""Cross-simulator tolerance of issue 4 (curl and press against the FEM); rows above it are flagged."""
+"""Cross-simulator tolerance (curl and press against the FEM); rows above it are flagged."""
 BEAM_METRICS = ("force_n", "tip_deflection_m", "analytic_m")
 """What a cantilever shape shows: tip load [N], tip deflection [m], Euler–Bernoulli's [m]."""
 

@@ -188,8 +188,8 @@ class RayExecutor:
     """Tasks as Ray remote tasks (one CPU and one MuJoCo thread each), at most ``slots`` in flight.
 
     ``address``: ``"local"`` starts a Ray instance on this machine with ``num_cpus`` CPUs (its
-    addresses are loopback only when the caller set ``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0``, see
-    shared/NOTES.md); anything else is the address of a running cluster, which this joins.
+    addresses are loopback only when the caller set ``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0``);
+    anything else is the address of a running cluster, which this joins.
     """
 
     def __init__(

@@ -155,7 +155,7 @@ def block_compliance(design: FingerDesign, young: np.ndarray) -> np.ndarray:
     Under a unit tip load, block i's rotation (face to face) over the moment at its middle,
     ``c_i = Δφ_i / (L − x_i)``: the chain's hinge i then turns as the FEM's block does, and with the
     fitted hinge axes its tendon curl follows too (linear tip deflection and curl within 0.6% of the
-    FEM on the issue's extreme designs).
+    FEM on the alternating extreme designs).
     """
     phi = calibration_for(design).face_angles(np.asarray(young, dtype=float))
     c = np.diff(np.r_[0.0, phi]) / moment_arms(design)

@@ -20,7 +20,7 @@ LOG_E_MAX = 17.0
 _BLOCKS_PER_FINGER = 11
 _N_FINGERS = 2
 
-# The paper's jointly optimised design, base to tip, segment (flexure) alternating (shared/NOTES.md).
+# The paper's jointly optimised design, base to tip, segment (flexure) alternating (the paper's table).
 _PAPER_OPT_A = [16.05, 15.16, 14.62, 14.89, 15.31, 14.62, 15.85, 14.65, 15.23, 15.34, 15.22]
 _PAPER_OPT_B = [15.54, 14.53, 14.27, 14.81, 15.00, 15.97, 14.54, 15.14, 14.95, 15.31, 15.47]
 

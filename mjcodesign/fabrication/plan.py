@@ -55,7 +55,7 @@ _MAX_COUNT = 100
 _MAX_LAYER_HEIGHT = 2e-3
 _DEFAULT_TABLE = "calibration_tpu95a.toml"
 FINGER_NAMES = ("A", "B")
-"""Names of the two fingers, in the order of :class:`~mjcodesign.stiffness.Stiffness` rows."""
+"""Names of the two fingers, in the order of :class:`~mjcodesign.design.Stiffness` rows."""
 
 
 class _Type(enum.Enum):

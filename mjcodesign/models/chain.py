@@ -1,7 +1,7 @@
 """Hinge-chain (pseudo-rigid-body) finger.
 
 Each block's bending compliance is lumped into one hinge at the block's midpoint (hinges at block
-boundaries overshoot by 12–25%, shared/NOTES.md). Its stiffness and axis come from
+boundaries overshoot by 12–25%). Its stiffness and axis come from
 :attr:`SimOptions.stiffness_model`:
 
 * ``fem`` (default): ``k_i = 1 / c_i`` with ``c_i`` block i's rotation per unit moment in the calibrated

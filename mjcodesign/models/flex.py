@@ -576,7 +576,7 @@ def linear_curl(m: mujoco.MjModel, handle: FingerHandle, design: FingerDesign, t
     """Small-deflection tendon curl of a base-clamped flex: ``K u = Wᵀ F`` with the compiled stiffness.
 
     F is the frictionless point-force tendon (`mjcodesign.design.tendon_law.tendon_forces`, the law of
-    `mjcodesign.tendon`) at the *rest* waypoints, spread to the nodes by the interpolation weights W.
+    `mjcodesign.models.tendon`) at the *rest* waypoints, spread to the nodes by the interpolation weights W.
     It is the first-order rest state of the dynamics: on the soft trilinear flex the tip rises 29.4 mm
     against 28.9 mm from the dynamics at 0.02 N (0.3 rad), but 118 mm against 90 mm at 0.08 N
     (1.1 rad), so use it for bends of a few tenths of a radian. Returns ``tip_displacement_m`` of the

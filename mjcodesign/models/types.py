@@ -72,7 +72,11 @@ class FingerModel(enum.Enum):
     """Which MuJoCo discretisation of the finger."""
 
     CHAIN = "chain"
-    """Pseudo-rigid body: one hinge per block at its midpoint, k = E I / l."""
+    """Pseudo-rigid body: one hinge per block at its midpoint (:mod:`mjcodesign.models.chain`).
+
+    Hinge stiffness by :attr:`SimOptions.stiffness_model`: ``fem`` (default) k_i = 1 / c_i, block i's
+    compliance in the calibrated FEM, about its fitted bending axis; ``beam`` k_i = E_i I_i / l_i.
+    """
     FLEX = "flex"
     """MuJoCo flex with trilinear interpolated dofs."""
     FLEX_QUADRATIC = "flex-quadratic"
@@ -90,7 +94,7 @@ class TendonMode(enum.Enum):
     NATIVE = "native"
     """A MuJoCo spatial tendon through one site per waypoint, pulled by a force actuator."""
     POINT_FORCE = "point-force"
-    """The paper's model: forces at the waypoints, applied each step (see :mod:`mjcodesign.tendon`)."""
+    """The paper's model: forces at the waypoints, applied each step (see :mod:`mjcodesign.models.tendon`)."""
 
 
 @dataclass(frozen=True, kw_only=True)

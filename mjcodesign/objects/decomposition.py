@@ -32,7 +32,7 @@ class CoacdSettings:
     decimate: bool = True
     max_ch_vertex: int = 64
     max_convex_hull: int = 16
-    """Cap on the hull count: collision cost grows with hulls (shared/NOTES.md)."""
+    """Cap on the hull count: collision cost grows with hulls."""
     seed: int = 0
 
     def __post_init__(self) -> None:

@@ -45,9 +45,9 @@ FILE_FORMAT = 2
 MAX_PENETRATION = 1e-3
 """Accepted poses penetrate the object or the ground by at most this much [m] (dense point set)."""
 NOISE_TRANSLATION = 3e-3
-"""Augmentation noise σ on the palm position [m] (paper, NOTES.md)."""
+"""Augmentation noise σ on the palm position [m] (the paper)."""
 NOISE_ROTATION = 5e-3
-"""Augmentation noise σ on each component of the rotation vector [rad] (paper, NOTES.md)."""
+"""Augmentation noise σ on each component of the rotation vector [rad] (the paper)."""
 
 
 @dataclass

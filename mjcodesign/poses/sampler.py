@@ -2,7 +2,7 @@
 
 Pairs of surface points whose normals pass a friction-cone test are the contact candidates; each is
 scored by its alignment and its grasp axis' distance to the COM, picked at random by score, approached
-from above or from the side, and handed to :func:`mjcodesign.poses.candidates.refine_and_rank`.
+from above or from the side, and handed to :func:`mjcodesign.poses.accept.refine_and_rank`.
 Frames are :mod:`mjcodesign.poses.gripper`'s.
 """
 

@@ -11,7 +11,7 @@
   ``T = clip(k (ℓ − ℓ*), 0, T_max)`` with ``T_max = τ(I_limit) / r``, and the motor's back-EMF as a
   damper ``b ℓ̇`` on the tendon.
 
-Hardware facts (ROBOTIS e-manual, XL330-M288-T; shared/NOTES.md): stall torque 0.52 N·m at 1.47 A and
+Hardware facts (ROBOTIS e-manual, XL330-M288-T): stall torque 0.52 N·m at 1.47 A and
 5.0 V, no-load speed 103 rpm at 5 V, 4096 ticks per turn, Current Limit (register 38) factory default
 1750 mA, which current-based position mode uses as its limit. At 5 V the supply caps the current at the
 stall current, so the tension limit is 0.52 N·m / r: 52 N on a 10 mm spool. The paper's hardware pulls
@@ -61,7 +61,7 @@ XL330_CURRENT_LIMIT = 1.75
 PAPER_TICKS = 1000
 """The paper's hardware tendon pull [ticks of 4096] (``hardware/tendon.py: PAPER_PULL_TICKS``)."""
 _SPOOL_RADIUS = 0.010
-"""Spool radius [m]: not published; 10 mm is an assumption (shared/NOTES.md's example)."""
+"""Spool radius [m]: not published; 10 mm is an assumption."""
 _SATURATION_TICKS = 64
 """Tendon error [ticks] at which the servo reaches its tension limit: sets the servo stiffness
 k = T_max / (64 ticks of tendon), 52 N over 0.98 mm on a 10 mm spool. The XL330's position gain in

@@ -240,8 +240,8 @@ def press_linear(
 ) -> dict:
     """Flex finger pressed onto the plate by a linear static contact solve (small deflection).
 
-    ``K u = f + Gᵀλ`` with MuJoCo's compiled stiffness ``K`` (`mjcodesign.flex.assemble_stiffness`),
-    the tendon's first-order load ``f`` (`mjcodesign.flex.linear_tendon_load`) and unilateral
+    ``K u = f + Gᵀλ`` with MuJoCo's compiled stiffness ``K`` (`mjcodesign.models.flex.assemble_stiffness`),
+    the tendon's first-order load ``f`` (`mjcodesign.models.flex.linear_tendon_load`) and unilateral
     frictionless contacts at the flex surface vertices, which keep their collision radius from the
     plate's lower face (gap ``s = s0 + G u ≥ 0``, normal force ``λ ≥ 0``, ``λ·s = 0``). Eliminating ``u``
     leaves a strictly convex QP in ``λ`` (``A = G K⁻¹ Gᵀ``), solved exactly as a non-negative least

@@ -137,7 +137,7 @@ def _step_all(
     ``checked`` checks MuJoCo's warnings and the state after every step and stops at the first bad
     one: ``(step, error)``; None when every step passed, or always when unchecked. ``capture`` takes
     state t (of ``steps``, -1 the initial state) into ``captured[t]`` right after step t+1, while the
-    data still holds that state's forward quantities (:class:`~mjcodesign.observe.Capture`).
+    data still holds that state's forward quantities (:class:`~mjcodesign.sim.observe.Capture`).
     """
     reset_warnings(d)
     mujoco.mj_setState(m, d, x0, STATE_SPEC)
@@ -257,7 +257,7 @@ class MujocoBackend:
         """The scene's design at every pose (one model structure): one ``mujoco.rollout`` call.
 
         A pose moves the mount and palm in a copy of the model and sets the initial openings and the
-        controls (:func:`mjcodesign.scenario.scene_at_pose`); raises :class:`PoseError` for a bad pose.
+        controls (:func:`mjcodesign.scenarios.grasp.scene_at_pose`); raises :class:`PoseError` for a bad pose.
         ``observer`` receives every rollout, labelled ``labels[i]`` (default ``pose{i}``).
         """
         labels = labels or [f"pose{i}" for i in range(len(poses))]

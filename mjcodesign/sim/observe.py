@@ -65,7 +65,7 @@ class Rollout:
     ctrl: np.ndarray
     """Controls of every step (``scenario.control_spec()``), shape (nstep, nu + 6 nbody)."""
     starts: dict[str, int]
-    """First step of every phase, and ``end`` (:func:`mjcodesign.scenario.phase_controls`)."""
+    """First step of every phase, and ``end`` (:func:`mjcodesign.scenarios.grasp.phase_controls`)."""
     outcome: Outcome
     scratch: mujoco.MjData | None = field(default=None, compare=False, repr=False)
     """An ``MjData`` of ``model`` that the simulator is done with (None if it has none to spare): an

@@ -24,7 +24,7 @@ __all__ = ["FreeObject", "GROUND_CONTACT"]
 
 GROUND_CONTACT = (1e3, 10.0, 1.0)
 """Object–ground penalty per contact point: stiffness [N/m], damping [N·s/m], Coulomb μ (the authors'
-ke, kd and μ, per particle; shared/NOTES.md)."""
+ke, kd and μ, per particle, from their simulator's code)."""
 _BOX_MARGIN = 1e-6
 """Widening [m] of the body-frame bounding box that gates the mesh query (round-off of the transform)."""
 

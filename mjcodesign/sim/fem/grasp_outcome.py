@@ -10,7 +10,7 @@ reads the same quantities at the same times (`mjcodesign.sim.fem.schedule.GraspS
 * lift height, ground contact (an object collision point below z = 0) and finger contact (a finger
   vertex inside the object) at the end; the same failure kinds and reasons.
 
-`paper_loss` is the authors' co-design loss L_opt on these outputs (shared/NOTES.md, ``optimize.py``).
+`paper_loss` is the authors' co-design loss L_opt on these outputs (their ``optimize.py``).
 """
 
 from __future__ import annotations

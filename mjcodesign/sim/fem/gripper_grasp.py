@@ -62,7 +62,7 @@ against 50.6 s without samples, run back to back)."""
 
 GRASP_TENSION = 4.0
 """Default tendon tension of the FEM grasp [N] (the gradient's baseline; the grasp study's
-``STUDY_TENSION``): the authors' 100 in their 5x scene at equal bending (T / 25, shared/NOTES.md). At
+``STUDY_TENSION``): the authors' 100 in their 5x scene at equal bending (T / 25: T ∝ L² at equal E). At
 the scenario's default 10 N the soft finger's flexures crush in the FEM (its tets invert within ~80 ms
 of tightening: a DIVERGED outcome), a regime no real 0.7 MPa finger reaches."""
 

@@ -12,7 +12,7 @@ from mjcodesign.errors import DesignError
 __all__ = ["FemOptions", "FemDynamics"]
 
 _POISSON = 0.45
-"""Poisson's ratio of the paper's TPU model (shared/NOTES.md)."""
+"""Poisson's ratio of the paper's TPU model (the authors' simulator)."""
 
 
 @dataclass(frozen=True)
@@ -67,7 +67,7 @@ class FemOptions:
 
 @dataclass(frozen=True)
 class FemDynamics:
-    """Explicit dynamics options; defaults are the paper's (shared/NOTES.md)."""
+    """Explicit dynamics options; defaults are the paper's (the authors' simulator)."""
 
     dt: float = 2.5e-6
     """Substep [s] (4000 fps × 100 substeps in the paper)."""
@@ -82,7 +82,7 @@ class FemDynamics:
     contact_damping_ratio: float = 0.0
     """Two-finger grasp only: > 0 gives every finger vertex's contact this damping ratio ζ instead of
     ``contact_kd`` (area·kd = 2ζ √(ke·area·m)). The paper's kd is 10–20× critical on a vertex of the
-    coarse mesh, and it adds to the normal force that bounds friction (docs/benchmarks.md, issue 18);
+    coarse mesh, and it adds to the normal force that bounds friction (documentation: the FEM grasp study);
     MuJoCo's chain contacts are critically damped (ζ = 1). Use it with little selective mass
     scaling: at 10 µs on the coarse mesh (151% added mass) a ζ = 1 grip let a held box slide out,
     at 4 µs (1%) it held it (tests/test_fem_grasp.py)."""
