@@ -33,7 +33,16 @@ from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError, MeshError, PoseError
 from mjcodesign.models.types import FingerModel, GripperPose, SimOptions
-from mjcodesign.objects import CoacdSettings, GraspObject, convex_decomposition, load_object, parse_density
+from mjcodesign.objects import (
+    CoacdSettings,
+    GraspObject,
+    at_mass,
+    convex_decomposition,
+    load_object,
+    parse_density,
+    parse_mass,
+    published_mass,
+)
 from mjcodesign.poses import read_candidates, sample_poses, to_gripper_pose
 from mjcodesign.scenarios.grasp import GraspScenario, GraspScene, auto_pose, compile_scene, scene_at_pose
 from mjcodesign.scenarios.outcome import Failure, Outcome, failed_outcome
@@ -247,6 +256,7 @@ def load_grasp_object(
     source: str | Path,
     density: str | float = "light",
     *,
+    mass: str | float | None = None,
     seed: int = 0,
     allow_open: bool = False,
     cache_dir: Path | None = None,
@@ -254,10 +264,18 @@ def load_grasp_object(
     """An object ready for a job, watertight, with its convex pieces (CoACD, cached under ``cache_dir``).
 
     ``source``: a YCB name, ``egad-like:N`` or a mesh file; ``density``: kg/m³ or a preset name.
+    ``mass`` overrides the density: ``"real"`` places a YCB object at its published mass
+    (:func:`~mjcodesign.objects.published_mass`; :class:`MeshError` for any other object or a YCB
+    object without one), a number at that mass [kg]. Either way the density becomes mass / volume,
+    uniform, and the inertia is the uniformly filled mesh's (:func:`~mjcodesign.objects.at_mass`).
     """
     if Path(source).is_dir():
         raise MeshError(f"{source} is a folder: give one object")
+    mass = parse_mass(mass)
+    target = published_mass(str(source)).mass if mass == "real" else mass  # refused before any loading
     obj = load_object(source, parse_density(density), allow_open=allow_open, seed=seed)
+    if target is not None:
+        obj = at_mass(obj, target)
     convex_decomposition(obj, CoacdSettings(seed=seed), cache_dir=cache_dir)
     return obj
 

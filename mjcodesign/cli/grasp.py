@@ -47,7 +47,17 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--model", choices=_MODELS, default="chain")
     p.add_argument(
-        "--density", default="light", help="object density [kg/m³] or a preset: light (100), heavy (400)"
+        "--density",
+        default="light",
+        help="object density [kg/m³] or a preset of the paper's relative scale (not real objects): light "
+        "(100), heavy (400)",
+    )
+    p.add_argument(
+        "--mass",
+        default=None,
+        help="real: a YCB object at its published mass (the YCB object list; refused for objects without "
+        "one); or a mass [kg] (for egad-like and mesh files too). The density becomes mass / volume, "
+        "uniform, and the inertia is the uniformly filled mesh's. Default: from --density",
     )
     p.add_argument(
         "--pose",
@@ -139,6 +149,7 @@ def grasp(
     density: str = "light",
     pose: str = "auto",
     *,
+    mass: str | float | None = None,
     impulse: float | None = None,
     tension: float | None = None,
     tendon: str | None = None,
@@ -154,9 +165,11 @@ def grasp(
 ) -> dict:
     """One grasp rollout (a :class:`~mjcodesign.jobs.GraspJob`); the JSON-ready outcome plus the object's facts.
 
-    ``observer`` (:mod:`mjcodesign.sim.observe`) receives the rollout as ``label``. ``prepared``: the
-    result of :func:`prepare_object` for these ``source``, ``density`` and ``pose`` arguments, so that
-    several designs or backends on one object load, decompose and pose it once.
+    ``mass``: None (from ``density``), ``"real"`` (a YCB object's published mass) or a mass [kg]
+    (:func:`mjcodesign.jobs.load_grasp_object`). ``observer`` (:mod:`mjcodesign.sim.observe`) receives
+    the rollout as ``label``. ``prepared``: the result of :func:`prepare_object` for these ``source``,
+    ``density``, ``pose`` and ``mass`` arguments, so that several designs or backends on one object
+    load, decompose and pose it once.
     """
     from mjcodesign.design.stiffness import Stiffness
     from mjcodesign.errors import DesignError
@@ -184,7 +197,7 @@ def grasp(
         sim = get_backend(backend)
     if prepared is None:
         prepared = prepare_object(
-            source, density, pose, seed=seed, allow_open=allow_open, cache_dir=cache_dir
+            source, density, pose, mass=mass, seed=seed, allow_open=allow_open, cache_dir=cache_dir
         )
     obj, rho, gripper_pose = prepared
     kwargs = {k: v for k, v in (("tension", tension), ("lift", lift), ("impulse", impulse)) if v is not None}
@@ -208,6 +221,7 @@ def grasp(
         object=obj.name,
         mass_kg=obj.mass,
         density_kg_m3=rho,
+        **_mass_facts(source, mass),
         repaired=obj.repaired,
         fallback=obj.fallback,
         hulls=len(obj.hulls),
@@ -255,16 +269,34 @@ def prepare_object(
     density: str = "light",
     pose: str = "auto",
     *,
+    mass: str | float | None = None,
     seed: int = 0,
     allow_open: bool = False,
     cache_dir: Path | None = None,
 ) -> tuple:
-    """(object with its convex decomposition, density [kg/m³], gripper pose) for :func:`grasp`."""
+    """(object with its convex decomposition, density [kg/m³], gripper pose) for :func:`grasp`.
+
+    ``mass``: see :func:`mjcodesign.jobs.load_grasp_object` (the density is then mass / volume).
+    """
     from mjcodesign.jobs import load_grasp_object, resolve_pose
 
     check_pose_file(pose)
-    obj = load_grasp_object(source, density, seed=seed, allow_open=allow_open, cache_dir=cache_dir)
+    obj = load_grasp_object(
+        source, density, mass=mass, seed=seed, allow_open=allow_open, cache_dir=cache_dir
+    )
     return obj, obj.density, resolve_pose(pose, obj, seed=seed)
+
+
+def _mass_facts(source: str, mass: str | float | None) -> dict:
+    """How the object's mass was set: ``mass_mode`` (density, real, given) and the published source."""
+    from mjcodesign.objects import parse_mass, published_mass
+
+    mode = parse_mass(mass)
+    if mode is None:
+        return {"mass_mode": "density", "mass_source": None}
+    if mode == "real":
+        return {"mass_mode": "real", "mass_source": published_mass(str(source)).source}
+    return {"mass_mode": "given", "mass_source": None}
 
 
 def check_pose_file(pose: str) -> None:
@@ -380,7 +412,7 @@ class _Runner:
     def prepare(self, source: str) -> tuple:
         a = self.args
         return prepare_object(
-            source, a.density, a.pose, seed=a.seed, allow_open=a.allow_open, cache_dir=self.cache
+            source, a.density, a.pose, mass=a.mass, seed=a.seed, allow_open=a.allow_open, cache_dir=self.cache
         )
 
     def one(self, source: str, variant: tuple, prepared: tuple, prefix: str = "") -> dict:
@@ -392,6 +424,7 @@ class _Runner:
             a.model,
             a.density,
             a.pose,
+            mass=a.mass,
             impulse=a.impulse,
             tension=a.tension,
             tendon=a.tendon,

@@ -7,10 +7,22 @@ Import from here (``from mjcodesign.objects import load_object``): each name has
 - :mod:`~mjcodesign.objects.repair`: watertight repair (manifold3d, pymeshfix), cached on disk;
 - :mod:`~mjcodesign.objects.sweep`: the object in the fingers' sweep and the start openings it allows;
 - :mod:`~mjcodesign.objects.sets`: the paper's YCB splits and the procedural ``egad-like`` shapes;
+- :mod:`~mjcodesign.objects.masses`: the YCB objects' published masses, and an object at a given mass;
 - :mod:`~mjcodesign.objects.decomposition`: CoACD convex pieces, cached on disk.
 """
 
 from mjcodesign.objects.decomposition import CoacdSettings, convex_decomposition
+from mjcodesign.objects.masses import (
+    MASS_MODES,
+    MASS_TABLE,
+    MAX_MASS,
+    PublishedMass,
+    at_mass,
+    mass_table,
+    parse_mass,
+    published_mass,
+    real_density,
+)
 from mjcodesign.objects.mesh import (
     DENSITY_PRESETS,
     MESH_SUFFIXES,
@@ -52,6 +64,9 @@ from mjcodesign.objects.sweep import (
 
 __all__ = [
     "DENSITY_PRESETS",
+    "MASS_MODES",
+    "MASS_TABLE",
+    "MAX_MASS",
     "MAX_REPAIR_DEVIATION",
     "MESH_SUFFIXES",
     "OBJECT_SETS",
@@ -62,8 +77,10 @@ __all__ = [
     "CoacdSettings",
     "FingerSweep",
     "GraspObject",
+    "PublishedMass",
     "RepairMethod",
     "SweepStatus",
+    "at_mass",
     "box_object",
     "check_seed",
     "convex_decomposition",
@@ -72,10 +89,14 @@ __all__ = [
     "load_folder",
     "load_mesh",
     "load_object",
+    "mass_table",
     "named_set",
     "object_name",
     "parse_density",
     "parse_egad_index",
+    "parse_mass",
+    "published_mass",
+    "real_density",
     "repair_deviation",
     "repair_mesh",
     "repair_metrics",

@@ -1,0 +1,121 @@
+"""Real object masses: the published YCB table, an object at a mass, and ``--mass`` on the commands."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from mjcodesign.errors import MeshError
+from mjcodesign.objects import (
+    YCB_IN_DOMAIN,
+    YCB_OOD,
+    at_mass,
+    box_object,
+    mass_table,
+    parse_mass,
+    published_mass,
+    real_density,
+)
+
+# Masses as the YCB object list prints them [g] (ycbbenchmarks.com, object-list-Sheet1.pdf, column
+# "Mass"), written here by hand from the list so that a mistyped table fails.
+_SHEET_G = {
+    "013_apple": 68,
+    "006_mustard_bottle": 603,
+    "010_potted_meat_can": 370,
+    "012_strawberry": 18,
+    "056_tennis_ball": 58,
+    "065-j_cups": 38,
+    "044_flat_screwdriver": 98.4,
+}
+
+
+def test_every_ycb_object_of_both_splits_has_a_mass_or_a_reason():
+    rows = mass_table()["objects"]
+    assert set(YCB_IN_DOMAIN) | set(YCB_OOD) <= set(rows)
+    for name in YCB_IN_DOMAIN + YCB_OOD:
+        row = rows[name]
+        if row["mass_kg"] is None:
+            assert row.get("note"), name  # the table says why there is none
+        else:
+            assert 0.001 < row["mass_kg"] < 2.0, name
+
+
+def test_table_header_cites_its_source():
+    t = mass_table()
+    assert t["unit"] == "kg"
+    assert "ycbbenchmarks.com" in t["source"] and "object-list-Sheet1.pdf" in t["source"]
+    assert "10.1109/MRA.2015.2448951" in t["source"]
+
+
+@pytest.mark.parametrize("name", sorted(_SHEET_G))
+def test_published_mass_matches_the_list(name):
+    m = published_mass(name)
+    assert m.mass == pytest.approx(_SHEET_G[name] / 1000.0, abs=1e-9)
+    assert "object-list-Sheet1.pdf" in m.source
+
+
+@pytest.mark.parametrize(
+    "name", ["063-a_marbles", "072-a_toy_airplane", "073-c_lego_duplo", "egad-like:3", "cup.stl", "nope"]
+)
+def test_no_published_mass_is_refused_not_invented(name):
+    with pytest.raises(MeshError) as exc:
+        published_mass(name)
+    assert "\n" not in str(exc.value)
+
+
+def test_parse_mass():
+    assert parse_mass(None) is None and parse_mass("density") is None
+    assert parse_mass("real") == "real"
+    assert parse_mass("0.25") == 0.25
+    for bad in ("heavy", "-1", "0", "nan", "1e3"):
+        with pytest.raises(MeshError):
+            parse_mass(bad)
+
+
+def test_at_mass_scales_density_and_inertia_of_the_same_mesh():
+    box = box_object((0.04, 0.05, 0.06), 100.0)
+    heavy = at_mass(box, 0.3)
+    volume = 0.04 * 0.05 * 0.06
+    assert heavy.mass == pytest.approx(0.3)
+    assert heavy.density == pytest.approx(0.3 / volume)  # uniform: rho = m / V
+    assert real_density(box, 0.3) == pytest.approx(heavy.density)
+    # A uniform box: I_xx = m (b² + c²) / 12.
+    assert heavy.inertia[0, 0] == pytest.approx(0.3 * (0.05**2 + 0.06**2) / 12.0, rel=1e-9)
+    np.testing.assert_allclose(heavy.inertia, box.inertia * heavy.mass / box.mass, rtol=1e-12)
+    assert heavy.hulls is box.hulls and heavy.mesh is box.mesh
+
+
+def test_load_grasp_object_at_its_real_mass():
+    from mjcodesign.cli.common import user_cache_dir
+    from mjcodesign.jobs import load_grasp_object
+
+    cache = user_cache_dir()  # CoACD's cache, shared with the other tests
+    obj = load_grasp_object("013_apple", "light", mass="real", cache_dir=cache)
+    assert obj.mass == pytest.approx(0.068)
+    light = load_grasp_object("013_apple", "light", cache_dir=cache)
+    assert obj.density == pytest.approx(0.068 / (light.mass / light.density))
+    given = load_grasp_object("egad-like:0", mass=0.05, cache_dir=cache)
+    assert given.mass == pytest.approx(0.05)
+    with pytest.raises(MeshError, match="no published mass"):
+        load_grasp_object("egad-like:0", mass="real", cache_dir=cache)
+
+
+def test_grasp_cli_uses_the_published_mass(capsys):
+    from mjcodesign.cli.main import main
+
+    assert main(["grasp", "--object", "013_apple", "--mass", "real", "--design", "soft", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["mass_kg"] == pytest.approx(0.068)
+    assert out["mass_mode"] == "real"
+    assert "object-list-Sheet1.pdf" in out["mass_source"]
+
+
+def test_grasp_cli_refuses_an_object_without_a_published_mass(capsys):
+    from mjcodesign.cli.main import main
+
+    assert main(["grasp", "--object", "063-a_marbles", "--mass", "real", "--json"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "no published mass" in err
