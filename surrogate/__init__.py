@@ -17,6 +17,7 @@ does. Import from here (``from mjcodesign.surrogate import Surrogate``): each na
 from mjcodesign.surrogate.checkpoint import (
     CHECKPOINT_FORMAT,
     CHECKPOINT_VERSION,
+    dataset_config,
     load_surrogate,
     save_checkpoint,
 )
@@ -68,6 +69,7 @@ __all__ = [
     "TrainConfig",
     "TrainResult",
     "checkpoint_smoothness",
+    "dataset_config",
     "load_grasp_data",
     "load_surrogate",
     "normalize_clouds",

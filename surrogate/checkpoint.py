@@ -19,6 +19,7 @@ import os
 import uuid
 from pathlib import Path
 
+from mjcodesign.data.config import DatagenConfig
 from mjcodesign.errors import MjcodesignError, OutputError
 from mjcodesign.surrogate.data import OUTPUT_NAMES, Normalizer
 from mjcodesign.surrogate.inference import Surrogate
@@ -29,6 +30,7 @@ __all__ = [
     "CHECKPOINT_VERSION",
     "CONFIG",
     "WEIGHTS",
+    "dataset_config",
     "load_surrogate",
     "read_record",
     "save_checkpoint",
@@ -104,6 +106,23 @@ def read_record(path: str | Path) -> dict:
             f"{root}: a surrogate checkpoint of another schema (v{theirs}; this is v{CHECKPOINT_VERSION})"
         )
     return head
+
+
+def dataset_config(surrogate: Surrogate) -> DatagenConfig | None:
+    """The config of the dataset ``surrogate`` was trained on; None for a record without one.
+
+    Read from the record's ``dataset.config`` (:meth:`DatagenConfig.from_dict`): the grasp scenario,
+    the tendon drive, the finger model and geometry the dataset's rows were simulated under.
+
+    Raises :class:`OutputError` for a config that does not read back.
+    """
+    recorded = (surrogate.meta.get("dataset") or {}).get("config")
+    if recorded is None:
+        return None
+    try:
+        return DatagenConfig.from_dict(recorded)
+    except MjcodesignError as exc:
+        raise OutputError(f"the checkpoint's dataset config does not read back: {exc}") from exc
 
 
 def load_surrogate(path: str | Path) -> Surrogate:

@@ -207,7 +207,8 @@ def train_and_report(
     dataset = {"path": str(data.root), "manifest_sha256": data.manifest_sha256,
                "fingerprint": data.manifest.get("fingerprint"), "schema_version": data.manifest.get("schema_version"),
                "object_seed": data.manifest["config"]["object_seed"], "density": data.manifest["config"]["density"],
-               "cloud_points": int(data.clouds.shape[1]), "samples": len(data), "poses": len(data.clouds)}  # fmt: skip
+               "cloud_points": int(data.clouds.shape[1]), "samples": len(data), "poses": len(data.clouds),
+               "config": data.manifest["config"]}  # fmt: skip
     sur = Surrogate(res.model, res.normalizer, lift=data.lift, lifted_fraction=data.lifted_fraction)
     test_set = GraspDataset(data, parts.test, res.normalizer, frame=mcfg.frame_inputs)
     net = _measure(

@@ -17,18 +17,14 @@ lines say little: the median total variation of one network measured 0.19 on 4 l
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import torch
 
-from mjcodesign.design.finger import FingerDesign
+from mjcodesign.data.config import DatagenConfig
 from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
-from mjcodesign.errors import DesignError, UnsupportedError
+from mjcodesign.errors import DesignError
 from mjcodesign.jobs import GraspJob, load_grasp_object, run_jobs
-from mjcodesign.models.types import FingerModel, GripperPose
-from mjcodesign.scenarios.drive import TendonPosition
-from mjcodesign.scenarios.grasp import GraspScenario
+from mjcodesign.models.types import GripperPose
 from mjcodesign.sim import get_backend
 from mjcodesign.surrogate.data import N_LOG_E, GraspData
 from mjcodesign.surrogate.inference import DesignLoss, GraspBatch, Poses, Surrogate
@@ -48,34 +44,6 @@ def design_lines(
     half = length / 2  # |u_i| <= 1, so d0 this far inside the range keeps the line inside
     d0 = rng.uniform(LOG_E_MIN + half, LOG_E_MAX - half, size=(lines, N_LOG_E))
     return d0[:, None, :] + t[None, :, None] * u[:, None, :], u, t
-
-
-def _scenario(manifest: dict) -> GraspScenario:
-    """The dataset's grasp scenario, rebuilt from its manifest (either tendon mode)."""
-    cfg = manifest["config"]
-    fields = {k: v for k, v in cfg["scenario"].items() if k != "tendon"}
-    tendon = cfg["tendon"]
-    if tendon["mode"] == "force":
-        return GraspScenario(**fields, tension=float(tendon["tension_n"]))
-    if tendon["mode"] == "position":
-        drive = TendonPosition(
-            ticks=float(tendon["ticks"]),
-            spool_radius=float(tendon["spool_radius_m"]),
-            current_limit=float(tendon["current_limit_a"]),
-            speed=float(tendon["speed_rad_s"]),
-            saturation_ticks=float(tendon["saturation_ticks"]),
-        )
-        return GraspScenario(**fields, tendon=drive)
-    raise UnsupportedError(f"smoothness: unknown tendon mode {tendon['mode']!r} in the dataset's manifest")
-
-
-def _check_geometry(manifest: dict) -> FingerDesign:
-    geometry = FingerDesign()
-    mine = dataclasses.asdict(geometry)
-    mine["routing"] = geometry.routing.value
-    if manifest["config"]["finger"] != mine:
-        raise UnsupportedError("smoothness: the dataset's finger geometry is not the default one")
-    return geometry
 
 
 def _sim_losses(outs, up: np.ndarray, loss: DesignLoss) -> np.ndarray:
@@ -108,8 +76,7 @@ def smoothness(
     """Lines through design space at the pose rows ``poses`` of ``data`` (module docstring)."""
     loss = loss or DesignLoss()
     manifest = data.manifest
-    scenario, geometry = _scenario(manifest), _check_geometry(manifest)
-    model = FingerModel(manifest["config"]["model"])
+    config = DatagenConfig.from_dict(manifest["config"])
     backend = get_backend("mujoco")
     rng = np.random.default_rng(seed)
     rows = []
@@ -119,15 +86,15 @@ def smoothness(
         obj = load_grasp_object(
             entry["source"],
             float(data.pose_density[p]),
-            seed=manifest["config"]["object_seed"],
+            seed=config.object_seed,
             cache_dir=cache_dir,
         )
         designs, u, t = design_lines(rng, lines, points, length)
         pose = GripperPose.from_matrix(data.palm[p], tuple(data.openings[p]))
         flat = designs.reshape(-1, N_LOG_E)
         jobs = [
-            GraspJob(obj=obj, pose=pose, design=Stiffness(d), finger_model=model, scenario=scenario,
-                     density=float(data.pose_density[p]), geometry=geometry)
+            GraspJob(obj=obj, pose=pose, design=Stiffness(d), finger_model=config.model,
+                     scenario=config.scenario, density=float(data.pose_density[p]), geometry=config.geometry)
             for d in flat
         ]  # fmt: skip
         outs = run_jobs(jobs, backend)

@@ -256,3 +256,74 @@ def test_simulated_loss_is_the_paper_loss_and_unusable_rollouts_fail():
     np.testing.assert_allclose(rows[0], 1e-3 * (2.1 + 0.004), rtol=1e-12)
     np.testing.assert_allclose(rows[1], 1e-3 * (0.5 + 0.02) + 1e3 * (0.5 + 0.02 + 1.0), rtol=1e-12)
     assert rows[2] == 1e3
+
+
+def test_ground_truth_runs_under_the_dataset_s_scenario(tmp_path):
+    """A position-mode dataset's checkpoint re-simulates in position mode, with the dataset's phases.
+
+    A tiny dataset (one box, two poses, four designs each) with the servo drive; a checkpoint trained
+    on it with the real training path; the verification reads the scenario back from the checkpoint.
+    """
+    import dataclasses
+
+    import trimesh
+
+    from mjcodesign.codesign import load_pose_set
+    from mjcodesign.codesign.verify import verify
+    from mjcodesign.data import DatagenConfig, generate, parse_density_spec
+    from mjcodesign.design.stiffness import Stiffness
+    from mjcodesign.jobs import GraspJob, load_grasp_object, run_jobs
+    from mjcodesign.scenarios.drive import TendonPosition
+    from mjcodesign.scenarios.grasp import GraspScenario
+    from mjcodesign.sim import MujocoBackend
+    from mjcodesign.surrogate import (
+        ModelConfig,
+        TrainConfig,
+        dataset_config,
+        load_surrogate,
+        train_and_report,
+    )
+
+    trimesh.creation.box(extents=(0.05, 0.04, 0.06)).export(tmp_path / "box.stl")
+    drive = TendonPosition(ticks=900.0)
+    scenario = GraspScenario(impulse=0.0, tighten_s=0.1, lift_s=0.2, hold_s=0.1, post_hold_s=0.02, lift=0.025)
+    cfg = DatagenConfig(
+        objects=(str(tmp_path / "box.stl"),),
+        poses_per_object=2,
+        designs_per_pose=4,
+        density=parse_density_spec("200"),
+        tendon=drive,
+        scenario=scenario,
+    )
+    cache = tmp_path / "cache"
+    assert generate(cfg, tmp_path / "ds", workers=1, cache_dir=cache)["complete"]
+    tiny = ModelConfig(point_widths=(4,), hidden=4, depth=1, penultimate=4, dropout=0.0)
+    train_and_report(
+        tmp_path / "ds",
+        tmp_path / "ckpt",
+        split_mode="random",
+        config=TrainConfig(epochs=1, batch_size=4),
+        model_config=tiny,
+        efficiency=0.0,
+        smoothness_poses=0,
+    )
+    sur = load_surrogate(tmp_path / "ckpt")
+    assert dataset_config(sur) == cfg
+    poses = load_pose_set(tmp_path / "ds")
+    truth = verify(sur, {"optimised": (poses, None, None)}, 200.0, cache_dir=cache)
+    sim = truth["simulation"]
+    assert sim["source"] == "checkpoint" and sim["model"] == "chain" and sim["tendon"] == "position:900"
+    assert sim["scenario"] == json.loads(json.dumps(dataclasses.asdict(cfg.scenario)))
+    assert sim["scenario"]["lift"] == 0.025 and sim["scenario"]["tendon"]["ticks"] == 900.0
+    # Each row is the rollout of that design at that pose under the dataset's scenario.
+    obj = load_grasp_object(cfg.objects[0], 200.0, cache_dir=cache)
+    for row in truth["rows"]:
+        job = GraspJob(
+            obj=obj,
+            pose=poses.gripper_pose(row["pose_row"]),
+            design=Stiffness.preset(row["design"]),
+            scenario=cfg.scenario,
+            density=200.0,
+        )
+        (out,) = run_jobs([job], MujocoBackend(nthread=1))
+        assert (row["simulated_success"], row["reason"]) == (bool(out.success), out.reason)

@@ -40,11 +40,13 @@ from mjcodesign.data import (
 )
 from mjcodesign.data.executors import cpu_count
 from mjcodesign.data.schema import SAMPLES, build_table, empty_columns
+from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
-from mjcodesign.errors import MjcodesignError
+from mjcodesign.errors import MjcodesignError, OutputError
 from mjcodesign.jobs import load_grasp_object
+from mjcodesign.models.types import FingerModel
 from mjcodesign.poses import scene_offset
-from mjcodesign.scenarios.drive import TendonForce
+from mjcodesign.scenarios.drive import TendonForce, TendonPosition
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose
 
 # Shorter phases (0.57 s instead of 0.7 s) and no impulse: a test. A 0.1-s lift ends at 18 m/s² and the
@@ -266,6 +268,22 @@ def test_held_objects_feel_their_weight(reference, config):
     p = reference.poses().to_pydict()
     volume = [reference.manifest["objects"][o]["volume_m3"] for o in p["object_index"]]
     np.testing.assert_allclose(p["mass"], np.multiply(p["density"], volume), rtol=1e-12)
+
+
+@pytest.mark.parametrize("tendon", [TendonForce(tension=7.0), TendonPosition(ticks=800.0)])
+@pytest.mark.parametrize("model", [FingerModel.CHAIN, FingerModel.FLEX])
+def test_config_round_trips_through_its_dict(config, tendon, model):
+    """A manifest's config reads back as the config that wrote it: scenario, drive, model, geometry."""
+    c = dataclasses.replace(
+        config, tendon=tendon, tension=None, model=model, geometry=FingerDesign(length=0.12, n_segments=5)
+    )
+    back = DatagenConfig.from_dict(json.loads(json.dumps(c.as_dict())))
+    assert back == c and back.fingerprint() == c.fingerprint()
+    assert back.scenario.tendon == tendon and back.scenario.lift == c.scenario.lift
+    broken = c.as_dict()
+    del broken["tendon"]["mode"]
+    with pytest.raises(OutputError, match="not a dataset config"):
+        DatagenConfig.from_dict(broken)
 
 
 def test_designs_in_range_and_keyed_by_pose(config):

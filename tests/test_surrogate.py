@@ -440,25 +440,3 @@ def test_smoothness_slope_correlation_is_none_where_undefined():
     )
     assert _correlation(np.array([1.0, 2.0]), np.array([3.0, 3.0])) is None  # a flat simulator: no r, no NaN
     assert _correlation(np.array([1.0]), np.array([2.0])) is None
-
-
-def test_smoothness_rebuilds_either_tendon_drive_from_the_manifest():
-    from mjcodesign.data.config import _tendon_dict
-    from mjcodesign.scenarios.drive import TendonForce, TendonPosition
-    from mjcodesign.surrogate.smoothness import _scenario
-
-    keep = (
-        "settle_s",
-        "close_s",
-        "tighten_s",
-        "lift",
-        "lift_s",
-        "hold_s",
-        "impulse",
-        "post_hold_s",
-        "lifted_fraction",
-    )
-    for drive in (TendonForce(tension=7.0), TendonPosition(ticks=800.0)):
-        sc = GraspScenario(tendon=drive)
-        manifest = {"config": {"tendon": _tendon_dict(drive), "scenario": {k: getattr(sc, k) for k in keep}}}
-        assert _scenario(manifest) == sc

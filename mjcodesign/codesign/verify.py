@@ -6,20 +6,26 @@ For each object and each design compared (the optimised one, and the soft and se
   candidate pose of lowest L_opt for that design (what the surrogate would pick for it);
 * the surrogate's predicted success there (:meth:`~mjcodesign.surrogate.Surrogate.predict`);
 * the simulated outcome (:class:`~mjcodesign.jobs.GraspJob` on MuJoCo C through
-  :func:`~mjcodesign.jobs.run_jobs`), with the dataset's scenario (:class:`GraspScenario` defaults).
+  :func:`~mjcodesign.jobs.run_jobs`) under the dataset's grasp scenario (tendon drive included),
+  finger model and geometry, as the checkpoint records them
+  (:func:`~mjcodesign.surrogate.dataset_config`); a checkpoint that records none runs the default
+  chain and :class:`GraspScenario` with the checkpoint's lift, and the result says so.
 
 :func:`verify` returns rows and success rates per (object set, design), predicted beside simulated.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
 
-from mjcodesign.codesign.problem import PoseSet
+from mjcodesign.codesign.problem import PoseSet, object_key
+from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import PRESETS, Stiffness
 from mjcodesign.jobs import GraspJob, load_grasp_object, run_jobs
+from mjcodesign.models.types import FingerModel
 from mjcodesign.scenarios.grasp import GraspScenario
 from mjcodesign.sim.mujoco_c import MujocoBackend
 
@@ -71,11 +77,26 @@ def verify(
     """Simulate each set's objects with the optimised design(s) and the presets.
 
     ``sets``: name -> (poses, the optimised design of each object (22 ln E; None: only the presets),
-    the optimised design's chosen pose rows (None: the surrogate picks them here)). Returns JSON-ready
-    rows and rates per (set, design).
+    the optimised design's chosen pose rows (None: the surrogate picks them here)). ``scenario``
+    replaces the dataset's. Returns JSON-ready rows and rates per (set, design), and ``simulation``:
+    the scenario, tendon drive and finger model they ran under, and where those came from.
     """
+    from mjcodesign.surrogate import dataset_config
+
     t0 = time.perf_counter()
-    scenario = scenario or GraspScenario()
+    config = dataset_config(surrogate)
+    if config is None:
+        source = "defaults"
+        model, geometry = FingerModel.CHAIN, FingerDesign()
+        dataset_scenario = GraspScenario(lift=surrogate.lift, lifted_fraction=surrogate.lifted_fraction)
+    else:
+        source = "checkpoint"
+        model, geometry, dataset_scenario = config.model, config.geometry, config.scenario
+    if scenario is not None:
+        source, dataset_scenario = "given", scenario
+    scenario = dataset_scenario
+    # A dataset's object goes by its name (a mesh file's stem); it is loaded from its source.
+    sources = {object_key(s): s for s in config.objects} if config is not None else {}
     jobs, meta = [], []
     for set_name, (poses, designs, chosen) in sets.items():
         objs = {}
@@ -90,12 +111,14 @@ def verify(
             ok, score = predicted_success(surrogate, poses, rows, np.array(per_object), density)
             for k, name in enumerate(poses.objects):
                 if name not in objs:
-                    objs[name] = load_grasp_object(name, density, seed=object_seed, cache_dir=cache_dir)
+                    objs[name] = load_grasp_object(
+                        sources.get(name, name), density, seed=object_seed, cache_dir=cache_dir
+                    )
                 design = Stiffness(per_object[k])
                 jobs.append(
                     GraspJob(obj=objs[name], pose=poses.gripper_pose(int(rows[k])), design=design,
-                             scenario=scenario, density=float(density), seed=object_seed,
-                             label=f"{set_name}/{label}/{name}")
+                             finger_model=model, scenario=scenario, density=float(density),
+                             seed=object_seed, geometry=geometry, label=f"{set_name}/{label}/{name}")
                 )  # fmt: skip
                 meta.append((set_name, label, name, int(rows[k]), bool(ok[k]), float(score[k])))
     if progress is not None:
@@ -130,7 +153,19 @@ def verify(
                     ),
                 }
             )
-    return {"rates": rates, "rows": rows_out, "rollouts": len(jobs), "wall_s": time.perf_counter() - t0}
+    simulation = {
+        "source": source,
+        "model": model.value,
+        "tendon": scenario.tendon.text(),
+        "scenario": dataclasses.asdict(scenario),
+    }
+    return {
+        "rates": rates,
+        "rows": rows_out,
+        "rollouts": len(jobs),
+        "simulation": simulation,
+        "wall_s": time.perf_counter() - t0,
+    }
 
 
 def _pick_each(surrogate, poses: PoseSet, per_object, density, loss) -> np.ndarray:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from mjcodesign.design.finger import FingerDesign
-from mjcodesign.errors import DesignError, MeshError
+from mjcodesign.errors import DesignError, MeshError, OutputError
 from mjcodesign.models.types import FingerModel, SimOptions
 from mjcodesign.objects import MESH_SUFFIXES, OBJECT_SETS, CoacdSettings, named_set, parse_density
 from mjcodesign.scenarios.drive import TendonForce, TendonPosition
@@ -225,6 +225,38 @@ class DatagenConfig:
             "coacd": dataclasses.asdict(self.coacd),
         }
 
+    @classmethod
+    def from_dict(cls, d: dict) -> DatagenConfig:
+        """The config :meth:`as_dict` wrote (a dataset manifest's ``config``): ``from_dict(c.as_dict()) == c``.
+
+        The derived entries (``sim_options``, ``coacd``) are not read: they follow from the rest.
+        Raises :class:`OutputError` when an entry is missing or of the wrong kind, and the config's own
+        errors (:class:`DesignError`, :class:`MeshError`) for values it refuses.
+        """
+        try:
+            density = d["density"]
+            finger = dict(d["finger"])
+            scenario = {k: v for k, v in d["scenario"].items() if k != "tendon"}
+            return cls(
+                objects=tuple(str(o) for o in d["objects"]),
+                poses_per_object=int(d["poses_per_object"]),
+                designs_per_pose=int(d["designs_per_pose"]),
+                density=DensitySpec(
+                    float(density["low_kg_m3"]), float(density["high_kg_m3"]), str(density["text"])
+                ),
+                tendon=_tendon_of(d["tendon"]),
+                model=FingerModel(d["model"]),
+                backend=str(d["backend"]),
+                sampler=str(d["sampler"]),
+                seed=int(d["seed"]),
+                object_seed=int(d["object_seed"]),
+                cloud_points=int(d["cloud_points"]),
+                scenario=GraspScenario(**scenario),
+                geometry=FingerDesign(**finger),
+            )
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise OutputError(f"not a dataset config ({type(exc).__name__}: {exc})") from exc
+
     def fingerprint(self) -> str:
         """SHA-256 of :meth:`as_dict` and the schema version: equal exactly when the rows must be equal."""
         text = json.dumps({"schema_version": SCHEMA_VERSION, **self.as_dict()}, sort_keys=True)
@@ -232,7 +264,7 @@ class DatagenConfig:
 
 
 def _tendon_dict(tendon: TendonForce | TendonPosition) -> dict:
-    """The manifest's ``tendon``: the mode and its parameters in SI units (force: as before issue 16)."""
+    """The manifest's ``tendon``: the mode and its parameters in SI units (read by :func:`_tendon_of`)."""
     if isinstance(tendon, TendonForce):
         return {"mode": "force", "tension_n": float(tendon.tension)}
     return {
@@ -244,3 +276,18 @@ def _tendon_dict(tendon: TendonForce | TendonPosition) -> dict:
         "saturation_ticks": tendon.saturation_ticks,
         "max_tension_n": float(tendon.max_tension),
     }
+
+
+def _tendon_of(d: dict) -> TendonForce | TendonPosition:
+    """The drive :func:`_tendon_dict` wrote; ``max_tension_n`` is derived and not read."""
+    if d["mode"] == "force":
+        return TendonForce(tension=float(d["tension_n"]))
+    if d["mode"] == "position":
+        return TendonPosition(
+            ticks=float(d["ticks"]),
+            spool_radius=float(d["spool_radius_m"]),
+            current_limit=float(d["current_limit_a"]),
+            speed=float(d["speed_rad_s"]),
+            saturation_ticks=float(d["saturation_ticks"]),
+        )
+    raise ValueError(f"unknown tendon mode {d['mode']!r}")
