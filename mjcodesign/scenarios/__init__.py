@@ -27,6 +27,7 @@ from mjcodesign.scenarios.grasp import (
     start_openings,
 )
 from mjcodesign.scenarios.outcome import Failure, Outcome, failed_outcome, outcome_from_states, outcome_steps
+from mjcodesign.scenarios.perturb import NOMINAL, Perturbation, perturbed_pose, perturbed_scene
 
 __all__ = [
     "DEFAULT_IMPULSE",
@@ -58,5 +59,9 @@ __all__ = [
     "Outcome",
     "failed_outcome",
     "outcome_from_states",
+    "NOMINAL",
+    "Perturbation",
+    "perturbed_pose",
+    "perturbed_scene",
     "outcome_steps",
 ]

@@ -201,6 +201,8 @@ class GraspScene:
     finger_bodies: np.ndarray = field(init=False)
     finger_mask: np.ndarray = field(init=False)
     """True for the finger bodies, shape (nbody,)."""
+    drive: TendonForce | TendonPosition | None = field(init=False, default=None)
+    """The tendon drive this scene's model is already set up for (:func:`drive_scene` then leaves it)."""
 
     def __post_init__(self) -> None:
         m = self.built.model
@@ -423,7 +425,7 @@ def drive_scene(scene: GraspScene, scenario: GraspScenario) -> GraspScene:
     Force mode: the scene itself (its tendon actuators are compiled as force motors). Position mode: a
     copy with servo actuators (:func:`mjcodesign.scenarios.drive.apply_drive`).
     """
-    if isinstance(scenario.tendon, TendonForce):
+    if isinstance(scenario.tendon, TendonForce) or scene.drive == scenario.tendon:
         return scene
     m = copy.copy(scene.model)
     ids = [
@@ -434,6 +436,7 @@ def drive_scene(scene: GraspScene, scenario: GraspScenario) -> GraspScene:
     moved = copy.copy(scene)
     moved.built = dataclasses.replace(scene.built, model=m)
     moved.model = m
+    moved.drive = scenario.tendon
     return moved
 
 

@@ -1,0 +1,125 @@
+"""What a real robot does differently each time: one perturbed draw of a grasp, written into a scene copy.
+
+A :class:`Perturbation` moves and turns the palm (arm repeatability and camera calibration), scales the
+object's mass (inertia with it: same shape, uniform density), the finger–object sliding friction and
+the tendon drive (the force mode's tension, or the position servo's gain and tension limit).
+:func:`perturbed_scene` writes one into a copy of a compiled scene without recompiling, so a batch of
+perturbed scenes shares one model structure and runs through one ``mujoco.rollout`` call.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from mjcodesign.errors import DesignError
+from mjcodesign.models.types import GripperPose
+from mjcodesign.scenarios.drive import TendonForce
+from mjcodesign.scenarios.grasp import GraspScenario, GraspScene, drive_scene, scene_at_pose
+
+__all__ = ["NOMINAL", "Perturbation", "perturbed_pose", "perturbed_scene"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Perturbation:
+    """One draw of the differences between two executions of the same grasp."""
+
+    palm_offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Palm position offset in the world frame [m]."""
+    palm_rotation: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Palm rotation about its own origin, a rotation vector in the world frame [rad]."""
+    mass_scale: float = 1.0
+    """Object mass and inertia factor [-]."""
+    friction_scale: float = 1.0
+    """Finger–object sliding friction factor [-]."""
+    tendon_scale: float = 1.0
+    """Tendon drive factor [-]: the tension (force mode) or the servo's gain and tension limit."""
+
+    def __post_init__(self) -> None:
+        for name in ("palm_offset", "palm_rotation"):
+            v = np.asarray(getattr(self, name), dtype=float)
+            if v.shape != (3,) or not np.all(np.isfinite(v)):
+                raise DesignError(f"perturbation {name} must be 3 finite numbers, got {getattr(self, name)}")
+            object.__setattr__(self, name, tuple(float(x) for x in v))
+        for name in ("mass_scale", "friction_scale", "tendon_scale"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise DesignError(f"perturbation {name} must be a finite factor > 0, got {v}")
+            object.__setattr__(self, name, float(v))
+
+    @property
+    def is_nominal(self) -> bool:
+        """Whether this draw changes nothing."""
+        return self == NOMINAL
+
+    def as_dict(self) -> dict:
+        """JSON-ready fields."""
+        return dataclasses.asdict(self)
+
+
+NOMINAL = Perturbation()
+"""The draw that changes nothing."""
+
+
+def perturbed_pose(pose: GripperPose, p: Perturbation) -> GripperPose:
+    """``pose`` moved by ``p.palm_offset`` and turned by ``p.palm_rotation`` about the palm's origin."""
+    q_rot = np.zeros(4)
+    mujoco.mju_axisAngle2Quat(q_rot, *_axis_angle(np.asarray(p.palm_rotation)))
+    q = np.zeros(4)
+    mujoco.mju_mulQuat(q, q_rot, np.asarray(pose.quat, dtype=float))
+    q /= np.linalg.norm(q)
+    return GripperPose(tuple(np.asarray(pose.position) + np.asarray(p.palm_offset)), tuple(q), pose.openings)
+
+
+def _axis_angle(rotvec: np.ndarray) -> tuple[np.ndarray, float]:
+    angle = float(np.linalg.norm(rotvec))
+    if angle == 0.0:
+        return np.array([0.0, 0.0, 1.0]), 0.0
+    return rotvec / angle, angle
+
+
+def perturbed_scene(scene: GraspScene, scenario: GraspScenario, p: Perturbation) -> GraspScene:
+    """``scene`` under draw ``p``, driven for ``scenario`` (its backends then leave the drive as it is).
+
+    Writes into a model copy: object ``body_mass`` and ``body_inertia`` times ``mass_scale``; the sliding
+    friction of the object's and the fingers' geoms times ``friction_scale`` (MuJoCo takes the larger of
+    the two geoms' coefficients, so both are scaled for the finger–object pair); the tendon actuators'
+    gear (force mode: tension = gear · control) or the servo's gain, bias and force range (position mode)
+    times ``tendon_scale``. Then the palm moves (:func:`perturbed_pose`, :func:`scene_at_pose`, whose
+    ``mj_setConst`` also takes the new mass into the derived constants). Raises :class:`PoseError` when
+    the perturbed pose cannot be simulated.
+    """
+    m = copy.copy(scene.model)
+    b = scene.object_body
+    m.body_mass[b] *= p.mass_scale
+    m.body_inertia[b] *= p.mass_scale
+    geoms = np.flatnonzero((m.geom_bodyid == b) | scene.finger_mask[m.geom_bodyid])
+    m.geom_friction[geoms, 0] *= p.friction_scale
+    force_mode = isinstance(scenario.tendon, TendonForce)
+    actuators = [
+        mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
+        for h in scene.built.fingers
+        for name in h.actuators
+    ]
+    if force_mode:  # before mj_setConst, which derives actuator_acc0 from the gear
+        m.actuator_gear[actuators, 0] *= p.tendon_scale
+    staged = copy.copy(scene)
+    staged.built = dataclasses.replace(scene.built, model=m)
+    staged.model = m
+    if any(p.palm_offset) or any(p.palm_rotation):
+        moved = scene_at_pose(staged, perturbed_pose(scene.pose, p))
+    else:
+        mujoco.mj_setConst(m, mujoco.MjData(m))
+        moved = staged
+    driven = drive_scene(moved, scenario)
+    if not force_mode:  # the servo's parameters, as apply_drive wrote them into the driven copy
+        dm = driven.model
+        dm.actuator_gainprm[actuators, 0] *= p.tendon_scale
+        dm.actuator_biasprm[actuators, 1] *= p.tendon_scale
+        dm.actuator_forcerange[actuators] *= p.tendon_scale
+    driven.drive = scenario.tendon
+    return driven
