@@ -36,10 +36,10 @@ import numpy as np
 import torch
 
 from mjcodesign.data import Dataset, open_dataset
+from mjcodesign.design.stiffness import N_LOG_E
 from mjcodesign.errors import DesignError, OutputError
 
 __all__ = [
-    "N_LOG_E",
     "N_OUTPUTS",
     "N_REGRESSION",
     "OUTPUT_NAMES",
@@ -59,8 +59,6 @@ __all__ = [
     "subsample",
 ]
 
-N_LOG_E = 22
-"""ln E values per design."""
 N_REGRESSION = 9
 """Regressed outputs: body force (torque 3 [N m], force 3 [N]) and displacement (3 [m])."""
 N_OUTPUTS = N_REGRESSION + 1

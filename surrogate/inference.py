@@ -29,9 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from mjcodesign.design.stiffness import N_LOG_E
 from mjcodesign.errors import DesignError, StiffnessError
 from mjcodesign.surrogate.data import (
-    N_LOG_E,
     N_REGRESSION,
     GraspData,
     Normalizer,

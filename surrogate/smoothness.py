@@ -21,12 +21,12 @@ import numpy as np
 import torch
 
 from mjcodesign.data.config import DatagenConfig
-from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
+from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, N_LOG_E, Stiffness
 from mjcodesign.errors import DesignError
 from mjcodesign.jobs import GraspJob, load_grasp_object, run_jobs
 from mjcodesign.models.types import GripperPose
 from mjcodesign.sim import get_backend
-from mjcodesign.surrogate.data import N_LOG_E, GraspData
+from mjcodesign.surrogate.data import GraspData
 from mjcodesign.surrogate.inference import DesignLoss, GraspBatch, Poses, Surrogate
 
 __all__ = ["design_lines", "smoothness"]

@@ -15,7 +15,6 @@ Torch is imported only inside the functions that run the surrogate.
 """
 
 from mjcodesign.codesign.optimize import (
-    N_LOG_E,
     Mode,
     OptimizeConfig,
     OptimizeResult,
@@ -28,7 +27,6 @@ from mjcodesign.codesign.problem import PoseSet, load_pose_set, object_key
 from mjcodesign.codesign.selection import Phase, PoseSelection
 
 __all__ = [
-    "N_LOG_E",
     "Mode",
     "OptimizeConfig",
     "OptimizeResult",

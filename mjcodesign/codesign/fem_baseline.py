@@ -16,8 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mjcodesign.codesign.optimize import N_LOG_E, log_e_of, z_of
-from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN
+from mjcodesign.codesign.optimize import log_e_of, z_of
+from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, N_LOG_E
 from mjcodesign.errors import DesignError
 from mjcodesign.objects import GraspObject
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose

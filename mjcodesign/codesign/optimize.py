@@ -42,11 +42,10 @@ import numpy as np
 
 from mjcodesign.codesign.problem import PoseSet
 from mjcodesign.codesign.selection import PoseSelection
-from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN
+from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, N_LOG_E
 from mjcodesign.errors import DesignError
 
 __all__ = [
-    "N_LOG_E",
     "Mode",
     "OptimizeConfig",
     "OptimizeResult",
@@ -56,8 +55,6 @@ __all__ = [
     "z_of",
 ]
 
-N_LOG_E = 22
-"""ln E values per design (two fingers of 11 blocks)."""
 _SPAN = LOG_E_MAX - LOG_E_MIN  # 3.5: ln E = LOG_E_MIN + _SPAN · sigmoid(z)
 _INIT_FRACTION = 0.6  # the authors' z starts at 0.6 of the range (ln E 15.6); the paper does not say
 _TORCH_WEIGHT_DECAY = 0.01  # torch's AdamW default, which the authors' optimize.py keeps

@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mjcodesign.codesign.optimize import N_LOG_E, log_e_of, z_of
+from mjcodesign.codesign.optimize import log_e_of, z_of
 from mjcodesign.codesign.problem import PoseSet
-from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.design.stiffness import N_LOG_E, Stiffness
 from mjcodesign.errors import DesignError, UnsupportedError
 from mjcodesign.jobs import GraspJob, load_grasp_object, run_jobs
 from mjcodesign.scenarios.grasp import GraspScenario

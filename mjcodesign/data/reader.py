@@ -19,6 +19,7 @@ import pyarrow.parquet as pq
 
 from mjcodesign.data.schema import TABLES
 from mjcodesign.data.store import FORMAT, MANIFEST
+from mjcodesign.design.stiffness import N_LOG_E
 from mjcodesign.errors import OutputError, UnsupportedError
 
 __all__ = [
@@ -108,7 +109,7 @@ def _rate(success: np.ndarray) -> dict:
 
 def _mean_log_e(samples: pa.Table) -> np.ndarray:
     flat = samples.column("log_e").combine_chunks().flatten().to_numpy()
-    return flat.reshape(-1, 22).mean(axis=1) if len(flat) else np.zeros(0)
+    return flat.reshape(-1, N_LOG_E).mean(axis=1) if len(flat) else np.zeros(0)
 
 
 def summarize(ds: Dataset) -> dict:

@@ -13,12 +13,9 @@ import warnings
 
 import numpy as np
 
-from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN
+from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, N_LOG_E
 
-__all__ = ["N_LOG_E", "PoseStreams", "object_pose_seed", "sample_designs"]
-
-N_LOG_E = 22
-"""ln E values per design (11 blocks per finger, two fingers)."""
+__all__ = ["PoseStreams", "object_pose_seed", "sample_designs"]
 
 
 def object_pose_seed(seed: int, object_index: int) -> int:

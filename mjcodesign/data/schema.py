@@ -18,6 +18,8 @@ from __future__ import annotations
 import numpy as np
 import pyarrow as pa
 
+from mjcodesign.design.stiffness import N_LOG_E
+
 __all__ = ["COLUMNS", "POSES", "REJECTED", "SAMPLES", "TABLES", "build_table", "empty_columns"]
 
 _F64 = pa.float64()
@@ -49,7 +51,7 @@ _COLUMNS: dict[str, tuple[pa.DataType, str]] = {
         "surface samples inside the box before the draw of N (fewer: points repeat)",
     ),
     "design_index": (pa.int32(), "design of the pose"),
-    "log_e": (_vec(22), "ln(E / Pa) of the 22 blocks, finger A base to tip, then finger B"),
+    "log_e": (_vec(N_LOG_E), "ln(E / Pa) of the 22 blocks, finger A base to tip, then finger B"),
     "body_force": (
         _vec(6),
         "fingers' wrench on the object, gripper frame: torque about the COM [N m] (3), force [N] (3)",

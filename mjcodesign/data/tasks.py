@@ -25,7 +25,7 @@ from mjcodesign.data.cloud import partial_cloud, to_gripper
 from mjcodesign.data.config import DatagenConfig
 from mjcodesign.data.sampling import PoseStreams, object_pose_seed, sample_designs
 from mjcodesign.data.schema import POSES, REJECTED, SAMPLES, build_table, empty_columns
-from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.design.stiffness import N_LOG_E, Stiffness
 from mjcodesign.errors import MeshError, PoseError, UnsupportedError
 from mjcodesign.jobs import GraspJob, SceneCache, load_grasp_object, run_jobs
 from mjcodesign.models.types import GripperPose
@@ -119,7 +119,7 @@ class ShardTask:
     def designs(self) -> np.ndarray:
         """The shard's designs, ln(E / Pa), shape (n, 22): :attr:`log_e`, or ``designs_per_pose`` drawn."""
         if self.log_e is not None:
-            return np.array(self.log_e, dtype=float).reshape(len(self.log_e), 22)
+            return np.array(self.log_e, dtype=float).reshape(len(self.log_e), N_LOG_E)
         c = self.config
         rng = PoseStreams(c.seed, self.object_index, self.pose_index).designs
         return sample_designs(rng, c.designs_per_pose, c.sampler)
@@ -326,7 +326,7 @@ def _result(t: ShardTask, name: str, outs: list[Outcome], wall: float) -> ShardR
             "pose_index": [t.pose_index] * len(rows),
             "design_index": rows,
             "density": [t.density] * len(rows),
-            "log_e": designs[rows].reshape(len(rows), 22),
+            "log_e": designs[rows].reshape(len(rows), N_LOG_E),
             "body_force": np.array([outs[i].body_force for i in rows]).reshape(len(rows), 6),
             "displacement": np.array([outs[i].displacement for i in rows]).reshape(len(rows), 3),
             "ground_contact": [bool(outs[i].ground_contact) for i in rows],

@@ -13,7 +13,7 @@ from mjcodesign.design.beam import (
 )
 from mjcodesign.design.calibration import CalibratedFem, block_compliance, calibration_for
 from mjcodesign.design.finger import Block, BlockKind, FingerDesign, Routing
-from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, PRESETS, Stiffness
+from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, N_LOG_E, PRESETS, Stiffness
 from mjcodesign.design.tendon_law import TENDON_VARIANTS, tendon_forces, unit_vectors
 
 __all__ = [
@@ -25,6 +25,7 @@ __all__ = [
     "PRESETS",
     "LOG_E_MIN",
     "LOG_E_MAX",
+    "N_LOG_E",
     "second_moment",
     "block_bending_compliance",
     "block_effective_ei",

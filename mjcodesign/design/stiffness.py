@@ -10,7 +10,16 @@ import numpy as np
 
 from mjcodesign.errors import StiffnessError
 
-__all__ = ["DESIGN_FILE_SUFFIXES", "LOG_E_MIN", "LOG_E_MAX", "PRESETS", "Stiffness", "read_design_file", "write_design_file"]
+__all__ = [
+    "DESIGN_FILE_SUFFIXES",
+    "LOG_E_MIN",
+    "LOG_E_MAX",
+    "N_LOG_E",
+    "PRESETS",
+    "Stiffness",
+    "read_design_file",
+    "write_design_file",
+]
 
 LOG_E_MIN = 13.5
 """Softest printable block, ln(E / Pa): about 0.73 MPa (TPU 95A at low infill)."""
@@ -19,6 +28,9 @@ LOG_E_MAX = 17.0
 
 _BLOCKS_PER_FINGER = 11
 _N_FINGERS = 2
+N_LOG_E = _N_FINGERS * _BLOCKS_PER_FINGER
+"""ln E values per design: finger A's 11 blocks base to tip, then finger B's (a dataset row, the
+surrogate's input, the co-design's variables)."""
 
 # The paper's jointly optimised design, base to tip, segment (flexure) alternating (the paper's table).
 _PAPER_OPT_A = [16.05, 15.16, 14.62, 14.89, 15.31, 14.62, 15.85, 14.65, 15.23, 15.34, 15.22]
@@ -152,17 +164,23 @@ def read_design_file(path: str | Path, n_blocks: int = _BLOCKS_PER_FINGER) -> St
     try:
         text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise StiffnessError(f"cannot read design file {p}: {getattr(exc, 'strerror', None) or exc}") from None
+        raise StiffnessError(
+            f"cannot read design file {p}: {getattr(exc, 'strerror', None) or exc}"
+        ) from None
     try:
         raw = json.loads(text)
     except ValueError:
         try:
             raw = [float(v) for v in text.replace("\n", ",").split(",") if v.strip()]
         except ValueError:
-            raise StiffnessError(f"{p}: not a design file (JSON with {_DESIGN_KEY!r}, or ln E values)") from None
+            raise StiffnessError(
+                f"{p}: not a design file (JSON with {_DESIGN_KEY!r}, or ln E values)"
+            ) from None
     if isinstance(raw, dict) and _DESIGN_KEY in raw:
         raw = raw[_DESIGN_KEY]
-    if not isinstance(raw, list) or not all(isinstance(v, int | float) and not isinstance(v, bool) for v in raw):
+    if not isinstance(raw, list) or not all(
+        isinstance(v, int | float) and not isinstance(v, bool) for v in raw
+    ):
         raise StiffnessError(f"{p}: a design file holds {_DESIGN_KEY!r}: a list of ln(E/Pa) values")
     try:
         return Stiffness(raw, n_blocks=n_blocks)
@@ -175,4 +193,3 @@ def write_design_file(path: str | Path, design: Stiffness, **meta) -> Path:
     p = Path(path)
     p.write_text(json.dumps({_DESIGN_KEY: design.as_list(), **meta}, indent=1) + "\n", encoding="utf-8")
     return p
-
