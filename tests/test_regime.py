@@ -106,3 +106,17 @@ def test_real_regime_preset():
     lo, hi = TAPE_FRICTION_RANGE
     assert lo <= REAL_REGIME.friction <= hi
     assert REAL_REGIME.tension is None  # the position servo, not a fixed force
+
+
+def test_grasp_cli_takes_the_disturbance_as_delta_v_and_the_friction(capsys):
+    import json
+
+    from mjcodesign.cli.main import main
+
+    argv = ["grasp", "--object", "013_apple", "--mass", "real", "--delta-v", "paper", "--friction", "tape-min"]
+    assert main([*argv, "--design", "semi-rigid", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["delta_v_m_s"] == PAPER_DELTA_V and out["friction"] == TAPE_FRICTION_RANGE[0]
+    assert out["impulse_ns"] == pytest.approx(0.068 * PAPER_DELTA_V, rel=1e-12)  # J = m dv, the apple's m
+    assert main(["grasp", "--object", "013_apple", "--friction", "sticky", "--json"]) == 2
+    assert len(capsys.readouterr().err.strip().splitlines()) == 1

@@ -75,6 +75,19 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         help="downward disturbance impulse [N s]; default 0.0179, the paper's 0.1 N s (applied to a 5x "
         "larger scene) mapped to real size (its 0.2 and 0.4 map to 0.036 and 0.072)",
     )
+    p.add_argument(
+        "--delta-v",
+        default=None,
+        help="the disturbance as a downward velocity change of the object [m/s] (impulse m dv, whatever "
+        "the mass), instead of --impulse; 'paper': the paper's 0.1 N s relative to a hand-sized object, "
+        "0.51 m/s",
+    )
+    p.add_argument(
+        "--friction",
+        default=None,
+        help="finger-object sliding friction coefficient (default: the paper's 1); 'tape-min': 0.6, the "
+        "floor the gripping tape's maker claims (the range 0.6-1 is in the docs' regime page)",
+    )
     p.add_argument("--tension", type=float, default=None, help="tendon tension per finger [N]")
     # --tendon: the tendon drive, parsed by mjcodesign.scenarios.parse_tendon.
     p.add_argument(
@@ -151,6 +164,8 @@ def grasp(
     *,
     mass: str | float | None = None,
     impulse: float | None = None,
+    delta_v: str | float | None = None,
+    friction: str | float | None = None,
     tension: float | None = None,
     tendon: str | None = None,
     lift: float | None = None,
@@ -201,18 +216,20 @@ def grasp(
         )
     obj, rho, gripper_pose = prepared
     kwargs = {k: v for k, v in (("tension", tension), ("lift", lift), ("impulse", impulse)) if v is not None}
+    kwargs.update(_physics(delta_v, friction))
     if tendon is not None:  # --tendon
         from mjcodesign.scenarios import parse_tendon
 
         if tension is not None:
             raise DesignError("give --tension or --tendon, not both")
         kwargs["tendon"] = parse_tendon(tendon)
+    scenario = GraspScenario(**kwargs)
     job = GraspJob(
         obj=obj,
         pose=gripper_pose,
         design=stiffness,
         finger_model=FingerModel(model),
-        scenario=GraspScenario(**kwargs),
+        scenario=scenario,
         seed=seed,
         label=label or design,
     )
@@ -222,6 +239,9 @@ def grasp(
         mass_kg=obj.mass,
         density_kg_m3=rho,
         **_mass_facts(source, mass),
+        impulse_ns=scenario.impulse_on(obj.mass),
+        delta_v_m_s=scenario.delta_v,
+        friction=scenario.friction,
         repaired=obj.repaired,
         fallback=obj.fallback,
         hulls=len(obj.hulls),
@@ -285,6 +305,24 @@ def prepare_object(
         source, density, mass=mass, seed=seed, allow_open=allow_open, cache_dir=cache_dir
     )
     return obj, obj.density, resolve_pose(pose, obj, seed=seed)
+
+
+def _physics(delta_v: str | float | None, friction: str | float | None) -> dict:
+    """GraspScenario's ``delta_v`` and ``friction`` from ``--delta-v`` and ``--friction`` (names or numbers)."""
+    from mjcodesign.errors import DesignError
+    from mjcodesign.scenarios import PAPER_DELTA_V, TAPE_FRICTION_FLOOR
+
+    names = {"delta_v": {"paper": PAPER_DELTA_V}, "friction": {"tape-min": TAPE_FRICTION_FLOOR}}
+    out = {}
+    for key, text in (("delta_v", delta_v), ("friction", friction)):
+        if text is None:
+            continue
+        try:
+            out[key] = float(names[key].get(text, text))
+        except (TypeError, ValueError):
+            choices = ", ".join(names[key])
+            raise DesignError(f"--{key.replace('_', '-')} must be a number or {choices}, got {text!r}") from None
+    return out
 
 
 def _mass_facts(source: str, mass: str | float | None) -> dict:
@@ -426,6 +464,8 @@ class _Runner:
             a.pose,
             mass=a.mass,
             impulse=a.impulse,
+            delta_v=a.delta_v,
+            friction=a.friction,
             tension=a.tension,
             tendon=a.tendon,
             lift=a.lift,
