@@ -136,7 +136,7 @@ class GraspPlan:
     steps: tuple[Step, ...]
     ranking: tuple[dict, ...] = ()
     """Every candidate considered: its index, whether it is feasible (else the reason), its points in the
-    gripper box and, when the surrogate scored it, its prediction (:func:`rank_candidates`)."""
+    gripper box and, when the surrogate scored it, its prediction (:func:`~mjcodesign.hardware.surrogate_select.score_candidates`)."""
 
     def lines(self) -> list[str]:
         """Human-readable plan, one line per step."""

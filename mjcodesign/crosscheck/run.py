@@ -36,7 +36,7 @@ def parse_sweep(text: str) -> list[str] | None:
 
 
 def summary_rows(scenario: str, design: str, rows: list[dict]) -> list[dict]:
-    """Per model (the FEM reference excluded), the worst and median |rel_diff| of ``rows``."""
+    """Per model (the FEM reference excluded), the worst and median ``|rel_diff|`` of ``rows``."""
     out = []
     for m in dict.fromkeys(r["model"] for r in rows):
         diffs = [r["rel_diff"] for r in rows if r["model"] == m and r["rel_diff"] is not None]

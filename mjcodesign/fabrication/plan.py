@@ -406,7 +406,7 @@ class PrintPlan:
 
     @property
     def max_abs_rel_error(self) -> float:
-        """Largest |achieved / target − 1| over all blocks."""
+        """Largest ``|achieved / target − 1|`` over all blocks."""
         return max(abs(b.rel_error) for b in self)
 
     def as_dict(self) -> dict:

@@ -75,7 +75,7 @@ _EGAD_LEVELS = 5  # complexity grades 0 (ellipsoid) .. 4 (many bumps)
 def egad_like_mesh(index: int, *, seed: int = 0):
     """The seeded procedural shape ``index`` as a trimesh [m]; complexity grows with ``index % 5``.
 
-    A star-shaped surface r(u) = r0 (1 + sum_k a_k exp(-|u - c_k|² / w²)) over an icosphere, so it is
+    A star-shaped surface ``r(u) = r0 (1 + sum_k a_k exp(-|u - c_k|² / w²))`` over an icosphere, so it is
     watertight by construction; grade g = ``index % 5`` has 3g bumps of amplitude up to 0.1 + 0.05 g
     (0: ellipsoid, 4: many bumps).
     """

@@ -99,7 +99,7 @@ class SamplerOptions:
 def antipodal_pairs(points: np.ndarray, normals: np.ndarray, friction: float = FRICTION):
     """Index pairs (i, j) whose contacts pass the friction-cone test, and their alignment.
 
-    Contact i pushes along u = (p_j − p_i)/|p_j − p_i|; both −n_i·u and n_j·u must exceed
+    Contact i pushes along ``u = (p_j − p_i) / |p_j − p_i|``; both −n_i·u and n_j·u must exceed
     cos(atan μ). Returns (i, j, width [m], alignment = mean of the two cosines).
     """
     p = np.asarray(points, dtype=float)

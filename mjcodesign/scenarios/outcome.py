@@ -66,7 +66,7 @@ class Outcome:
     """Object position change relative to the palm, grasp (end of tightening) to end [m], shape (3,)."""
     ground_contact: bool
     reason: str
-    """Readable reason: ``ok``, or the failures joined by ``; `` with their numbers."""
+    """Readable reason: ``ok``, or the failures joined by ``"; "`` with their numbers."""
     failures: tuple[Failure, ...] = ()
     """Every failure kind, in the order of ``reason``; empty on success."""
     wall_time_s: float = 0.0

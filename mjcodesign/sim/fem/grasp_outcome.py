@@ -178,7 +178,7 @@ def grade(
 def paper_loss(body_force, displacement, ground_points: float) -> tuple[float, np.ndarray, np.ndarray]:
     """The authors' L_opt and its gradient w.r.t. the body force (6) and the displacement (3).
 
-    L = Σ w_i |o_i| over the body force (torque, force), the displacement and the ground contact, with
+    ``L = Σ w_i |o_i|`` over the body force (torque, force), the displacement and the ground contact, with
     w = `LOSS_WEIGHT`, or `LOSS_PENALTY` on a negative vertical force (palm z, index 5), a negative
     vertical displacement (index 2) and a positive ground contact (its count of points, piecewise
     constant: no gradient). Outputs are in the palm frame (the Outcome's; the authors' are y-up world).
