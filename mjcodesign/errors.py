@@ -11,6 +11,7 @@ __all__ = [
     "PoseError",
     "SimulationDiverged",
     "OutputError",
+    "DatasetError",
     "HardwareError",
     "ObserverError",
     "UnsupportedError",
@@ -47,6 +48,10 @@ class SimulationDiverged(MjcodesignError, RuntimeError):
 
 class OutputError(MjcodesignError, OSError):
     """An output path cannot be written."""
+
+
+class DatasetError(MjcodesignError):
+    """A dataset file is missing, truncated, unreadable or not the one its manifest records."""
 
 
 class HardwareError(MjcodesignError, RuntimeError):

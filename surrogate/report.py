@@ -37,6 +37,7 @@ from mjcodesign.surrogate.smoothness import smoothness
 from mjcodesign.surrogate.train import EpochLog, TrainConfig, evaluate_loss, train
 
 from mjcodesign.errors import OutputError, UnsupportedError
+from mjcodesign.outputs import OutputKind, check_output, staged
 
 __all__ = ["TensorBoardLog", "checkpoint_smoothness", "predict_rows", "standard_loss", "train_and_report"]
 
@@ -46,7 +47,7 @@ _EPS = 1e-6  # probability clip of the cross-entropy
 
 def predict_rows(surrogate: Surrogate, data: GraspData, rows: np.ndarray) -> np.ndarray:
     """Outputs (S, 10) of the samples ``rows`` in physical units, contact as a probability."""
-    poses = Poses.from_data(data)
+    poses = Poses.of(data.poses)
     features = surrogate.features(poses)
     out = np.zeros((len(rows), N_REGRESSION + 1))
     for i in range(0, len(rows), _PREDICT_CHUNK):
@@ -181,6 +182,7 @@ def train_and_report(
     data_dir: str | Path,
     out: str | Path,
     *,
+    overwrite: bool = False,
     split_mode: str = "object",
     config: TrainConfig | None = None,
     model_config: ModelConfig | None = None,
@@ -194,12 +196,12 @@ def train_and_report(
 
     ``efficiency``: the share of training data of the second run (0: none). ``smoothness_poses``: test
     poses re-simulated along ``smoothness_lines`` design lines each (0: none). ``on_epoch(run, log)``
-    sees every epoch of the runs ``full`` and ``efficiency``.
+    sees every epoch of the runs ``full`` and ``efficiency``. ``out`` follows the output-folder rule of
+    :mod:`mjcodesign.outputs` (checked before any work; ``overwrite`` keeps another writer's files beside
+    the checkpoint); every file lands there at once when the report is complete.
     """
     cfg, mcfg = config or TrainConfig(), model_config or ModelConfig()
-    root = Path(out)
-    if root.exists() and not root.is_dir():
-        raise OutputError(f"--out {root} is a file, not a folder")
+    folder = check_output(out, OutputKind.CHECKPOINT, overwrite=overwrite, inputs={"--data": data_dir})
     data = load_grasp_data(data_dir)
     parts = split(data, split_mode, seed=cfg.seed)
     runs = {"full": train(data, parts, cfg, mcfg, on_epoch=on_epoch and (lambda log: on_epoch("full", log)))}
@@ -234,13 +236,11 @@ def train_and_report(
         s_pred = predict_rows(s_sur, data, parts.test), predict_rows(s_sur, data, parts.val)
         metrics["efficiency"] = {"fraction": efficiency, "training": small.summary(),
                                  "test": _measure(f"surrogate on {efficiency:.0%}", *s_pred, data, parts, small.normalizer)}  # fmt: skip
-    root.mkdir(parents=True, exist_ok=True)
     if smoothness_poses:
         poses = _smoothness_poses(data, parts, smoothness_poses)
         metrics["smoothness"] = smoothness(
             sur, data, poses, lines=smoothness_lines, seed=cfg.seed, cache_dir=cache_dir
         )
-        plot_lines(metrics["smoothness"], root / "smoothness.png")
     metrics["verdict"] = verdict(models)
     sur.meta = {
         "dataset": dataset,
@@ -248,11 +248,14 @@ def train_and_report(
         "train": cfg.as_dict(),
         "metrics": _brief(metrics),
     }
-    save_checkpoint(root, sur)
-    plot_curves({k: r.summary() for k, r in runs.items()}, root / "curves.png")
-    plot_calibration({k: m["success"]["calibration"] for k, m in models.items()}, root / "calibration.png")
-    write_text(root / "metrics.json", json.dumps(metrics, indent=1, allow_nan=False))
-    write_text(root / "summary.md", summary_markdown(metrics))
+    with staged(folder) as root:
+        if smoothness_poses:
+            plot_lines(metrics["smoothness"], root / "smoothness.png")
+        save_checkpoint(root, sur)
+        plot_curves({k: r.summary() for k, r in runs.items()}, root / "curves.png")
+        plot_calibration({k: m["success"]["calibration"] for k, m in models.items()}, root / "calibration.png")
+        write_text(root / "metrics.json", json.dumps(metrics, indent=1, allow_nan=False))
+        write_text(root / "summary.md", summary_markdown(metrics))
     return metrics
 
 

@@ -25,6 +25,7 @@ from mjcodesign.evaluation import (
     summary_table,
 )
 from mjcodesign.jobs import GraspJob, run_jobs
+from mjcodesign.outputs import MARKER
 from mjcodesign.scenarios.grasp import GraspScenario, paper_impulse
 from mjcodesign.sim.protocol import get_backend
 
@@ -149,7 +150,7 @@ def test_cli_writes_the_report(tmp_path):
     assert summary["rollouts"] == 1
     assert len(summary["recorded"]) == 1 and (tmp_path / "ex.rrd").stat().st_size > 0  # its one grasp
     out = out / "sub"  # made with its parent
-    assert {f.name for f in out.iterdir()} == {"table.md", "disturbance.md", "results.json", "success.png"}
+    assert {f.name for f in out.iterdir()} == {"table.md", "disturbance.md", "results.json", "success.png", MARKER}
     res = json.loads((out / "results.json").read_text())
     c = summary["table"][0]["cells"]["in-domain/light"]
     assert c == cell(res["rollouts"], design_label="soft", domain="in-domain", density="light")

@@ -337,7 +337,7 @@ def test_export_failing_midway_leaves_the_folder_as_it_was(tmp_path, monkeypatch
     with pytest.raises(OutputError, match="No space left"):
         export_print("paper-optimized", None, out)
     assert _tree(out) == before  # the old set, whole: no new 3MF beside old STLs
-    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []  # no staging folder left
+    assert [p.name for p in out.parent.iterdir() if p.name.startswith(".")] == []  # no staging folder left
     fresh = tmp_path / "new" / "out"
     with pytest.raises(OutputError):
         export_print("paper-optimized", None, fresh)

@@ -23,6 +23,7 @@ __all__ = [
     "user_cache_dir",
     "quiet_warp",
     "path_text",
+    "add_out_folder",
     "port_number",
     "int_at_least",
     "finite_float",
@@ -43,6 +44,19 @@ class Parser(argparse.ArgumentParser):
 def short(text: str, keep: int = 60) -> str:
     """``text`` quoted, cut to ``keep`` characters with an ellipsis: a 5,000-character path stays one line."""
     return repr(text if len(text) <= keep else text[:keep] + "…")
+
+
+def add_out_folder(p: argparse.ArgumentParser, what: str) -> None:
+    """``--out`` (a folder, :mod:`mjcodesign.outputs`' rule) and ``--overwrite`` on parser ``p``."""
+    p.add_argument(
+        "--out",
+        type=path_text,
+        required=True,
+        help=f"{what} folder: new, empty or this command's earlier output (replaced whole when done)",
+    )
+    p.add_argument(
+        "--overwrite", action="store_true", help="write into a non-empty folder, keeping its other files"
+    )
 
 
 def path_text(text: str) -> str:

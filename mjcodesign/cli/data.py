@@ -1,4 +1,4 @@
-"""``mjcodesign datagen``, ``mjcodesign data info`` and ``mjcodesign bench datagen``.
+"""``mjcodesign datagen``, ``mjcodesign data info``, ``mjcodesign data verify`` and ``mjcodesign bench datagen``.
 
 Wire them into the main CLI with ``cli_data.add_parser(subparsers)`` and
 ``cli_data.add_bench_parser(bench_subparsers)``. Every input is checked before anything is written, so
@@ -17,10 +17,19 @@ from pathlib import Path
 
 from mjcodesign.cli.common import Parser, emit, int_at_least, quiet_warp, user_cache_dir
 
-__all__ = ["add_parser", "add_bench_parser", "run_datagen", "run_info", "run_bench", "datagen_config"]
+__all__ = [
+    "add_parser",
+    "add_bench_parser",
+    "run_datagen",
+    "run_info",
+    "run_verify",
+    "run_bench",
+    "datagen_config",
+]
 
 _MODELS = ("chain", "flex")
 _BENCH_OBJECTS = "012_strawberry,013_apple,010_potted_meat_can"
+_DAMAGED_SHOWN = 5  # damaged files named on the one error line of `data verify` (--json lists all)
 # Ray binds its external address unless told otherwise; these keep a local instance on loopback.
 _RAY_LOCAL_ENV = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0", "RAY_USAGE_STATS_ENABLED": "0"}
 
@@ -42,7 +51,15 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--density",
         default="light",
-        help="object density per pose: light (100), heavy (400), a number [kg/m³], or uniform:LO,HI",
+        help="object density per pose: light (100), heavy (400), a number [kg/m³], or uniform:LO,HI (the "
+        "paper's relative scale, not real objects)",
+    )
+    p.add_argument(
+        "--mass",
+        choices=("density", "real"),
+        default="density",
+        help="real: every object at its published mass (YCB objects only; the YCB object list), uniform "
+        "density mass / volume, --density unused; density: from --density",
     )
     p.add_argument(
         "--tendon",
@@ -80,6 +97,12 @@ def add_parser(subparsers) -> None:
     info.add_argument("--json", action="store_true")
     info.add_argument("--plot", default=None, help="draw success against mean ln E per object into FILE.png")
     info.set_defaults(func=run_info)
+    check = dsub.add_parser(
+        "verify", help="check every file against the manifest's size and SHA-256 (exit 2 naming the damaged)"
+    )
+    check.add_argument("dir", help="dataset folder")
+    check.add_argument("--json", action="store_true", help="the report as JSON on stdout (also when damaged)")
+    check.set_defaults(func=run_verify)
 
 
 def add_bench_parser(bench_subparsers) -> None:
@@ -138,6 +161,7 @@ def datagen_config(args: argparse.Namespace):
         density=parse_density_spec(args.density),
         tendon=parse_tendon(args.tendon),
         scenario=_scenario(args.scenario),
+        mass=args.mass,
         **{k: getattr(args, k) for k in same},
     )
 
@@ -296,6 +320,26 @@ def run_info(args: argparse.Namespace) -> int:
     for key in ("failures", "rejected_by_kind", "rejected_top_reasons"):
         if res[key]:
             emit({f"{key}: {k}": v for k, v in res[key].items()}, False)
+    return 0
+
+
+def run_verify(args: argparse.Namespace) -> int:
+    """Run ``data verify``: the report on stdout; a damaged dataset exits 2 with one line naming its files."""
+    from mjcodesign.data import open_dataset
+    from mjcodesign.errors import DatasetError
+
+    found = open_dataset(args.dir).verify()
+    report = {"path": str(args.dir), **found.as_dict()}
+    if args.json:
+        print(json.dumps(report))
+    else:
+        emit({k: v for k, v in report.items() if k != "damaged"}, False)
+    if found.damaged:
+        lines = [d.line() for d in found.damaged]
+        shown = "; ".join(lines[:_DAMAGED_SHOWN]) + (
+            f"; and {len(lines) - _DAMAGED_SHOWN} more" if len(lines) > _DAMAGED_SHOWN else ""
+        )
+        raise DatasetError(f"{args.dir}: {len(lines)} damaged file(s): {shown}")
     return 0
 
 

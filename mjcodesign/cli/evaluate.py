@@ -141,6 +141,9 @@ def run(args: argparse.Namespace) -> int:
     config = _config(args)
     out = Path(args.out)
     _check_out(out)
+    from mjcodesign.outputs import OutputKind, check_output
+
+    check_output(out, OutputKind.EVALUATION, inputs={"--ckpt": args.ckpt, "--anygrasp": args.anygrasp})
     if args.rrd is not None and not Path(args.rrd).resolve().parent.is_dir():
         from mjcodesign.errors import OutputError
 

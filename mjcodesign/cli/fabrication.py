@@ -10,7 +10,7 @@ import argparse
 import json
 from pathlib import Path
 
-from mjcodesign.cli.common import path_text
+from mjcodesign.cli.common import add_out_folder, path_text
 
 __all__ = ["add_parser", "run"]
 
@@ -47,12 +47,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         default=None,
         help="calibration TOML (default: the packaged EXAMPLE table for TPU 95A, placeholder values)",
     )
-    p.add_argument(
-        "--out",
-        type=_path,
-        required=True,
-        help="output directory (created if missing; nothing lands in it unless every file was written)",
-    )
+    add_out_folder(p, "print files'")
     p.add_argument("--json", action="store_true", help="print the per-block mapping as JSON on stdout")
 
 
@@ -60,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     """Run ``export-print``; returns the exit code. Library errors propagate to the caller."""
     from mjcodesign.fabrication import export_print
 
-    report = export_print(args.design, args.calibration, args.out)
+    report = export_print(args.design, args.calibration, args.out, overwrite=args.overwrite)
     if args.json:
         print(json.dumps(report, indent=2))
     else:

@@ -12,6 +12,7 @@ import warnings
 
 from mjcodesign.cli.common import (
     Parser,
+    add_out_folder,
     emit,
     finite_float,
     int_at_least,
@@ -45,12 +46,15 @@ def _cmd_validate_beam(args) -> int:
 def _cmd_finger_export(args) -> int:
     from mjcodesign.design import FingerDesign
     from mjcodesign.models import TendonMode, build_finger, build_gripper, export_model
+    from mjcodesign.outputs import OutputKind, check_output, staged
 
+    folder = check_output(args.out, OutputKind.FINGER, overwrite=args.overwrite)
     stiffness = parse_design(args.design)
     build = build_gripper if args.gripper else build_finger
     kwargs = {} if args.gripper else {"scene": True}
     built = build(FingerDesign(), stiffness, args.model, **kwargs)
-    manifest = export_model(built, args.out)
+    with staged(folder) as tmp:
+        manifest = export_model(built, tmp)
     if built.finger_model.is_flex and built.tendon_mode is TendonMode.NATIVE:
         print(_FLEX_TENDON_NOTE, file=sys.stderr)
     manifest["out"] = str(args.out)
@@ -116,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
     exp = fsub.add_parser("export", help="write a self-contained MJCF, MJB and block STLs")
     exp.add_argument("--design", default="paper-optimized")
     exp.add_argument("--model", choices=_MODELS, default="chain")
-    exp.add_argument("--out", type=path_text, required=True, help="output folder (created if missing)")
+    add_out_folder(exp, "output")
     exp.add_argument("--gripper", action="store_true", help="export the two-finger gripper, not one finger")
     exp.add_argument("--json", action="store_true")
     exp.set_defaults(func=_cmd_finger_export)

@@ -11,7 +11,7 @@ import contextlib
 import json
 from pathlib import Path
 
-from mjcodesign.cli.common import emit, int_at_least, path_text, user_cache_dir
+from mjcodesign.cli.common import add_out_folder, emit, int_at_least, path_text, user_cache_dir
 
 __all__ = ["add_bench_parser", "add_parser", "run", "run_bench"]
 
@@ -44,7 +44,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--mode", choices=_MODES, default="joint", help="one design for all objects, or one each")
     p.add_argument("--density", default="light", help="object density [kg/m³] or light (100) / heavy (400)")
     p.add_argument("--seed", type=int_at_least(0), default=0, help="draws candidate clouds")
-    p.add_argument("--out", type=path_text, required=True, help="output folder (written when the run ends)")
+    add_out_folder(p, "output")
     p.add_argument("--rrd", type=path_text, default=None, help="also log the loss curves to this Rerun file")
     p.add_argument("--max-iterations", type=int_at_least(1), default=2000, help="N of Algorithm 1")
     p.add_argument("--patience", type=int_at_least(1), default=100, help="T_p of Algorithm 1 (paper: 100)")
@@ -101,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
             density=density,
             out=args.out,
             config=cfg,
+            overwrite=args.overwrite,
             seed=args.seed,
             ground_truth=not args.no_ground_truth,
             cache_dir=user_cache_dir(),

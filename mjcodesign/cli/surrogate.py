@@ -11,7 +11,15 @@ import argparse
 import json
 import sys
 
-from mjcodesign.cli.common import emit, finite_float, int_at_least, parse_design, path_text, user_cache_dir
+from mjcodesign.cli.common import (
+    add_out_folder,
+    emit,
+    finite_float,
+    int_at_least,
+    parse_design,
+    path_text,
+    user_cache_dir,
+)
 
 __all__ = ["add_bench_parser", "add_parser", "run_bench", "run_predict", "run_smoothness", "run_train"]
 
@@ -74,7 +82,7 @@ def add_parser(subparsers) -> None:
     """Register ``train`` and ``predict`` on an ``argparse`` subparsers object."""
     t = subparsers.add_parser("train", help="train the PointNet + MLP surrogate on a dataset; write a report")
     t.add_argument("--data", required=True, type=path_text, help="dataset folder (mjcodesign datagen)")
-    t.add_argument("--out", required=True, type=path_text, help="checkpoint and report folder (created)")
+    add_out_folder(t, "checkpoint and report")
     t.add_argument(
         "--split", choices=_SPLITS, default="object", help="held-out objects, or the paper's 80/20"
     )
@@ -206,6 +214,7 @@ def run_train(args: argparse.Namespace) -> int:
             m = train_and_report(
                 args.data,
                 args.out,
+                overwrite=args.overwrite,
                 split_mode=args.split,
                 config=cfg,
                 model_config=mcfg,

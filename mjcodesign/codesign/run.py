@@ -11,10 +11,6 @@ anything (an object without poses, a checkpoint of another schema), then writes 
 
 from __future__ import annotations
 
-import contextlib
-import os
-import shutil
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
@@ -29,7 +25,7 @@ from mjcodesign.codesign.report import (
     write_pose,
 )
 from mjcodesign.codesign.verify import verify
-from mjcodesign.errors import OutputError
+from mjcodesign.outputs import OutputFolder, OutputKind, check_output, staged
 
 __all__ = ["held_out_objects", "run_codesign"]
 
@@ -49,15 +45,23 @@ def run_codesign(
     density: float,
     out: str | Path,
     config: OptimizeConfig,
+    overwrite: bool = False,
     seed: int = 0,
     ground_truth: bool = True,
     cache_dir: str | Path | None = None,
     on_step: Callable[[Step], None] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> tuple[dict, OptimizeResult]:
-    """Optimise, re-simulate and write the files (module docstring); returns the JSON and the result."""
+    """Optimise, re-simulate and write the files (module docstring); returns the JSON and the result.
+
+    ``out`` follows the output-folder rule of :mod:`mjcodesign.outputs`, checked before any work
+    (``overwrite``: write beside another writer's files, keeping them); the files land there at once.
+    """
     from mjcodesign.surrogate import load_surrogate
 
+    folder = check_output(
+        out, OutputKind.CODESIGN, overwrite=overwrite, inputs={"--ckpt": checkpoint, "--poses": poses}
+    )
     say = progress or (lambda _msg: None)
     surrogate = load_surrogate(checkpoint)  # first: a checkpoint of another schema is refused in ~1 s
     say("reading poses")
@@ -66,7 +70,6 @@ def run_codesign(
     held = held_out_objects(surrogate.meta, everything.objects, chosen_set.objects)
     held_set = everything.select(held, per_object) if held else None
     root = Path(out)
-    _check_out(root)
     say(f"optimising {len(chosen_set.objects)} objects ({config.mode.value})")
     result = optimize(surrogate, chosen_set, density, config, on_step=on_step)
     truth = None
@@ -80,13 +83,8 @@ def run_codesign(
             sets["held_out"] = (held_set, joint, None)
         truth = verify(surrogate, sets, density, object_seed=object_seed, cache_dir=cache_dir, progress=say)
     record = _record(result, chosen_set, held, truth, checkpoint, poses, density, seed, root)
-    _write(root, result, chosen_set, record)
+    _write(folder, result, chosen_set, record)
     return record, result
-
-
-def _check_out(root: Path) -> None:
-    if root.exists() and not root.is_dir():
-        raise OutputError(f"--out {root} exists and is not a folder")
 
 
 def _record(result, poses: PoseSet, held, truth, checkpoint, source, density, seed, root) -> dict:
@@ -124,15 +122,9 @@ def _record(result, poses: PoseSet, held, truth, checkpoint, source, density, se
     }
 
 
-def _write(root: Path, result: OptimizeResult, poses: PoseSet, record: dict) -> None:
-    """Every file into a temporary folder beside ``root``, then moved in: a failure leaves nothing."""
-    parent = root.parent if str(root.parent) else Path(".")
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.", dir=parent))
-    except OSError as exc:
-        raise OutputError(f"cannot write {root}: {exc.strerror or exc}") from exc
-    try:
+def _write(folder: OutputFolder, result: OptimizeResult, poses: PoseSet, record: dict) -> None:
+    """Every file into the folder's temporary sibling, then swapped into place: a failure leaves nothing."""
+    with staged(folder) as tmp:
         if result.mode is Mode.JOINT:
             write_design(tmp / "design.txt", result.designs[0])
         else:
@@ -145,14 +137,3 @@ def _write(root: Path, result: OptimizeResult, poses: PoseSet, record: dict) -> 
         plot_curves(result, tmp / "curves.png")
         full = dict(record, curves={"objects": list(result.objects), "loss": result.curves.tolist()})
         write_json(tmp / "result.json", full)
-        root.mkdir(parents=True, exist_ok=True)
-        for item in tmp.iterdir():
-            target = root / item.name
-            if target.is_dir():
-                shutil.rmtree(target)
-            os.replace(item, target)
-    except OSError as exc:
-        raise OutputError(f"cannot write {root}: {exc.strerror or exc}") from exc
-    finally:
-        with contextlib.suppress(OSError):
-            shutil.rmtree(tmp)

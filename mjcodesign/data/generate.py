@@ -73,7 +73,9 @@ def generate(
     cluster address, instead of the pool. ``device``: MJWarp's Warp device. ``cache_dir``: CoACD's cache.
     ``slots``: tasks in flight (default twice the workers or CPUs). ``worker_setup``: a picklable
     function every worker process runs first (e.g. quieting Warp's log). ``command``: recorded in the
-    manifest. Raises :class:`OutputError` for an unusable ``out`` (see :meth:`DatasetDir.open`).
+    manifest. Files of ``out`` found damaged (:mod:`~mjcodesign.data.integrity`) are listed in
+    ``damaged_redone`` and their objects and shards computed again. Raises :class:`OutputError` for an
+    unusable ``out`` (see :meth:`DatasetDir.open`).
     """
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise DesignError(f"--workers must be an integer >= 1, got {workers!r}")
@@ -100,6 +102,7 @@ def generate(
         **counts,
         "success_rate": _success_rate(ds),
         "computed": computed,
+        "damaged_redone": ds.damaged,
         "wall_s": wall,
         "samples_per_s": rollouts / wall if wall > 0 else 0.0,
         "workers": workers,

@@ -1,7 +1,10 @@
 """Reading a dataset back: its tables as Arrow, and the summary ``mjcodesign data info`` prints.
 
 Only the files the manifest lists are read, so a folder that a run is still writing (or was killed
-while writing) reads as its finished part. No torch here; the surrogate's ``Dataset`` wraps this.
+while writing) reads as its finished part. Each file is checked as it is read (its size and SHA-256
+against the manifest, its rows' keys against its entry: :mod:`mjcodesign.data.integrity`), so a damaged
+dataset is refused with :class:`DatasetError` naming the file. No torch here; the surrogate's
+``Dataset`` wraps this.
 
 Design groups, from the mean ln E of a design's 22 blocks (printable range 13.5–17.0, midpoint 15.25):
 ``soft-like`` below 15.0, ``stiff-like`` above 15.5, ``mixed`` in between. Uniform draws per block
@@ -15,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.parquet as pq
 
+from mjcodesign.data.integrity import Integrity, listed_files, read_table, verify
 from mjcodesign.data.schema import TABLES
 from mjcodesign.data.store import FORMAT, MANIFEST
 from mjcodesign.design.stiffness import N_LOG_E
@@ -43,6 +46,11 @@ _EXACT_DENSITIES = 6  # up to this many distinct densities are listed one by one
 _DENSITY_BINS = 4
 _PLOT_BINS = 8  # mean-ln-E bins of the success plot
 _TOP_REASONS = 10
+_INTEGRITY_HASHED = "every file's size and SHA-256 checked against the manifest"
+_INTEGRITY_LEGACY = (
+    "written before file hashes were recorded: sizes and hashes not checked (rows' keys checked); "
+    "`datagen --resume` with the same settings records them"
+)
 
 
 def design_group(mean_log_e: float) -> str:
@@ -61,16 +69,12 @@ class Dataset:
 
     def files(self, table: str) -> list[Path]:
         """Files of ``table`` (poses, samples, rejected) that the manifest lists."""
-        if table == "poses":
-            rel = [o["poses_file"] for o in self.manifest["objects"] if o["status"] == "ready"]
-        else:
-            rel = [s["files"][table] for s in self.manifest["shards"].values() if table in s["files"]]
-        return [self.root / r for r in rel]
+        return [self.root / it.rel for it in listed_files(self.root, self.manifest, table)]
 
     def table(self, table: str) -> pa.Table:
-        """All rows of ``table``, sorted by object, pose (and design)."""
+        """All rows of ``table``, sorted by object, pose (and design); :class:`DatasetError` if a file is damaged."""
         schema = TABLES[table]
-        parts = [pq.read_table(f, schema=schema) for f in self.files(table)]
+        parts = [read_table(self.root, it, schema) for it in listed_files(self.root, self.manifest, table)]
         t = pa.concat_tables(parts) if parts else schema.empty_table()
         keys = _KEYS["poses" if table == "poses" else "samples"]
         return t.sort_by([(k, "ascending") for k in keys])
@@ -86,6 +90,10 @@ class Dataset:
     def rejected(self) -> pa.Table:
         """The sample errors (diverged, implausible, bad pose)."""
         return self.table("rejected")
+
+    def verify(self) -> Integrity:
+        """Every listed file checked against the manifest (the damaged ones listed, none raised)."""
+        return verify(self.root, self.manifest)
 
 
 def open_dataset(path: str | Path) -> Dataset:
@@ -142,9 +150,13 @@ def summarize(ds: Dataset) -> dict:
     reasons = rej.column("reason").to_pylist()
     top = sorted({r: reasons.count(r) for r in set(reasons)}.items(), key=lambda kv: (-kv[1], kv[0]))
     failures = s.column("failure").to_pylist()
+    listed = list(listed_files(ds.root, m))
+    hashed = sum(it.check is not None for it in listed)
     return {
         "path": str(ds.root),
         "complete": bool(m.get("complete")),
+        "integrity": _INTEGRITY_HASHED if hashed == len(listed) else _INTEGRITY_LEGACY,
+        "files_with_hash": f"{hashed}/{len(listed)}",
         "schema_version": m.get("schema_version"),
         "project_version": m.get("project_version"),
         "backend": m["config"]["backend"],

@@ -12,6 +12,7 @@ import uuid
 from pathlib import Path
 
 from mjcodesign.evaluation.config import DOMAINS, PAPER_TABLE1, EvalConfig
+from mjcodesign.outputs import OutputKind, check_output, staged
 
 __all__ = [
     "cell",
@@ -165,7 +166,12 @@ def _atomic_write(path: Path, text: str) -> None:
 
 
 def write_report(out: Path, rows: list[dict], objects: list, config: EvalConfig, meta: dict) -> dict:
-    """Write table.md, disturbance.md, results.json and success.png into ``out``; return the summary."""
+    """Write table.md, disturbance.md, results.json and success.png into ``out``; return the summary.
+
+    ``out`` follows the output-folder rule of :mod:`mjcodesign.outputs`: the files are written into a
+    temporary sibling and swapped into place together.
+    """
+    folder = check_output(out, OutputKind.EVALUATION)
     table = summary_table(rows, config)
     dist = disturbance_table(rows, config)
     summary = {
@@ -174,9 +180,9 @@ def write_report(out: Path, rows: list[dict], objects: list, config: EvalConfig,
         "objects": [{"name": o.name, "domain": o.domain, "error": o.error} for o in objects],
         **meta,
     }
-    out.mkdir(parents=True, exist_ok=True)
-    _bar_chart(table, config, out / "success.png")
-    _atomic_write(out / "table.md", table1_markdown(table, config))
-    _atomic_write(out / "disturbance.md", disturbance_markdown(dist, config))
-    _atomic_write(out / "results.json", json.dumps({**summary, "rollouts": rows}, indent=None) + "\n")
+    with staged(folder) as tmp:
+        _bar_chart(table, config, tmp / "success.png")
+        _atomic_write(tmp / "table.md", table1_markdown(table, config))
+        _atomic_write(tmp / "disturbance.md", disturbance_markdown(dist, config))
+        _atomic_write(tmp / "results.json", json.dumps({**summary, "rollouts": rows}, indent=None) + "\n")
     return summary

@@ -1,0 +1,351 @@
+"""Output folders: which folder a command may write into, and how its files land there whole.
+
+Every command that writes a folder (``datagen``, ``train``, ``optimize``, ``evaluate``, ``finger export``,
+``export-print``) follows one rule:
+
+- it writes into a new or empty folder (a hidden file counts as content), or into one that holds its
+  own kind of output, recognised by the marker file :data:`MARKER` it wrote there (a dataset by its
+  ``manifest.json``);
+- a folder that holds anything else is refused with :class:`OutputError`, unless ``overwrite`` is given
+  for a kind that allows it; then its files are kept beside the new output (same-named ones replaced);
+- another kind's output, and a folder that is also one of the command's inputs (or lies inside one, or
+  holds one), are always refused;
+- it never removes a file it did not write: entries the marker does not list are carried into the new
+  folder (hard links, else copies).
+
+:func:`check_output` applies the rule before any work. :func:`staged` then yields a temporary sibling
+folder to write into and, when the block ends without an exception, writes the marker and swaps the
+sibling into place with one ``renameat2(RENAME_EXCHANGE)`` (two renames where the kernel lacks it, undone
+on the next check after a kill between them). A process killed at any moment leaves the old output or the
+new one, whole.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import datetime
+import enum
+import errno
+import json
+import os
+import shutil
+import uuid
+from collections.abc import Iterator, Mapping
+from dataclasses import KW_ONLY, dataclass
+from pathlib import Path
+
+from mjcodesign.errors import OutputError
+
+__all__ = ["MARKER", "OutputFolder", "OutputKind", "check_output", "folder_kind", "staged"]
+
+MARKER = ".mjcodesign-output.json"
+"""The file naming a folder's kind and the entries the command wrote (JSON)."""
+_MARKER_FORMAT = "mjcodesign-output"
+_MARKER_VERSION = 1
+# A dataset is recognised by its own manifest (mjcodesign.data.store.MANIFEST and FORMAT; a test keeps
+# them equal): datagen continues a dataset shard by shard, so it never writes through staged().
+_DATASET_MANIFEST = "manifest.json"
+_DATASET_FORMAT = "mjcodesign-grasp-dataset"
+_STAGING = "mjcodesign-staging"
+_OLD = "mjcodesign-old"
+_RENAME_EXCHANGE = 2  # linux/fs.h: swap two paths atomically
+_AT_FDCWD = -100
+
+
+class OutputKind(enum.Enum):
+    """What a command writes; its value names the kind in the marker."""
+
+    DATASET = "dataset"
+    CHECKPOINT = "checkpoint"
+    CODESIGN = "codesign"
+    EVALUATION = "evaluation"
+    FINGER = "finger"
+    PRINT = "print"
+
+    @property
+    def command(self) -> str:
+        """The command that writes this kind."""
+        return _COMMANDS[self]
+
+
+_COMMANDS = {
+    OutputKind.DATASET: "datagen",
+    OutputKind.CHECKPOINT: "train",
+    OutputKind.CODESIGN: "optimize",
+    OutputKind.EVALUATION: "evaluate",
+    OutputKind.FINGER: "finger export",
+    OutputKind.PRINT: "export-print",
+}
+_NO_OVERWRITE = frozenset({OutputKind.DATASET})  # datagen continues its own dataset, never writes beside
+
+
+@dataclass(frozen=True)
+class OutputFolder:
+    """A folder :func:`check_output` accepted for ``kind`` (pass it to :func:`staged`)."""
+
+    path: Path
+    """The folder as the user named it (messages show this)."""
+    kind: OutputKind
+    _: KW_ONLY
+    overwrite: bool = False
+    """Whether files another writer left there may stay beside the new output."""
+    inputs: tuple[tuple[str, Path], ...] = ()
+    """(flag, path) of the command's inputs, which the folder must not overlap."""
+    flag: str = "--out"
+    """The flag that named the folder (messages show it)."""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.path, Path) or not str(self.path):
+            raise OutputError(f"{self.flag}: an output folder must be a non-empty path, got {self.path!r}")
+        if not isinstance(self.kind, OutputKind):
+            raise TypeError(f"kind must be an OutputKind, got {self.kind!r}")
+        if self.overwrite and self.kind in _NO_OVERWRITE:
+            raise OutputError(f"{self.kind.command} has no --overwrite")
+
+    @property
+    def real(self) -> Path:
+        """The folder's absolute path with links resolved (a link to a folder keeps pointing to it)."""
+        return Path(os.path.realpath(self.path))
+
+
+def folder_kind(path: str | Path) -> OutputKind | None:
+    """The kind of output ``path`` holds (its marker, or a dataset's manifest), or None."""
+    root = Path(path)
+    head = _read_json(root / MARKER)
+    if head is not None and head.get("format") == _MARKER_FORMAT:
+        try:
+            return OutputKind(head.get("kind"))
+        except ValueError:
+            return None
+    head = _read_json(root / _DATASET_MANIFEST)
+    if head is not None and head.get("format") == _DATASET_FORMAT:
+        return OutputKind.DATASET
+    return None
+
+
+def check_output(
+    path: str | Path,
+    kind: OutputKind,
+    *,
+    overwrite: bool = False,
+    inputs: Mapping[str, str | Path | None] | None = None,
+    flag: str = "--out",
+) -> OutputFolder:
+    """Apply the rule of the module docstring to ``path`` before any work; the accepted folder.
+
+    ``inputs`` maps each input's flag to its path (None: not given). Raises :class:`OutputError` with
+    one line naming the reason; writes nothing. Leftovers of a killed :func:`staged` beside ``path``
+    (its temporary sibling, or the old output between two renames) are cleared or put back first.
+    """
+    given = tuple((k, Path(v)) for k, v in (inputs or {}).items() if v is not None and str(v))
+    folder = OutputFolder(Path(path), kind, overwrite=overwrite, inputs=given, flag=flag)
+    _recover(folder.real)
+    _check(folder)
+    return folder
+
+
+def _check(folder: OutputFolder) -> None:
+    where, real, kind = f"{folder.flag} {folder.path}", folder.real, folder.kind
+    for name, given in folder.inputs:
+        src = Path(os.path.realpath(given))
+        if src == real or real in src.parents or src in real.parents:
+            rel = "is" if src == real else ("holds" if real in src.parents else "lies inside")
+            raise OutputError(f"{where} {rel} the input {name} {given}: choose another folder")
+    if not real.exists():
+        if os.path.lexists(folder.path):
+            raise OutputError(f"{where} is a broken link")
+        return
+    if not real.is_dir():
+        raise OutputError(f"{where} is a file, not a folder")
+    try:
+        entries = sorted(os.listdir(real))
+    except OSError as exc:
+        raise OutputError(f"{where} cannot be read: {exc.strerror or exc}") from exc
+    if not entries:
+        return
+    found = folder_kind(real)
+    if found is kind:
+        return
+    if found is not None:
+        raise OutputError(
+            f"{where} holds {_article(found)} ({found.command} output), not {_article(kind)}: choose another folder"
+        )
+    if folder.overwrite:
+        return
+    hint = "" if kind in _NO_OVERWRITE else ", or pass --overwrite to write beside them"
+    shown = ", ".join(repr(e) for e in entries[:3]) + (", …" if len(entries) > 3 else "")
+    raise OutputError(
+        f"{where} is not empty and holds no {kind.command} output ({shown}): choose a new or empty folder{hint}"
+    )
+
+
+def _article(kind: OutputKind) -> str:
+    return f"{'an' if kind.value[0] in 'aeiou' else 'a'} {kind.value}"
+
+
+@contextlib.contextmanager
+def staged(folder: OutputFolder) -> Iterator[Path]:
+    """A temporary sibling of ``folder`` to write the whole output into, swapped into place at the end.
+
+    The folder is checked again first (it may have changed during the work). On a normal exit the
+    marker is written (listing the entries written), entries of the old folder that the old marker does
+    not list are carried over, and the sibling replaces the folder in one exchange. On an exception the
+    sibling is removed and the folder is left as it was. Raises :class:`OutputError` when it cannot write.
+    """
+    if folder.kind in _NO_OVERWRITE:
+        raise OutputError(f"{folder.kind.command} writes its folder in place, not staged")
+    _check(folder)
+    real = folder.real
+    tmp = real.with_name(f".{real.name}.{_STAGING}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+    made = _missing(real.parent)
+    done = False
+    try:
+        try:
+            real.parent.mkdir(parents=True, exist_ok=True)
+            tmp.mkdir()
+            yield tmp
+            _check(folder)
+            _finish(folder, tmp)
+            _swap(folder, tmp)
+            done = True
+        except OSError as exc:
+            raise OutputError(f"cannot write {folder.flag} {folder.path}: {exc.strerror or exc}") from exc
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if not done:
+            for d in made:  # the folders this call made, deepest first, while empty
+                with contextlib.suppress(OSError):
+                    d.rmdir()
+
+
+def _missing(path: Path) -> list[Path]:
+    """``path`` and its ancestors that do not exist yet, deepest first."""
+    out = []
+    while not os.path.lexists(path) and path != path.parent:
+        out.append(path)
+        path = path.parent
+    return out
+
+
+def _finish(folder: OutputFolder, tmp: Path) -> None:
+    """Write the marker into ``tmp`` and carry over what the old folder holds that it did not write."""
+    written = sorted(e for e in os.listdir(tmp) if e != MARKER)
+    marker = {
+        "format": _MARKER_FORMAT,
+        "version": _MARKER_VERSION,
+        "kind": folder.kind.value,
+        "command": folder.kind.command,
+        "entries": written,
+        "written": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
+    }
+    (tmp / MARKER).write_text(json.dumps(marker, indent=1) + "\n", encoding="utf-8")
+    real = folder.real
+    if not real.is_dir():
+        return
+    old = _read_json(real / MARKER) if folder_kind(real) is folder.kind else None
+    ours = set((old or {}).get("entries") or ()) | {MARKER}
+    for name in os.listdir(real):
+        if name in ours or (tmp / name).exists() or (tmp / name).is_symlink():
+            continue
+        src, dst = real / name, tmp / name
+        if src.is_dir() and not src.is_symlink():
+            shutil.copytree(src, dst, symlinks=True, copy_function=_link_or_copy)
+        else:
+            _link_or_copy(src, dst)
+
+
+def _link_or_copy(src, dst) -> None:
+    """A hard link (the file itself, not a copy), or a copy where links are not possible."""
+    if os.path.islink(src):
+        os.symlink(os.readlink(src), dst)
+        return
+    try:
+        os.link(src, dst)
+    except OSError:
+        shutil.copy2(src, dst)
+
+
+def _swap(folder: OutputFolder, tmp: Path) -> None:
+    """Put ``tmp`` at the folder's place in one step; the old folder ends at ``tmp`` (then removed)."""
+    real = folder.real
+    if not os.path.lexists(real):
+        os.rename(tmp, real)  # replaces an empty folder made meanwhile; a non-empty one is an error
+        return
+    if _exchange(tmp, real):
+        return
+    old = real.with_name(f".{real.name}.{_OLD}-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+    os.rename(real, old)  # a kill here leaves `old`; the next check_output puts it back
+    os.rename(tmp, real)
+    os.rename(old, tmp)
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two paths with ``renameat2(RENAME_EXCHANGE)``; False where the system cannot."""
+    fn = getattr(_libc(), "renameat2", None)
+    if fn is None:
+        return False
+    rc = fn(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE)
+    if rc == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP):
+        return False
+    raise OSError(err, os.strerror(err), str(b))
+
+
+_LIBC: list = []
+
+
+def _libc():
+    if not _LIBC:
+        try:
+            _LIBC.append(ctypes.CDLL(None, use_errno=True))
+        except OSError:
+            _LIBC.append(None)
+    return _LIBC[0]
+
+
+def _recover(real: Path) -> None:
+    """Clear what a killed :func:`staged` left beside ``real``: its sibling, or the old folder to put back."""
+    parent = real.parent
+    if not parent.is_dir():
+        return
+    prefix = f".{real.name}."
+    for name in os.listdir(parent):
+        if not name.startswith(prefix):
+            continue
+        tag = next((t for t in (_STAGING, _OLD) if name[len(prefix) :].startswith(t + "-")), None)
+        if tag is None or _alive(name[len(prefix) + len(tag) + 1 :].split("-")[0]):
+            continue
+        leftover = parent / name
+        with contextlib.suppress(OSError):
+            if tag == _OLD and not os.path.lexists(real):
+                os.rename(leftover, real)
+            else:
+                shutil.rmtree(leftover)
+
+
+def _alive(pid_text: str) -> bool:
+    """Whether the process that left a sibling may still be writing it (its id is in the name)."""
+    try:
+        pid = int(pid_text)
+    except ValueError:
+        return True
+    if pid == os.getpid():
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _read_json(path: Path) -> dict | None:
+    try:
+        head = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return head if isinstance(head, dict) else None
