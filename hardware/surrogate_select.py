@@ -81,7 +81,7 @@ def score_candidates(
 
     Returns the scores (candidate order) and the estimates used (COM, volume, mass, point count).
     """
-    from mjcodesign.data.cloud import fingers_box, to_gripper
+    from mjcodesign.data.cloud import fingers_box, gripper_up, to_gripper
     from mjcodesign.surrogate import GraspBatch, Poses, load_surrogate
 
     sur = load_surrogate(checkpoint)
@@ -105,7 +105,7 @@ def score_candidates(
         pick = rng.choice(len(inside), size=n, replace=len(inside) < n)
         clouds.append(inside[pick])
         coms.append(to_gripper(T, com[None])[0])
-        ups.append(T[2, :3])
+        ups.append(gripper_up(T))
         where.append((i, len(inside)))
     if where:
         p = len(where)

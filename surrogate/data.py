@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from mjcodesign.data import Dataset, open_dataset
+from mjcodesign.data import Dataset, PoseRows, StoredPoses, open_dataset, read_poses
 from mjcodesign.design.stiffness import N_LOG_E
 from mjcodesign.errors import DesignError, OutputError
 
@@ -76,24 +76,8 @@ _MIN_RADIUS = 1e-6  # [m] the authors' floor on a cloud's radius
 class GraspData:
     """A dataset's rows as arrays; P poses, S samples. Vectors in the gripper frame."""
 
-    clouds: np.ndarray
-    """Partial point clouds [m], float32, shape (P, N, 3)."""
-    com: np.ndarray
-    """Object COM [m], shape (P, 3)."""
-    up: np.ndarray
-    """World vertical (unit), shape (P, 3): row 2 of the palm rotation."""
-    palm: np.ndarray
-    """Palm pose in the world, shape (P, 4, 4) [m]."""
-    openings: np.ndarray
-    """Target openings of the fingers [m], shape (P, 2)."""
-    mass: np.ndarray
-    """Object mass at the pose's density [kg], shape (P,)."""
-    pose_density: np.ndarray
-    """[kg/m³], shape (P,)."""
-    objects: np.ndarray
-    """Object name of each pose, shape (P,)."""
-    pose_keys: np.ndarray
-    """(object_index, pose_index) of each pose, shape (P, 2)."""
+    stored: StoredPoses
+    """The poses table (:func:`mjcodesign.data.read_poses`): every stored pose, sampled or not."""
     pose: np.ndarray
     """Pose row of each sample, shape (S,)."""
     log_e: np.ndarray
@@ -113,6 +97,56 @@ class GraspData:
     root: Path
 
     @property
+    def poses(self) -> PoseRows:
+        """The pose rows (:class:`~mjcodesign.data.PoseRows`), shape (P, ...)."""
+        return self.stored.rows
+
+    @property
+    def clouds(self) -> np.ndarray:
+        """Partial point clouds [m], float32, shape (P, N, 3)."""
+        return self.stored.rows.clouds
+
+    @property
+    def com(self) -> np.ndarray:
+        """Object COM [m], shape (P, 3)."""
+        return self.stored.rows.com
+
+    @property
+    def up(self) -> np.ndarray:
+        """World vertical (unit), shape (P, 3): row 2 of the palm rotation."""
+        return self.stored.rows.up
+
+    @property
+    def palm(self) -> np.ndarray:
+        """Palm pose in the world, shape (P, 4, 4) [m]."""
+        return self.stored.rows.palms
+
+    @property
+    def openings(self) -> np.ndarray:
+        """Target openings of the fingers [m], shape (P, 2)."""
+        return self.stored.rows.openings
+
+    @property
+    def mass(self) -> np.ndarray:
+        """Object mass at the pose's density [kg], shape (P,)."""
+        return self.stored.mass
+
+    @property
+    def pose_density(self) -> np.ndarray:
+        """[kg/m³], shape (P,)."""
+        return self.stored.density
+
+    @property
+    def objects(self) -> np.ndarray:
+        """Object name of each pose, shape (P,)."""
+        return self.stored.rows.names
+
+    @property
+    def pose_keys(self) -> np.ndarray:
+        """(object_index, pose_index) of each pose, shape (P, 2)."""
+        return self.stored.keys
+
+    @property
     def sample_mass(self) -> np.ndarray:
         """Object mass of each sample [kg], shape (S,) (mass scales with density)."""
         return self.mass[self.pose] * self.density / self.pose_density[self.pose]
@@ -126,15 +160,6 @@ def _fixed(column, width: int) -> np.ndarray:
     return np.asarray(flat, dtype=float).reshape(-1, width)
 
 
-def _clouds(column) -> np.ndarray:
-    arr = column.combine_chunks()
-    lengths = np.diff(np.asarray(arr.offsets))
-    if len(lengths) and np.any(lengths != lengths[0]):
-        raise OutputError("point clouds of different sizes in one dataset")
-    pts = arr.flatten().flatten().to_numpy(zero_copy_only=False)
-    return np.asarray(pts, dtype=np.float32).reshape(len(arr), -1, 3)
-
-
 def load_grasp_data(source: str | Path | Dataset) -> GraspData:
     """The samples and poses of a dataset folder (or an open :class:`~mjcodesign.data.Dataset`).
 
@@ -143,11 +168,11 @@ def load_grasp_data(source: str | Path | Dataset) -> GraspData:
     ds = source if isinstance(source, Dataset) else open_dataset(source)
     mpath = ds.root / "manifest.json"
     sha = hashlib.sha256(mpath.read_bytes()).hexdigest()
-    poses, samples = ds.poses(), ds.samples()
+    samples = ds.samples()
     if samples.num_rows == 0:
         raise OutputError(f"{ds.root}: the dataset holds no sample")
-    keys = np.stack([poses.column(k).to_numpy() for k in ("object_index", "pose_index")], axis=1)
-    row_of = {(int(o), int(p)): i for i, (o, p) in enumerate(keys)}
+    stored = read_poses(ds)
+    row_of = {(int(o), int(p)): i for i, (o, p) in enumerate(stored.keys)}
     s_keys = zip(
         samples.column("object_index").to_numpy(), samples.column("pose_index").to_numpy(), strict=True
     )
@@ -155,7 +180,6 @@ def load_grasp_data(source: str | Path | Dataset) -> GraspData:
         pose = np.array([row_of[(int(o), int(p))] for o, p in s_keys], dtype=np.int64)
     except KeyError as exc:
         raise OutputError(f"{ds.root}: a sample's pose {exc} is not in the poses table") from None
-    palm = _fixed(poses.column("palm_pose"), 16).reshape(-1, 4, 4)
     contact = samples.column("ground_contact").to_numpy(zero_copy_only=False).astype(float)
     outputs = np.concatenate(
         [
@@ -167,15 +191,7 @@ def load_grasp_data(source: str | Path | Dataset) -> GraspData:
     )
     scenario = ds.manifest["config"]["scenario"]
     return GraspData(
-        clouds=_clouds(poses.column("point_cloud")),
-        com=_fixed(poses.column("com_gripper"), 3),
-        up=palm[:, 2, :3].copy(),
-        palm=palm,
-        openings=_fixed(poses.column("openings"), 2),
-        mass=poses.column("mass").to_numpy(),
-        pose_density=poses.column("density").to_numpy(),
-        objects=np.asarray(poses.column("object").to_pylist(), dtype=object),
-        pose_keys=keys,
+        stored=stored,
         pose=pose,
         log_e=_fixed(samples.column("log_e"), N_LOG_E),
         density=samples.column("density").to_numpy(),

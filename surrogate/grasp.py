@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from mjcodesign.data import partial_cloud
-from mjcodesign.data.cloud import to_gripper
+from mjcodesign.data.cloud import gripper_up, to_gripper
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError
@@ -62,7 +62,7 @@ def predict_grasp(
     T = pose_matrix(gp)
     cloud = partial_cloud(obj, T, gp.openings, np.random.default_rng(seed), n=int(ds["cloud_points"]))
     com = to_gripper(T, scene_offset(obj)[None])[0]
-    poses = Poses(cloud.points[None], com[None], T[2:3, :3], np.array([obj.mass / obj.density]))
+    poses = Poses(cloud.points[None], com[None], gripper_up(T)[None], np.array([obj.mass / obj.density]))
     pred = sur.predict(GraspBatch(poses, [0], [rho], design.log_e.reshape(1, -1)))
     return {
         "object": obj.name,

@@ -29,11 +29,11 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from mjcodesign.data import PoseRows
 from mjcodesign.design.stiffness import N_LOG_E
 from mjcodesign.errors import DesignError, StiffnessError
 from mjcodesign.surrogate.data import (
     N_REGRESSION,
-    GraspData,
     Normalizer,
     frame_inputs,
     normalize_clouds,
@@ -88,10 +88,13 @@ class Poses:
             raise DesignError("poses need a volume per pose, shape (P,)")
 
     @classmethod
-    def from_data(cls, data: GraspData, rows: np.ndarray | None = None) -> Poses:
-        """Pose ``rows`` of a dataset (all when None)."""
-        r = np.arange(len(data.clouds)) if rows is None else np.asarray(rows)
-        return cls(data.clouds[r], data.com[r], data.up[r], data.mass[r] / data.pose_density[r])
+    def of(cls, poses: PoseRows, rows: np.ndarray | None = None) -> Poses:
+        """Rows ``rows`` (all when None) of :class:`~mjcodesign.data.PoseRows`.
+
+        A dataset's (``GraspData.poses``) or a co-design's candidates (:class:`~mjcodesign.codesign.PoseSet`).
+        """
+        r = np.arange(len(poses)) if rows is None else np.asarray(rows)
+        return cls(poses.clouds[r], poses.com[r], poses.up[r], poses.volume[r])
 
     def __len__(self) -> int:
         return len(self.clouds)

@@ -100,7 +100,7 @@ def smoothness(
         outs = run_jobs(jobs, backend)
         l_sim = _sim_losses(outs, data.up[p], loss).reshape(lines, points)
         ok = np.array([o.success for o in outs]).reshape(lines, points)
-        batch = surrogate.prepare(GraspBatch(Poses.from_data(data, [p]), [0], [data.pose_density[p]]))
+        batch = surrogate.prepare(GraspBatch(Poses.of(data.poses, [p]), [0], [data.pose_density[p]]))
         for k in range(lines):
             res = [surrogate.loss_and_grad(d, batch, loss) for d in designs[k]]
             l_sur = np.array([r.loss for r in res])

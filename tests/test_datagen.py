@@ -33,18 +33,21 @@ from mjcodesign.data import (
     design_group,
     fingers_box,
     generate,
+    gripper_up,
     open_dataset,
     parse_density_spec,
+    read_poses,
     sample_designs,
     summarize,
 )
+from mjcodesign.data.cloud import to_gripper
 from mjcodesign.data.executors import cpu_count
 from mjcodesign.data.schema import SAMPLES, build_table, empty_columns
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
 from mjcodesign.errors import MjcodesignError, OutputError
 from mjcodesign.jobs import load_grasp_object
-from mjcodesign.models.types import FingerModel
+from mjcodesign.models.types import FingerModel, GripperPose
 from mjcodesign.poses import scene_offset
 from mjcodesign.scenarios.drive import TendonForce, TendonPosition
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose
@@ -225,6 +228,27 @@ def test_pose_rows_are_in_the_gripper_frame(reference, config, work):
         assert dist.max() < _TOL_SURFACE
     density = np.asarray(p["density"])
     assert np.all((density >= 300) & (density <= 500)) and len(set(density)) == len(density)
+
+
+def test_read_poses_is_the_poses_table(reference, config):
+    """The one reader of the poses table: every row, in the table's order, with its frame's vertical."""
+    stored = read_poses(reference)
+    p = reference.poses().to_pydict()
+    rows = stored.rows
+    assert len(rows) == len(p["pose_index"]) and rows.clouds.dtype == np.float32
+    assert_array_equal(stored.keys, np.column_stack([p["object_index"], p["pose_index"]]))
+    assert list(rows.names) == p["object"] and rows.objects == tuple(dict.fromkeys(p["object"]))
+    assert_array_equal(rows.clouds, np.asarray(p["point_cloud"], dtype=np.float32))
+    assert_array_equal(rows.palms, np.reshape(p["palm_pose"], (-1, 4, 4)))
+    assert_array_equal(rows.com, p["com_gripper"])
+    assert_array_equal(rows.openings, p["openings"])
+    assert_array_equal(stored.mass, p["mass"])
+    assert_array_equal(rows.volume, np.asarray(p["mass"]) / np.asarray(p["density"]))
+    for T, up in zip(rows.palms, rows.up, strict=True):
+        # The world's +z seen from the palm: to_gripper of a unit step up from the palm's origin.
+        np.testing.assert_allclose(up, to_gripper(T, T[None, :3, 3] + [0.0, 0.0, 1.0])[0], atol=1e-15)
+        assert_array_equal(up, gripper_up(T))
+    assert rows.gripper_pose(0) == GripperPose.from_matrix(rows.palms[0], tuple(rows.openings[0]))
 
 
 def _auto_tasks(config, entry: dict, density: float, shifts=(0.0,), palm_z=None) -> list[ShardTask]:

@@ -127,7 +127,7 @@ def _surrogate(data, result) -> Surrogate:
 
 def _batch(data, rows, with_design=True) -> GraspBatch:
     return GraspBatch(
-        Poses.from_data(data), data.pose[rows], data.density[rows], data.log_e[rows] if with_design else None
+        Poses.of(data.poses), data.pose[rows], data.density[rows], data.log_e[rows] if with_design else None
     )
 
 

@@ -80,7 +80,7 @@ def _bare_mlp(surrogate, poses: PoseSet):
     from mjcodesign.surrogate import GraspBatch, Poses
 
     batch = surrogate.prepare(
-        GraspBatch(Poses(poses.clouds, poses.com, poses.up, poses.volume), np.arange(len(poses)),
+        GraspBatch(Poses.of(poses), np.arange(len(poses)),
                    np.full(len(poses), _DENSITY))
     )  # fmt: skip
     feats = batch.features.features

@@ -242,7 +242,7 @@ def optimize(
         empty = [poses.objects[k] for k, r in enumerate(rows_of) if len(r) == 0]
         raise DesignError(f"every object needs a candidate pose; none for {empty or 'any object'}")
     base = loss or DesignLoss()
-    sur_poses = Poses(poses.clouds, poses.com, poses.up, poses.volume)
+    sur_poses = Poses.of(poses)
     joint = cfg.mode is Mode.JOINT
     groups = [np.arange(k_objects)] if joint else [np.array([k]) for k in range(k_objects)]
     batches = []

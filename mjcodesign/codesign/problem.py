@@ -19,10 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mjcodesign.data import CLOUD_POINTS, open_dataset, partial_cloud
+from mjcodesign.data import CLOUD_POINTS, PoseRows, open_dataset, partial_cloud, read_poses
 from mjcodesign.data.cloud import to_gripper
-from mjcodesign.errors import DesignError, OutputError, PoseError
-from mjcodesign.models.types import GripperPose
+from mjcodesign.errors import DesignError, PoseError
 from mjcodesign.objects import load_object
 from mjcodesign.poses import read_candidates, scene_offset
 
@@ -38,54 +37,13 @@ def object_key(source: str) -> str:
 
 
 @dataclass(frozen=True, eq=False)
-class PoseSet:
-    """P candidate poses of K objects; pose rows of one object are contiguous, in the source's order."""
+class PoseSet(PoseRows):
+    """P candidate poses of K objects (:class:`~mjcodesign.data.PoseRows`), in the source's order."""
 
-    objects: tuple[str, ...]
-    """Object names, shape (K,)."""
-    object_of: np.ndarray
-    """Object index of each pose, shape (P,), non-decreasing."""
-    clouds: np.ndarray
-    """Partial point clouds in the gripper frame [m], float32, shape (P, N, 3)."""
-    com: np.ndarray
-    """Object COM in the gripper frame [m], shape (P, 3)."""
-    palms: np.ndarray
-    """Palm poses in the scene's world [m], shape (P, 4, 4); row 2 of the rotation is the world vertical
-    in the gripper frame."""
-    openings: np.ndarray
-    """Target openings of fingers A and B [m], shape (P, 2)."""
-    volume: np.ndarray
-    """Object volume [m³], shape (P,)."""
     source: str = ""
     """Where the poses came from."""
     dataset_rollouts: int | None = None
     """Rollouts the source dataset ran (samples and rejected), None for candidate files."""
-
-    def __post_init__(self) -> None:
-        p = len(self.object_of)
-        shapes = [np.shape(self.com), np.shape(self.palms), np.shape(self.openings), np.shape(self.volume)]
-        if shapes != [(p, 3), (p, 4, 4), (p, 2), (p,)] or len(self.clouds) != p:
-            raise DesignError(
-                f"a pose set needs one cloud, COM, palm, opening pair and volume per pose ({p})"
-            )
-        if p and (np.any(np.diff(self.object_of) < 0) or self.object_of[-1] >= len(self.objects)):
-            raise DesignError("a pose set's poses must be grouped by object, in object order")
-
-    def __len__(self) -> int:
-        return len(self.object_of)
-
-    @property
-    def up(self) -> np.ndarray:
-        """World vertical in the gripper frame, shape (P, 3)."""
-        return self.palms[:, 2, :3]
-
-    def rows(self, k: int) -> np.ndarray:
-        """Pose rows of object ``k``."""
-        return np.flatnonzero(self.object_of == k)
-
-    def gripper_pose(self, row: int) -> GripperPose:
-        """Pose ``row`` as the simulator takes it."""
-        return GripperPose.from_matrix(self.palms[row], tuple(float(v) for v in self.openings[row]))
 
     def select(self, names, per_object: int) -> PoseSet:
         """The first ``per_object`` poses of each of ``names`` (in that order).
@@ -147,38 +105,27 @@ def load_pose_set(source: str | Path, *, seed: int = 0, cache_dir: str | Path | 
 def _from_dataset(root: Path) -> PoseSet:
     """The stored poses that have a sample (the surrogate never saw a pose data generation refused)."""
     ds = open_dataset(root)
-    t = ds.poses()
-    if t.num_rows == 0:
+    stored = read_poses(ds)
+    if len(stored.keys) == 0:
         raise PoseError(f"{root}: the dataset holds no pose")
-    names = [str(n) for n in t.column("object").to_pylist()]
-    keys = np.stack([t.column(k).to_numpy() for k in ("object_index", "pose_index")], axis=1)
     s = ds.samples()
     sampled = set(zip(s.column("object_index").to_pylist(), s.column("pose_index").to_pylist(), strict=True))
-    order = np.lexsort((keys[:, 1], keys[:, 0]))
-    order = order[[(int(keys[i, 0]), int(keys[i, 1])) in sampled for i in order]]
-    if len(order) == 0:
+    keep = np.array([(int(o), int(p)) in sampled for o, p in stored.keys], dtype=bool)
+    if not keep.any():
         raise PoseError(f"{root}: no stored pose has a sample (the simulator refused every one)")
-    objects = tuple(dict.fromkeys(names[i] for i in order))
+    rows = stored.rows
+    names = rows.names[keep]
+    objects = tuple(dict.fromkeys(names))
     k_of = {n: k for k, n in enumerate(objects)}
-
-    def fixed(name: str, width: int) -> np.ndarray:
-        flat = t.column(name).combine_chunks().flatten().to_numpy(zero_copy_only=False)
-        return np.asarray(flat, dtype=float).reshape(-1, width)[order]
-
-    clouds = t.column("point_cloud").combine_chunks()
-    lengths = np.diff(np.asarray(clouds.offsets))
-    if len(set(lengths.tolist())) != 1:
-        raise OutputError(f"{root}: point clouds of different sizes")
-    pts = np.asarray(clouds.flatten().flatten().to_numpy(zero_copy_only=False), dtype=np.float32)
     counts = ds.manifest.get("counts", {})
     return PoseSet(
         objects,
-        np.array([k_of[names[i]] for i in order], dtype=np.int64),
-        pts.reshape(len(lengths), -1, 3)[order],
-        fixed("com_gripper", 3),
-        fixed("palm_pose", 16).reshape(-1, 4, 4),
-        fixed("openings", 2),
-        (t.column("mass").to_numpy() / t.column("density").to_numpy())[order],
+        np.array([k_of[n] for n in names], dtype=np.int64),
+        rows.clouds[keep],
+        rows.com[keep],
+        rows.palms[keep],
+        rows.openings[keep],
+        rows.volume[keep],
         source=str(root),
         dataset_rollouts=int(counts.get("samples", 0)) + int(counts.get("rejected", 0)),
     )

@@ -35,29 +35,23 @@ BASELINES = ("soft", "semi-rigid")
 """Presets the optimised design is compared with."""
 
 
-def _surrogate_inputs(poses: PoseSet):
-    from mjcodesign.surrogate import Poses
-
-    return Poses(poses.clouds, poses.com, poses.up, poses.volume)
-
-
 def pick_poses(surrogate, poses: PoseSet, design, density: float, loss=None) -> np.ndarray:
     """Per object, the pose row of lowest L_opt for ``design`` (22 ln E), shape (K,)."""
-    from mjcodesign.surrogate import GraspBatch
+    from mjcodesign.surrogate import GraspBatch, Poses
 
     rows = np.arange(len(poses))
-    batch = GraspBatch(_surrogate_inputs(poses), rows, np.full(len(rows), float(density)))
+    batch = GraspBatch(Poses.of(poses), rows, np.full(len(rows), float(density)))
     per_row = surrogate.loss_and_grad(np.asarray(design, dtype=float), batch, loss=loss).rows
     return np.array([poses.rows(k)[np.argmin(per_row[poses.rows(k)])] for k in range(len(poses.objects))])
 
 
 def predicted_success(surrogate, poses: PoseSet, rows, designs, density: float):
     """The surrogate's success and score at pose ``rows`` with ``designs`` (one per row, (n, 22))."""
-    from mjcodesign.surrogate import GraspBatch
+    from mjcodesign.surrogate import GraspBatch, Poses
 
     rows = np.asarray(rows, dtype=np.int64)
     batch = GraspBatch(
-        _surrogate_inputs(poses), rows, np.full(len(rows), float(density)), np.asarray(designs, dtype=float)
+        Poses.of(poses), rows, np.full(len(rows), float(density)), np.asarray(designs, dtype=float)
     )
     pred = surrogate.predict(batch)
     return pred.success, pred.success_score

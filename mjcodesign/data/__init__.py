@@ -10,10 +10,11 @@ Import from here (``from mjcodesign.data import generate``): each name has this 
 - :mod:`~mjcodesign.data.executors`: in-process, process-pool and Ray execution;
 - :mod:`~mjcodesign.data.store`: the dataset folder, its manifest and crash-safe writes;
 - :mod:`~mjcodesign.data.generate`: :func:`generate`, the resumable driver;
-- :mod:`~mjcodesign.data.reader`: :func:`open_dataset` and :func:`summarize` (no torch).
+- :mod:`~mjcodesign.data.reader`: :func:`open_dataset` and :func:`summarize` (no torch);
+- :mod:`~mjcodesign.data.rows`: :class:`PoseRows`, the type of pose rows, and :func:`read_poses`.
 """
 
-from mjcodesign.data.cloud import PartialCloud, fingers_box, partial_cloud
+from mjcodesign.data.cloud import PartialCloud, fingers_box, gripper_up, partial_cloud
 from mjcodesign.data.config import (
     BACKENDS,
     CLOUD_POINTS,
@@ -27,6 +28,7 @@ from mjcodesign.data.config import (
 )
 from mjcodesign.data.generate import Event, generate
 from mjcodesign.data.reader import DESIGN_GROUPS, Dataset, design_group, open_dataset, plot_success, summarize
+from mjcodesign.data.rows import PoseRows, StoredPoses, read_poses
 from mjcodesign.data.sampling import PoseStreams, object_pose_seed, sample_designs
 from mjcodesign.data.schema import COLUMNS, POSES, REJECTED, SAMPLES
 from mjcodesign.data.store import MANIFEST, DatasetDir, project_version
@@ -50,12 +52,15 @@ __all__ = [
     "Event",
     "ObjectTask",
     "PartialCloud",
+    "PoseRows",
     "PoseStreams",
     "ShardTask",
+    "StoredPoses",
     "Worker",
     "design_group",
     "fingers_box",
     "generate",
+    "gripper_up",
     "object_pose_seed",
     "open_dataset",
     "parse_density_spec",
@@ -63,6 +68,7 @@ __all__ = [
     "partial_cloud",
     "plot_success",
     "project_version",
+    "read_poses",
     "resolve_objects",
     "sample_designs",
     "shard_key",

@@ -22,7 +22,15 @@ from mjcodesign.errors import PoseError
 from mjcodesign.objects import GraspObject
 from mjcodesign.poses import COARSE_EDGE, RigidGripper, scene_offset
 
-__all__ = ["MIN_INSIDE", "OVERSAMPLE", "PartialCloud", "fingers_box", "partial_cloud", "to_gripper"]
+__all__ = [
+    "MIN_INSIDE",
+    "OVERSAMPLE",
+    "PartialCloud",
+    "fingers_box",
+    "gripper_up",
+    "partial_cloud",
+    "to_gripper",
+]
 
 OVERSAMPLE = 50
 """Surface samples drawn per point kept (the authors' ``oversample_factor``)."""
@@ -48,6 +56,14 @@ class PartialCloud:
 def to_gripper(T: np.ndarray, points: np.ndarray) -> np.ndarray:
     """World points (k, 3) [m] in the palm frame of the 4x4 pose ``T``."""
     return (np.asarray(points, dtype=float) - T[:3, 3]) @ T[:3, :3]
+
+
+def gripper_up(T: np.ndarray) -> np.ndarray:
+    """The world's vertical (+z, unit) in the palm frame of pose(s) ``T``, shape (..., 4, 4) -> (..., 3).
+
+    Row 2 of the palm's rotation: the direction :func:`to_gripper` maps world +z to.
+    """
+    return np.asarray(T)[..., 2, :3]
 
 
 @functools.lru_cache(maxsize=4)
