@@ -53,6 +53,7 @@ from mjcodesign.scenarios.grasp import (
     scene_options,
 )
 from mjcodesign.scenarios.outcome import Failure, Outcome, failed_outcome
+from mjcodesign.scenarios.perturb import Perturbation, perturbed_scene
 from mjcodesign.sim.mujoco_c import scene_with_design
 from mjcodesign.sim.observe import Observer
 from mjcodesign.sim.protocol import Simulator
@@ -91,6 +92,8 @@ class GraspJob:
     """Numerical options of the model; None for the defaults."""
     label: str | None = None
     """Name an observer gets for this rollout (default ``job{i}``)."""
+    perturbation: Perturbation | None = None
+    """What this execution does differently (:mod:`mjcodesign.scenarios.perturb`); None: nothing."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.obj, GraspObject):
@@ -135,7 +138,11 @@ class SceneCache:
             hit = (
                 job.obj,
                 compile_scene(
-                    obj, job.geometry, job.design, job.finger_model, options=scene_options(job.scenario, job.options)
+                    obj,
+                    job.geometry,
+                    job.design,
+                    job.finger_model,
+                    options=scene_options(job.scenario, job.options),
                 ),
             )
             while len(self._scenes) >= self.size:
@@ -175,8 +182,17 @@ def _scene_key(job: GraspJob) -> tuple:
 
 
 def _run_group(jobs, idx: list[int], backend, observer, outs: list, strict: bool, base: GraspScene) -> None:
-    """The jobs ``idx`` of one scene key: per pose a design batch, then per design a pose batch."""
+    """The jobs ``idx`` of one scene key: per pose a design batch, then per design a pose batch.
+
+    Perturbed jobs go together through the backend's ``run_scenes`` (:func:`_run_perturbed`).
+    """
     first = jobs[idx[0]]
+    perturbed = [i for i in idx if jobs[i].perturbation is not None]
+    if perturbed:
+        _run_perturbed(jobs, perturbed, backend, observer, outs, strict, base)
+        idx = [i for i in idx if jobs[i].perturbation is None]
+        if not idx:
+            return
     by_pose: dict[GripperPose, list[int]] = defaultdict(list)
     for i in idx:
         by_pose[jobs[i].pose].append(i)
@@ -197,6 +213,52 @@ def _run_group(jobs, idx: list[int], backend, observer, outs: list, strict: bool
         by_design[_design_key(jobs[i].design)].append(i)
     for members in by_design.values():
         _run_poses(jobs, members, base, backend, observer, outs, strict)
+
+
+_SCENES_PER_CALL = (
+    256  # perturbed scenes per rollout call: its states (nstep x nstate doubles each) stay < 0.5 GB
+)
+
+
+def _run_perturbed(
+    jobs, idx: list[int], backend, observer, outs: list, strict: bool, base: GraspScene
+) -> None:
+    """Perturbed jobs of one scene key: a scene per (pose, draw), a model copy per design, batched.
+
+    A (pose, draw) that cannot be simulated marks its jobs :attr:`Failure.BAD_POSE`. Backends with
+    ``run_scenes`` take up to :data:`_SCENES_PER_CALL` scenes a call; others a design batch per scene.
+    """
+    scenario = jobs[idx[0]].scenario
+    at: dict[tuple, GraspScene | PoseError] = {}
+    by_scene: dict[tuple, list[int]] = defaultdict(list)
+    for i in idx:
+        key = (jobs[i].pose, jobs[i].perturbation)
+        if key not in at:
+            try:
+                at[key] = perturbed_scene(base, scenario, jobs[i].perturbation, pose=jobs[i].pose)
+            except PoseError as exc:
+                if strict:
+                    raise
+                at[key] = exc
+        if isinstance(at[key], PoseError):
+            outs[i] = failed_outcome(Failure.BAD_POSE, f"bad pose: {at[key]}")
+        else:
+            by_scene[key].append(i)
+    if hasattr(backend, "run_scenes"):
+        order = [i for members in by_scene.values() for i in members]
+        for k in range(0, len(order), _SCENES_PER_CALL):
+            chunk = order[k : k + _SCENES_PER_CALL]
+            scenes = [_with_design(at[(jobs[i].pose, jobs[i].perturbation)], jobs[i].design) for i in chunk]
+            _place(
+                outs,
+                chunk,
+                backend.run_scenes(scenes, scenario, observer=observer, labels=_labels(jobs, chunk)),
+            )
+        return
+    for key, members in by_scene.items():
+        designs = [jobs[i].design for i in members]
+        res = backend.run_batch(at[key], scenario, designs, observer=observer, labels=_labels(jobs, members))
+        _place(outs, members, res)
 
 
 def _run_poses(jobs, members: list[int], base: GraspScene, backend, observer, outs, strict: bool) -> None:

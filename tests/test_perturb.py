@@ -7,7 +7,7 @@ from numpy.testing import assert_array_equal
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
-from mjcodesign.errors import DesignError
+from mjcodesign.errors import DesignError, PoseError
 from mjcodesign.models.types import FingerModel, GripperPose
 from mjcodesign.objects import box_object
 from mjcodesign.scenarios.drive import TendonPosition
@@ -115,3 +115,58 @@ def test_bad_draws_are_refused():
         Perturbation(palm_offset=(0.0, np.nan, 0.0))
     with pytest.raises(DesignError):
         Perturbation(tendon_scale=float("inf"))
+
+
+def test_perturbed_jobs_batch_bitwise_like_single_rollouts(box_scene):
+    """run_jobs batches perturbed jobs through run_scenes; each equals its own single rollout bitwise."""
+    from mjcodesign.jobs import GraspJob, run_jobs
+
+    scenario = GraspScenario(impulse=0.0, hold_s=0.1, post_hold_s=0.05)
+    draws = [
+        NOMINAL,
+        Perturbation(palm_offset=(0.001, 0.0, 0.0005), mass_scale=1.08),
+        Perturbation(palm_rotation=(0.0, 0.0, 0.03), friction_scale=0.85, tendon_scale=1.04),
+    ]
+    designs = [Stiffness.preset("paper-optimized"), Stiffness.preset("soft")]
+    jobs = [
+        GraspJob(obj=box_scene.obj, pose=box_scene.pose, design=d, scenario=scenario, perturbation=p)
+        for p in draws
+        for d in designs
+    ]
+    outs = run_jobs(jobs, MujocoBackend(nthread=2))
+    for job, out in zip(jobs, outs, strict=True):
+        scene = build_scene(box_scene.obj, FingerDesign(), job.design, FingerModel.CHAIN, box_scene.pose)
+        ref = MujocoBackend().run(perturbed_scene(scene, scenario, job.perturbation), scenario)
+        assert_array_equal(out.body_force, ref.body_force)
+        assert_array_equal(out.displacement, ref.displacement)
+    plain = run_jobs(
+        [GraspJob(obj=box_scene.obj, pose=box_scene.pose, design=designs[0], scenario=scenario)],
+        MujocoBackend(),
+    )[0]
+    assert_array_equal(plain.body_force, outs[0].body_force)  # the nominal draw is the plain job
+
+
+def test_start_penetration_grows_with_the_palm_error():
+    """A palm draw that pushes the open fingers into an object: the overlap grows as the error does."""
+    from mjcodesign.evaluation.candidates import object_candidates
+    from mjcodesign.jobs import load_grasp_object
+    from mjcodesign.scenarios.perturb import start_penetration
+
+    obj = load_grasp_object("egad-like:3", "light")
+    cands = object_candidates(obj, 10)
+    base = build_scene(obj, FingerDesign(), Stiffness.preset("soft"), FingerModel.CHAIN, cands.poses[0])
+    scenario = GraspScenario()
+    rng = np.random.default_rng(0)
+
+    def depth(pose, offset, rotation, s):
+        p = Perturbation(palm_offset=tuple(s * offset), palm_rotation=tuple(s * rotation))
+        return start_penetration(perturbed_scene(base, scenario, p, pose=pose))
+
+    for _ in range(200):
+        pose = cands.poses[int(rng.integers(len(cands)))]
+        off, rot = rng.uniform(-0.002, 0.002, 3), np.deg2rad(rng.uniform(-2, 2, 3))
+        if depth(pose, off, rot, 0.0) == 0.0 and depth(pose, off, rot, 1.0) > 0.0005:
+            break
+    else:
+        pytest.fail("no palm draw of ±2 mm, ±2° overlapped the object in 200 tries")
+    assert depth(pose, off, rot, 1.5) > depth(pose, off, rot, 1.0) > depth(pose, off, rot, 0.5)

@@ -17,11 +17,12 @@ import mujoco
 import numpy as np
 
 from mjcodesign.errors import DesignError
+from mjcodesign.models.builder import make_data
 from mjcodesign.models.types import GripperPose
 from mjcodesign.scenarios.drive import TendonForce
 from mjcodesign.scenarios.grasp import GraspScenario, GraspScene, drive_scene, scene_at_pose
 
-__all__ = ["NOMINAL", "Perturbation", "perturbed_pose", "perturbed_scene"]
+__all__ = ["NOMINAL", "Perturbation", "perturbed_pose", "perturbed_scene", "start_penetration"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -82,8 +83,12 @@ def _axis_angle(rotvec: np.ndarray) -> tuple[np.ndarray, float]:
     return rotvec / angle, angle
 
 
-def perturbed_scene(scene: GraspScene, scenario: GraspScenario, p: Perturbation) -> GraspScene:
-    """``scene`` under draw ``p``, driven for ``scenario`` (its backends then leave the drive as it is).
+def perturbed_scene(
+    scene: GraspScene, scenario: GraspScenario, p: Perturbation, *, pose: GripperPose | None = None
+) -> GraspScene:
+    """``scene`` at ``pose`` (default: its own) under draw ``p``, driven for ``scenario``.
+
+    The result's ``drive`` names the scenario's tendon drive, so that backends leave it as it is.
 
     Writes into a model copy: object ``body_mass`` and ``body_inertia`` times ``mass_scale``; the sliding
     friction of the object's and the fingers' geoms times ``friction_scale`` (MuJoCo takes the larger of
@@ -110,8 +115,9 @@ def perturbed_scene(scene: GraspScene, scenario: GraspScenario, p: Perturbation)
     staged = copy.copy(scene)
     staged.built = dataclasses.replace(scene.built, model=m)
     staged.model = m
-    if any(p.palm_offset) or any(p.palm_rotation):
-        moved = scene_at_pose(staged, perturbed_pose(scene.pose, p))
+    target = scene.pose if pose is None else pose
+    if any(p.palm_offset) or any(p.palm_rotation) or target != scene.pose:
+        moved = scene_at_pose(staged, perturbed_pose(target, p))
     else:
         mujoco.mj_setConst(m, mujoco.MjData(m))
         moved = staged
@@ -123,3 +129,25 @@ def perturbed_scene(scene: GraspScene, scenario: GraspScenario, p: Perturbation)
         dm.actuator_forcerange[actuators] *= p.tendon_scale
     driven.drive = scenario.tendon
     return driven
+
+
+def start_penetration(scene: GraspScene) -> float:
+    """Deepest penetration at the rollout's start [m]: gripper into object or ground, object into ground.
+
+    The initial state (start openings) after ``mj_forward``; 0 when nothing overlaps. A palm perturbation
+    can push the open fingers into the object, which the settle phase would then push apart with energy
+    nothing put in.
+    """
+    m = scene.model
+    d = make_data(scene.built)
+    gripper = scene.finger_mask.copy()
+    gripper[[scene.palm_body, scene.mount_body]] = True
+    deepest = 0.0
+    for c in d.contact[: d.ncon]:
+        b1, b2 = int(m.geom_bodyid[c.geom1]), int(m.geom_bodyid[c.geom2])
+        obj = scene.object_body in (b1, b2)
+        ground = scene.ground_geom in (c.geom1, c.geom2)
+        grip = gripper[b1] or gripper[b2]
+        if (obj and (grip or ground)) or (ground and grip):
+            deepest = max(deepest, -float(c.dist))
+    return deepest

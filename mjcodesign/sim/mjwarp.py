@@ -44,6 +44,15 @@ __all__ = ["MjwarpBackend"]
 
 # Per-world model fields: a design's stiffness (with_stiffness) and a pose's mount and palm (scene_at_pose).
 _BATCHED = ("jnt_stiffness", "dof_damping", "geom_solref", "body_pos", "body_quat", "body_ipos")
+_SHARED_CHECKED = (
+    "body_mass",
+    "body_inertia",
+    "geom_friction",
+    "actuator_gear",
+    "actuator_gainprm",
+    "actuator_biasprm",
+    "actuator_forcerange",
+)  # what a perturbation changes besides the batched fields
 _NCONMAX_PER_WORLD = 256  # contacts per world (a grasp makes ~20-60)
 _NJMAX_PER_WORLD = 1024  # constraint rows per world
 
@@ -135,6 +144,13 @@ class MjwarpBackend:
         import warp as wp
 
         scenes = [drive_scene(sc, scenario) for sc in scenes]
+        for f in _SHARED_CHECKED:  # fields mjwarp shares across worlds: scenes may not differ in them
+            ref = getattr(scenes[0].model, f)
+            if any(not np.array_equal(getattr(sc.model, f), ref) for sc in scenes[1:]):
+                raise UnsupportedError(
+                    f"mjwarp shares {f} across worlds: scenes that differ in it (perturbed mass, friction "
+                    "or tendon drive) need the mujoco backend"
+                )
         flex0 = scenes[0].model.flex_stiffness
         if any(not np.array_equal(sc.model.flex_stiffness, flex0) for sc in scenes[1:]):
             raise UnsupportedError(
