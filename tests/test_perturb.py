@@ -7,7 +7,7 @@ from numpy.testing import assert_array_equal
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
-from mjcodesign.errors import DesignError, PoseError
+from mjcodesign.errors import DesignError
 from mjcodesign.models.types import FingerModel, GripperPose
 from mjcodesign.objects import box_object
 from mjcodesign.scenarios.drive import TendonPosition
