@@ -37,8 +37,19 @@ from pathlib import Path
 
 from mjcodesign.errors import OutputError
 
-__all__ = ["MARKER", "OutputFolder", "OutputKind", "check_output", "folder_kind", "staged"]
+__all__ = [
+    "MARKER",
+    "TMP_SUFFIX",
+    "OutputFolder",
+    "OutputKind",
+    "check_output",
+    "folder_kind",
+    "staged",
+    "write_atomic",
+]
 
+TMP_SUFFIX = ".tmp"
+"""Suffix of :func:`write_atomic`'s temporary files (``.NAME.HEX.tmp``, hidden, beside the file)."""
 MARKER = ".mjcodesign-output.json"
 """The file naming a folder's kind and the entries the command wrote (JSON)."""
 _MARKER_FORMAT = "mjcodesign-output"
@@ -178,6 +189,26 @@ def _check(folder: OutputFolder) -> None:
     raise OutputError(
         f"{where} is not empty and holds no {kind.command} output ({shown}): choose a new or empty folder{hint}"
     )
+
+
+def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
+    """Write ``data`` (text as UTF-8) to ``path`` through a temporary sibling file and a rename.
+
+    A reader never sees half a file, and a failed write leaves ``path`` as it was (the temporary file,
+    ``.NAME.HEX`` + :data:`TMP_SUFFIX`, is removed). Raises :class:`OutputError` when it cannot be written.
+    """
+    out = Path(path)
+    tmp = out.with_name(f".{out.name}.{uuid.uuid4().hex[:12]}{TMP_SUFFIX}")
+    raw = data.encode("utf-8") if isinstance(data, str) else data
+    try:
+        with open(tmp, "xb") as f:  # "x": a new file, mode from the umask as usual
+            f.write(raw)
+        os.replace(tmp, out)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from exc
+    return out
 
 
 def _article(kind: OutputKind) -> str:

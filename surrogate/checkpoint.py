@@ -15,12 +15,11 @@ being replaced reads as no checkpoint rather than as a record with the wrong wei
 from __future__ import annotations
 
 import json
-import os
-import uuid
 from pathlib import Path
 
 from mjcodesign.data.config import DatagenConfig
 from mjcodesign.errors import MjcodesignError, OutputError
+from mjcodesign.outputs import write_atomic
 from mjcodesign.surrogate.data import OUTPUT_NAMES, Normalizer
 from mjcodesign.surrogate.inference import Surrogate
 from mjcodesign.surrogate.model import GraspNet, ModelConfig
@@ -34,7 +33,6 @@ __all__ = [
     "load_surrogate",
     "read_record",
     "save_checkpoint",
-    "write_text",
 ]
 
 CHECKPOINT_FORMAT = "mjcodesign-surrogate"
@@ -42,22 +40,6 @@ CHECKPOINT_VERSION = 1
 """Bumped when a reader must change (inputs, outputs, file layout)."""
 CONFIG = "config.json"
 WEIGHTS = "model.safetensors"
-
-
-def write_text(path: str | Path, text: str) -> Path:
-    """Write ``text`` to ``path`` through a temporary file and a rename (a reader never sees half of it).
-
-    Raises :class:`OutputError` when it cannot be written; a failed write leaves ``path`` as it was.
-    """
-    out = Path(path)
-    tmp = out.with_name(f".{out.name}.{uuid.uuid4().hex[:12]}.tmp")
-    try:
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, out)
-    except OSError as exc:
-        tmp.unlink(missing_ok=True)
-        raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from exc
-    return out
 
 
 def save_checkpoint(out: str | Path, surrogate: Surrogate) -> Path:
@@ -84,7 +66,7 @@ def save_checkpoint(out: str | Path, surrogate: Surrogate) -> Path:
         save_file(state, str(root / WEIGHTS))
     except OSError as exc:
         raise OutputError(f"cannot write {root / WEIGHTS}: {exc.strerror or exc}") from exc
-    write_text(root / CONFIG, json.dumps(record, indent=1))
+    write_atomic(root / CONFIG, json.dumps(record, indent=1))
     return root
 
 

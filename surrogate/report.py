@@ -18,7 +18,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
-from mjcodesign.surrogate.checkpoint import load_surrogate, save_checkpoint, write_text
+from mjcodesign.surrogate.checkpoint import load_surrogate, save_checkpoint
 from mjcodesign.surrogate.data import (
     N_REGRESSION,
     GraspData,
@@ -37,7 +37,7 @@ from mjcodesign.surrogate.smoothness import smoothness
 from mjcodesign.surrogate.train import EpochLog, TrainConfig, evaluate_loss, train
 
 from mjcodesign.errors import OutputError, UnsupportedError
-from mjcodesign.outputs import OutputKind, check_output, staged
+from mjcodesign.outputs import OutputKind, check_output, staged, write_atomic
 
 __all__ = ["TensorBoardLog", "checkpoint_smoothness", "predict_rows", "standard_loss", "train_and_report"]
 
@@ -254,8 +254,8 @@ def train_and_report(
         save_checkpoint(root, sur)
         plot_curves({k: r.summary() for k, r in runs.items()}, root / "curves.png")
         plot_calibration({k: m["success"]["calibration"] for k, m in models.items()}, root / "calibration.png")
-        write_text(root / "metrics.json", json.dumps(metrics, indent=1, allow_nan=False))
-        write_text(root / "summary.md", summary_markdown(metrics))
+        write_atomic(root / "metrics.json", json.dumps(metrics, indent=1, allow_nan=False))
+        write_atomic(root / "summary.md", summary_markdown(metrics))
     return metrics
 
 

@@ -10,15 +10,13 @@ imported only when run, so that importing this package pulls in neither MuJoCo n
 
 from __future__ import annotations
 
-import contextlib
 import importlib
 import json
 import os
-import uuid
 from collections.abc import Callable
-from pathlib import Path
 
-from mjcodesign.errors import DesignError, OutputError
+from mjcodesign.errors import DesignError
+from mjcodesign.outputs import write_atomic
 
 __all__ = ["BENCHMARKS", "benchmark", "run_benchmark", "write_json"]
 
@@ -53,16 +51,7 @@ def write_json(result, out: str | os.PathLike, *, indent: int | None = 2) -> Non
     A reader never sees a half-written file, and a failed write leaves ``out`` as it was. Raises
     :class:`OutputError` when the file cannot be written.
     """
-    path = Path(out)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
-    try:
-        with open(tmp, "x", encoding="utf-8") as f:  # "x": a new file, mode from the umask as usual
-            f.write(json.dumps(result, indent=indent))
-        os.replace(tmp, path)
-    except OSError as exc:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from exc
+    write_atomic(out, json.dumps(result, indent=indent))
 
 
 def run_benchmark(

@@ -265,8 +265,8 @@ def run_smoothness(args: argparse.Namespace) -> int:
     """Run ``smoothness``."""
     import torch
 
+    from mjcodesign.outputs import write_atomic
     from mjcodesign.surrogate import checkpoint_smoothness
-    from mjcodesign.surrogate.checkpoint import write_text
 
     if args.out:  # refused before the re-simulation, not after it
         from pathlib import Path
@@ -282,7 +282,7 @@ def run_smoothness(args: argparse.Namespace) -> int:
         args.ckpt, args.data, poses=args.poses, lines=args.lines, part=args.part, cache_dir=user_cache_dir()
     )
     if args.out:
-        write_text(args.out, json.dumps({"ckpt": args.ckpt, "data": args.data, **res}, indent=1))
+        write_atomic(args.out, json.dumps({"ckpt": args.ckpt, "data": args.data, **res}, indent=1))
     emit({"ckpt": args.ckpt, "part": res["part"], **res["median"]}, args.json)
     return 0
 

@@ -19,13 +19,11 @@ files are not fsynced, so a power cut may lose the last ones.
 
 from __future__ import annotations
 
-import contextlib
 import datetime
 import fcntl
 import json
 import os
 import subprocess
-import uuid
 from importlib import metadata
 from pathlib import Path
 
@@ -37,7 +35,7 @@ from mjcodesign.data.integrity import listed_files, record, verify
 from mjcodesign.data.schema import COLUMNS
 from mjcodesign.data.tasks import ObjectResult, ShardResult, ShardTask
 from mjcodesign.errors import OutputError
-from mjcodesign.outputs import OutputKind, check_output
+from mjcodesign.outputs import TMP_SUFFIX, OutputKind, check_output, write_atomic
 
 __all__ = ["FORMAT", "LOCK", "MANIFEST", "DatasetDir", "project_version"]
 
@@ -45,7 +43,6 @@ MANIFEST = "manifest.json"
 LOCK = ".lock"
 FORMAT = "mjcodesign-grasp-dataset"
 """The manifest's ``format`` value."""
-_TMP = ".tmp"
 
 
 def project_version() -> str:
@@ -260,16 +257,7 @@ class DatasetDir:
         return record(data)
 
     def _replace(self, rel: str, data: bytes) -> None:
-        path = self.root / rel
-        tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}{_TMP}")
-        try:
-            with open(tmp, "xb") as f:
-                f.write(data)
-            os.replace(tmp, path)
-        except OSError as exc:
-            with contextlib.suppress(OSError):
-                tmp.unlink()
-            raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
+        write_atomic(self.root / rel, data)
 
 
 def _new_manifest(config: DatagenConfig) -> dict:
@@ -303,7 +291,7 @@ def _remove_temporaries(root: Path) -> None:
     for folder in (root, *(root / t for t in ("poses", "samples", "rejected"))):
         if folder.is_dir():
             for p in folder.iterdir():
-                if p.name.startswith(".") and p.name.endswith(_TMP):
+                if p.name.startswith(".") and p.name.endswith(TMP_SUFFIX):
                     p.unlink(missing_ok=True)
 
 
