@@ -119,3 +119,57 @@ def test_grasp_cli_refuses_an_object_without_a_published_mass(capsys):
     assert main(["grasp", "--object", "063-a_marbles", "--mass", "real", "--json"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "no published mass" in err
+
+
+def test_datagen_places_every_object_at_its_published_mass(tmp_path):
+    from mjcodesign.cli.common import user_cache_dir
+    from mjcodesign.data import DatagenConfig, generate, open_dataset, parse_density_spec
+
+    cfg = DatagenConfig(
+        objects=("013_apple", "012_strawberry"),
+        poses_per_object=1,
+        designs_per_pose=2,
+        density=parse_density_spec("light"),
+        mass="real",
+    )
+    generate(cfg, tmp_path / "ds", workers=1, cache_dir=user_cache_dir())
+    ds = open_dataset(tmp_path / "ds")
+    assert ds.manifest["config"]["mass"]["mode"] == "real"
+    assert "object-list-Sheet1.pdf" in ds.manifest["config"]["mass"]["source"]
+    poses = ds.poses().to_pydict()
+    for name, mass in zip(poses["object"], poses["mass"], strict=True):
+        assert mass == pytest.approx(_SHEET_G[name] / 1000.0, rel=1e-9)
+    assert DatagenConfig.from_dict(ds.manifest["config"]) == cfg
+
+
+def test_datagen_refuses_real_masses_it_does_not_have():
+    from mjcodesign.data import DatagenConfig, parse_density_spec
+
+    with pytest.raises(MeshError, match="063-a_marbles"):
+        DatagenConfig(
+            objects=("013_apple", "063-a_marbles"),
+            poses_per_object=1,
+            designs_per_pose=1,
+            density=parse_density_spec("light"),
+            mass="real",
+        )
+
+
+def test_density_datasets_keep_their_fingerprint():
+    # A density-mode config hashes what it hashed before masses had a mode: the manifest's "mass" entry
+    # and the unset scenario options are left out of the fingerprint.
+    import dataclasses
+    import hashlib
+
+    from mjcodesign.data import DatagenConfig, parse_density_spec
+    from mjcodesign.data.config import SCHEMA_VERSION
+    from mjcodesign.models.types import SimOptions
+
+    cfg = DatagenConfig(objects=("013_apple",), poses_per_object=1, designs_per_pose=1, density=parse_density_spec("light"))
+    d = cfg.as_dict()
+    assert d["mass"] == {"mode": "density"}
+    old = {k: v for k, v in d.items() if k != "mass"}
+    old["scenario"] = {k: v for k, v in dataclasses.asdict(cfg.scenario).items() if k not in ("delta_v", "friction")}
+    old["sim_options"] = dataclasses.asdict(SimOptions())
+    text = json.dumps({"schema_version": SCHEMA_VERSION, **old}, sort_keys=True)
+    assert cfg.fingerprint() == hashlib.sha256(text.encode()).hexdigest()

@@ -19,10 +19,19 @@ import numpy as np
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.errors import DesignError, MeshError, OutputError
 from mjcodesign.models.types import FingerModel, SimOptions
-from mjcodesign.objects import MESH_SUFFIXES, OBJECT_SETS, CoacdSettings, named_set, parse_density
+from mjcodesign.objects import (
+    MASS_MODES,
+    MESH_SUFFIXES,
+    OBJECT_SETS,
+    CoacdSettings,
+    mass_table,
+    named_set,
+    parse_density,
+    published_mass,
+)
 from mjcodesign.scenarios.drive import TendonForce, TendonPosition
 from mjcodesign.scenarios.drive import parse_tendon as _parse_tendon
-from mjcodesign.scenarios.grasp import GraspScenario
+from mjcodesign.scenarios.grasp import GraspScenario, scene_options
 
 __all__ = [
     "BACKENDS",
@@ -166,10 +175,20 @@ class DatagenConfig:
     """Seeds CoACD and the ``egad-like`` shapes (apart from :attr:`seed`, so CoACD's cache is reused)."""
     cloud_points: int = CLOUD_POINTS
     geometry: FingerDesign = field(default_factory=FingerDesign)
+    mass: str = "density"
+    """How each object's mass is set (:data:`~mjcodesign.objects.MASS_MODES`): ``density``, drawn per
+    pose from :attr:`density` (the paper's relative scale), or ``real``, every object at its published
+    mass (:func:`~mjcodesign.objects.published_mass`; uniform density mass / volume, :attr:`density`
+    unused), refused for an object without one."""
 
     def __post_init__(self) -> None:
         if not self.objects:
             raise MeshError("a dataset needs at least one object")
+        if self.mass not in MASS_MODES:
+            raise MeshError(f"--mass must be one of {', '.join(MASS_MODES)} for a dataset, got {self.mass!r}")
+        if self.mass == "real":
+            for name in self.objects:
+                published_mass(name)  # one line naming the object without a published mass
         for name in ("poses_per_object", "designs_per_pose", "cloud_points"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | np.integer) or v <= 0:
@@ -219,10 +238,11 @@ class DatagenConfig:
             "seed": int(self.seed),
             "object_seed": int(self.object_seed),
             "cloud_points": int(self.cloud_points),
-            "scenario": dataclasses.asdict(self.scenario),
+            "scenario": _scenario_dict(self.scenario),
             "finger": geometry,
-            "sim_options": dataclasses.asdict(SimOptions()),
+            "sim_options": dataclasses.asdict(scene_options(self.scenario) or SimOptions()),
             "coacd": dataclasses.asdict(self.coacd),
+            "mass": _mass_dict(self.mass),
         }
 
     @classmethod
@@ -253,14 +273,35 @@ class DatagenConfig:
                 cloud_points=int(d["cloud_points"]),
                 scenario=GraspScenario(**scenario),
                 geometry=FingerDesign(**finger),
+                mass=str(d.get("mass", {"mode": "density"})["mode"]),
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise OutputError(f"not a dataset config ({type(exc).__name__}: {exc})") from exc
 
     def fingerprint(self) -> str:
         """SHA-256 of :meth:`as_dict` and the schema version: equal exactly when the rows must be equal."""
-        text = json.dumps({"schema_version": SCHEMA_VERSION, **self.as_dict()}, sort_keys=True)
+        d = self.as_dict()
+        if self.mass == "density":  # the rows are those of a dataset made before masses had a mode
+            del d["mass"]
+        text = json.dumps({"schema_version": SCHEMA_VERSION, **d}, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _scenario_dict(scenario: GraspScenario) -> dict:
+    """The manifest's ``scenario``; ``delta_v`` and ``friction`` only when set, so that a dataset made
+    before the scenario had them keeps its fingerprint."""
+    d = dataclasses.asdict(scenario)
+    for key in ("delta_v", "friction"):
+        if d[key] is None:
+            del d[key]
+    return d
+
+
+def _mass_dict(mode: str) -> dict:
+    """The manifest's ``mass``: the mode, and for ``real`` the source of the published masses."""
+    if mode == "density":
+        return {"mode": "density"}
+    return {"mode": mode, "source": mass_table()["source"]}
 
 
 def _tendon_dict(tendon: TendonForce | TendonPosition) -> dict:

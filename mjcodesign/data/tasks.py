@@ -29,7 +29,7 @@ from mjcodesign.design.stiffness import N_LOG_E, Stiffness
 from mjcodesign.errors import MeshError, PoseError, UnsupportedError
 from mjcodesign.jobs import GraspJob, SceneCache, load_grasp_object, run_jobs
 from mjcodesign.models.types import GripperPose
-from mjcodesign.objects import DENSITY_PRESETS, GraspObject
+from mjcodesign.objects import DENSITY_PRESETS, GraspObject, published_mass, real_density
 from mjcodesign.poses import sample_poses, scene_offset
 from mjcodesign.scenarios.grasp import scene_at_pose
 from mjcodesign.scenarios.outcome import Failure, Outcome, failed_outcome
@@ -181,13 +181,14 @@ class Worker:
         )
         t_pose = time.perf_counter() - t0
         # sample_poses raises PoseError (every reason counted) when it accepts no candidate.
+        real = real_density(obj, published_mass(c.objects[task.index]).mass) if c.mass == "real" else None
         cols = empty_columns(POSES)
         dropped: dict[str, str] = {}
         t0 = time.perf_counter()
         for p in range(len(cands)):
             T = cands.matrices[p]
             streams = PoseStreams(c.seed, task.index, p)
-            rho = c.density.draw(streams.density)
+            rho = real if c.mass == "real" else c.density.draw(streams.density)
             try:
                 cloud = partial_cloud(
                     obj, T, cands.openings[p], streams.cloud, n=c.cloud_points, geometry=c.geometry

@@ -80,8 +80,8 @@ def published_mass(name: str) -> PublishedMass:
     text = str(name)
     if text.startswith("egad-like:") or Path(text).suffix.lower() in MESH_SUFFIXES or Path(text).exists():
         raise MeshError(
-            f"{text} has no published mass (only YCB objects do): give it a density (--density) or a "
-            "mass in kg (--mass KG)"
+            f"{text} has no published mass (only YCB objects do): give it a density (--density) or, "
+            "where a command takes one, a mass in kg"
         )
     row = table["objects"].get(text)
     if row is None:
@@ -89,7 +89,7 @@ def published_mass(name: str) -> PublishedMass:
     if row.get("mass_kg") is None:
         raise MeshError(
             f"{text} has no published mass: {row.get('note', 'not given')} ({table['citation']}); "
-            "give it a density (--density) or a mass in kg (--mass KG)"
+            "give it a density (--density) or, where a command takes one, a mass in kg"
         )
     return PublishedMass(text, float(row["mass_kg"]), table["citation"], row.get("note"))
 
