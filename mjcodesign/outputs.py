@@ -27,6 +27,7 @@ import ctypes
 import datetime
 import enum
 import errno
+import io
 import json
 import os
 import shutil
@@ -35,7 +36,7 @@ from collections.abc import Iterator, Mapping
 from dataclasses import KW_ONLY, dataclass
 from pathlib import Path
 
-from mjcodesign.errors import OutputError
+from mjcodesign.errors import OutputError, UnsupportedError
 
 __all__ = [
     "MARKER",
@@ -44,6 +45,8 @@ __all__ = [
     "OutputKind",
     "check_output",
     "folder_kind",
+    "new_figure",
+    "save_figure",
     "staged",
     "write_atomic",
 ]
@@ -209,6 +212,31 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
             tmp.unlink()
         raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from exc
     return out
+
+
+def new_figure(figsize: tuple[float, float], *, unavailable: str):
+    """A bare ``matplotlib.figure.Figure`` of ``figsize`` [in], drawn on with its own axes (``subplots``).
+
+    No pyplot: the process's backend and pyplot's figure list are left as they are (a library must not
+    set them). Raises :class:`UnsupportedError` with the message ``unavailable`` without matplotlib.
+    """
+    try:
+        from matplotlib.figure import Figure
+    except ImportError:
+        raise UnsupportedError(unavailable) from None
+    return Figure(figsize=figsize)
+
+
+def save_figure(fig, path: str | os.PathLike, *, dpi: int) -> Path:
+    """Lay out ``fig`` (:func:`new_figure`) and write it to ``path`` (format from its suffix, PNG by default).
+
+    Rendered in memory, then written by :func:`write_atomic`. Raises :class:`OutputError`.
+    """
+    out = Path(path)
+    buf = io.BytesIO()
+    fig.tight_layout()
+    fig.savefig(buf, format=out.suffix[1:].lower() or "png", dpi=dpi)
+    return write_atomic(out, buf.getvalue())
 
 
 def _article(kind: OutputKind) -> str:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from mjcodesign.errors import OutputError, UnsupportedError
+from mjcodesign.outputs import new_figure, save_figure
 
 __all__ = ["plot_calibration", "plot_curves", "plot_lines"]
 
@@ -12,35 +12,20 @@ _DPI = 110
 _LINES_SHOWN = 6
 
 
-def _pyplot():
-    try:
-        import matplotlib
-    except ImportError:
-        raise UnsupportedError(
-            "the surrogate's report needs matplotlib (pip install 'mjcodesign[torch]')"
-        ) from None
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
+def _figure(figsize: tuple[float, float]):
+    return new_figure(
+        figsize, unavailable="the surrogate's report needs matplotlib (pip install 'mjcodesign[torch]')"
+    )
 
 
 def _save(fig, path: Path) -> Path:
-    plt = _pyplot()
-    try:
-        fig.tight_layout()
-        fig.savefig(path, dpi=_DPI)
-    except OSError as exc:
-        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
-    finally:
-        plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=_DPI)
 
 
 def plot_curves(runs: dict[str, dict], path: Path) -> Path:
     """Training and validation loss per epoch of each run (``name -> TrainResult.summary()``)."""
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(7, 4.5))
+    fig = _figure((7, 4.5))
+    ax = fig.subplots()
     for name, s in runs.items():
         line = ax.plot(s["train_loss"], ls="--", lw=1, label=f"{name}: train")[0]
         ax.plot(s["val_loss"], color=line.get_color(), lw=1.5, label=f"{name}: validation")
@@ -54,8 +39,8 @@ def plot_curves(runs: dict[str, dict], path: Path) -> Path:
 
 def plot_calibration(models: dict[str, list[dict]], path: Path) -> Path:
     """Reliability diagram of the calibrated success probability on the test rows, one line per model."""
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(5, 5))
+    fig = _figure((5, 5))
+    ax = fig.subplots()
     ax.plot([0, 1], [0, 1], color="0.6", ls=":", lw=1)
     for name, bins in models.items():
         if bins:
@@ -70,9 +55,9 @@ def plot_calibration(models: dict[str, list[dict]], path: Path) -> Path:
 
 def plot_lines(result: dict, path: Path) -> Path:
     """L_opt along the smoothness lines: the surrogate beside the simulator."""
-    plt = _pyplot()
     rows = result["lines"][:_LINES_SHOWN]
-    fig, axes = plt.subplots(1, max(1, len(rows)), figsize=(3.2 * max(1, len(rows)), 3.4), squeeze=False)
+    fig = _figure((3.2 * max(1, len(rows)), 3.4))
+    axes = fig.subplots(1, max(1, len(rows)), squeeze=False)
     for ax, r in zip(axes[0], rows, strict=False):
         ax.plot(r["t"], r["simulator_loss"], marker="o", label="simulator")
         ax.plot(r["t"], r["surrogate_loss"], marker=".", label="surrogate")

@@ -1,4 +1,4 @@
-"""The one atomic file writer (mjcodesign.outputs.write_atomic) and the writers built on it."""
+"""The one atomic file writer (mjcodesign.outputs.write_atomic), the writers built on it, and the figures."""
 
 import json
 
@@ -46,3 +46,34 @@ def test_bench_json_goes_through_it(tmp_path, monkeypatch):
     monkeypatch.setattr("mjcodesign.bench.write_atomic", spy)
     write_json({"a": 1}, tmp_path / "b.json")
     assert seen == [tmp_path / "b.json"] and json.loads((tmp_path / "b.json").read_text()) == {"a": 1}
+
+
+def test_figure_writers_leave_pyplot_and_the_backend_alone(tmp_path):
+    """Library figures are bare Figures written through write_atomic: the process's backend stays as the
+    program set it, and pyplot is never imported (a library must not touch either)."""
+    import subprocess
+    import sys
+
+    script = f"""
+import sys
+from pathlib import Path
+import matplotlib
+matplotlib.use("svg")
+from mjcodesign.crosscheck.plot import plot_curves as curl
+from mjcodesign.surrogate.plots import plot_calibration, plot_curves, plot_lines
+
+out = Path({str(tmp_path)!r})
+curl({{"chain": {{"tension": [0.0, 1.0], "bend": [0.0, 0.1], "tip": [[0.0, 0.0, 0.01]]}}}}, str(out / "curl.png"))
+plot_curves({{"full": {{"train_loss": [2.0, 1.0], "val_loss": [2.5, 1.5], "best_epoch": 1}}}}, out / "curves.png")
+plot_calibration({{"net": [{{"predicted": 0.2, "observed": 0.3}}, {{"predicted": 0.8, "observed": 0.7}}]}}, out / "cal.png")
+line = {{"object": "box", "pose_row": 0, "line": 0, "t": [0.0, 1.0], "simulator_loss": [1.0, 2.0],
+        "surrogate_loss": [1.1, 1.9]}}
+plot_lines({{"lines": [line]}}, out / "lines.png")
+print(matplotlib.get_backend(), "matplotlib.pyplot" in sys.modules)
+"""
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["svg", "False"]
+    for name in ("curl.png", "curves.png", "cal.png", "lines.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cal.png", "curl.png", "curves.png", "lines.png"]

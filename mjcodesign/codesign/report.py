@@ -15,7 +15,8 @@ import numpy as np
 from mjcodesign.codesign.optimize import OptimizeResult
 from mjcodesign.codesign.problem import PoseSet
 from mjcodesign.design.stiffness import Stiffness
-from mjcodesign.errors import OutputError, UnsupportedError
+from mjcodesign.errors import OutputError
+from mjcodesign.outputs import new_figure, save_figure
 
 __all__ = ["design_text", "plot_curves", "pose_record", "write_design", "write_json", "write_pose"]
 
@@ -59,15 +60,9 @@ def write_pose(path: Path, poses: PoseSet, row: int) -> Path:
 
 def plot_curves(result: OptimizeResult, path: Path) -> Path:
     """Counted L_opt per object and in total against the iteration (log scale), as a PNG."""
-    try:
-        import matplotlib
-    except ImportError:
-        raise UnsupportedError("the loss curves need matplotlib (pip install 'mjcodesign[torch]')") from None
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    fig = new_figure((11, 4), unavailable="the loss curves need matplotlib (pip install 'mjcodesign[torch]')")
+    a, b = fig.subplots(1, 2)
     it = np.arange(1, result.iterations + 1)
-    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4))
     for k, name in enumerate(result.objects):
         a.plot(it, np.maximum(result.curves[:, k], 1e-12), lw=0.8, label=name if k < _LEGEND_MAX else None)
     a.set(yscale="log", xlabel="iteration", ylabel="counted L_opt", title="per object")
@@ -75,11 +70,4 @@ def plot_curves(result: OptimizeResult, path: Path) -> Path:
         a.legend(fontsize=6)
     b.plot(it, np.maximum(result.total_curve, 1e-12), color="k")
     b.set(yscale="log", xlabel="iteration", ylabel="Σ counted L_opt", title=f"total ({result.mode.value})")
-    try:
-        fig.tight_layout()
-        fig.savefig(path, dpi=_DPI)
-    except OSError as exc:
-        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from exc
-    finally:
-        plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path, dpi=_DPI)

@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from mjcodesign.errors import DesignError
+from mjcodesign.outputs import new_figure, save_figure
+
 __all__ = ["plot_curves"]
+
+_DPI = 120
 
 
 def plot_curves(curves: dict, path: str) -> None:
@@ -12,16 +17,12 @@ def plot_curves(curves: dict, path: str) -> None:
 
     Left: the tip path in the bending plane as the tension rises; right: the bend against the tension.
     ``curves`` maps a model to its ``tension`` [N], ``bend`` [rad] and ``tip`` displacements [m] (3,)
-    (the second value of :func:`mjcodesign.crosscheck.crosscheck`). Draws on a bare
-    ``matplotlib.figure.Figure`` (Agg), so the process's pyplot backend is left as it is.
+    (the second value of :func:`mjcodesign.crosscheck.crosscheck`), on a bare figure
+    (:func:`mjcodesign.outputs.new_figure`: no pyplot state).
     """
-    from matplotlib.figure import Figure
-
-    from mjcodesign.errors import DesignError, OutputError
-
     if not curves:
         raise DesignError("--plot needs the curl scenario (no trajectories to plot)")
-    fig = Figure(figsize=(9, 4))
+    fig = new_figure((9, 4), unavailable="--plot needs matplotlib (pip install matplotlib)")
     ax_tip, ax_bend = fig.subplots(1, 2)
     for name, c in curves.items():
         tip = 1e3 * np.array([[0.0, 0.0, 0.0]] + [list(v) for v in c["tip"]])
@@ -34,8 +35,4 @@ def plot_curves(curves: dict, path: str) -> None:
     ax_bend.set_xlabel("tendon tension [N]")
     ax_bend.set_ylabel("total bend [deg]")
     ax_bend.legend()
-    fig.tight_layout()
-    try:
-        fig.savefig(path, dpi=120)
-    except OSError as exc:
-        raise OutputError(f"cannot write {path}: {exc}") from exc
+    save_figure(fig, path, dpi=_DPI)

@@ -23,7 +23,8 @@ from mjcodesign.data.integrity import Integrity, listed_files, read_table, verif
 from mjcodesign.data.schema import TABLES
 from mjcodesign.data.store import FORMAT, MANIFEST
 from mjcodesign.design.stiffness import N_LOG_E
-from mjcodesign.errors import OutputError, UnsupportedError
+from mjcodesign.errors import OutputError
+from mjcodesign.outputs import new_figure, save_figure
 
 __all__ = [
     "DESIGN_GROUPS",
@@ -45,6 +46,7 @@ _KEYS = {"poses": ["object_index", "pose_index"], "samples": ["object_index", "p
 _EXACT_DENSITIES = 6  # up to this many distinct densities are listed one by one, more are binned
 _DENSITY_BINS = 4
 _PLOT_BINS = 8  # mean-ln-E bins of the success plot
+_PLOT_DPI = 120
 _TOP_REASONS = 10
 _INTEGRITY_HASHED = "every file's size and SHA-256 checked against the manifest"
 _INTEGRITY_LEGACY = (
@@ -184,19 +186,12 @@ def plot_success(ds: Dataset, path: str | Path) -> Path:
 
     Raises :class:`UnsupportedError` without matplotlib, :class:`OutputError` if the file cannot be written.
     """
-    try:
-        import matplotlib
-    except ImportError:
-        raise UnsupportedError("--plot needs matplotlib (pip install matplotlib)") from None
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    fig = new_figure((8, 5), unavailable="--plot needs matplotlib (pip install matplotlib)")
+    ax = fig.subplots()
     s = ds.samples()
     mean = _mean_log_e(s)
     success = np.asarray(s.column("success").to_numpy(zero_copy_only=False), dtype=float)
     objects = np.asarray(s.column("object").to_pylist(), dtype=object)
-    fig, ax = plt.subplots(figsize=(8, 5))
     if len(mean):
         edges = np.linspace(mean.min(), mean.max() + 1e-9, _PLOT_BINS + 1)
         centre = 0.5 * (edges[1:] + edges[:-1])
@@ -216,12 +211,4 @@ def plot_success(ds: Dataset, path: str | Path) -> Path:
     ax.set_title(f"{ds.root.name}: {s.num_rows} samples")
     if len(set(objects)) <= 20:
         ax.legend(fontsize="small", loc="best")
-    fig.tight_layout()
-    out = Path(path)
-    try:
-        fig.savefig(out, dpi=120)
-    except OSError as exc:
-        raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from exc
-    finally:
-        plt.close(fig)
-    return out
+    return save_figure(fig, path, dpi=_PLOT_DPI)
