@@ -158,6 +158,24 @@ def test_mjwarp_cuda_without_a_gpu_exits_2_with_one_line(tmp_path):
     assert len(lines) == 1 and "CUDA" in lines[0] and "Traceback" not in r.stderr
 
 
+def test_one_warp_device_picker_for_every_command():
+    """--device of grasp and datagen: cpu is the CPU, auto is CUDA when Warp finds one, cuda needs one."""
+    pytest.importorskip("warp")
+    from mjcodesign.errors import UnsupportedError
+    from mjcodesign.optional import import_warp, warp_device
+
+    has_cuda = import_warp().get_cuda_device_count() > 0
+    assert warp_device("cpu") == "cpu"
+    assert warp_device("auto") == ("cuda" if has_cuda else "cpu")
+    if has_cuda:
+        assert warp_device("cuda") == "cuda"
+    else:
+        with pytest.raises(UnsupportedError, match="no CUDA device"):
+            warp_device("cuda")
+    with pytest.raises(UnsupportedError, match="unknown Warp device"):
+        warp_device("gpu")
+
+
 def test_several_designs_load_and_pose_the_object_once(tmp_path, monkeypatch, capsys):
     import argparse
 

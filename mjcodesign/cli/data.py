@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from mjcodesign.cli.common import Parser, emit, int_at_least, quiet_warp, user_cache_dir
+from mjcodesign.optional import WARP_DEVICES
 
 __all__ = [
     "add_parser",
@@ -70,7 +71,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--backend", choices=("mujoco", "mjwarp"), default="mujoco")
     p.add_argument(
         "--device",
-        choices=("auto", "cpu", "cuda"),
+        choices=WARP_DEVICES,
         default="auto",
         help="mjwarp: Warp device (auto: CUDA if any)",
     )
@@ -114,7 +115,7 @@ def add_bench_parser(bench_subparsers) -> None:
     p.add_argument("--poses-per-object", type=int, default=4)
     p.add_argument("--designs-per-pose", type=int, default=35)
     p.add_argument("--backend", choices=("mujoco", "mjwarp"), default="mujoco")
-    p.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto")
+    p.add_argument("--device", choices=WARP_DEVICES, default="auto")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument(
         "--repeats",
@@ -177,19 +178,16 @@ def quiet_worker() -> None:
 
 def _device(args: argparse.Namespace) -> str:
     """Warp device for ``--device`` (auto: CUDA when present); checks the mjwarp backend is installed."""
-    from mjcodesign.errors import DesignError, UnsupportedError
+    from mjcodesign.errors import DesignError
 
     if args.backend != "mjwarp":
         return "cpu"
     if importlib.util.find_spec("mujoco_warp") is None or importlib.util.find_spec("warp") is None:
         raise DesignError("--backend mjwarp needs mujoco-warp and warp-lang (pip install 'mjcodesign[warp]')")
     quiet_worker()
-    import warp as wp
+    from mjcodesign.optional import warp_device
 
-    has_cuda = wp.get_cuda_device_count() > 0
-    if args.device == "cuda" and not has_cuda:
-        raise UnsupportedError("--device cuda: Warp finds no CUDA device here")
-    return "cuda" if args.device == "cuda" or (args.device == "auto" and has_cuda) else "cpu"
+    return warp_device(args.device)
 
 
 def _check_run(args: argparse.Namespace, config) -> None:

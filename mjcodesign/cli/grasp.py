@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from mjcodesign.cli.common import int_at_least, path_text, user_cache_dir
+from mjcodesign.optional import WARP_DEVICES
 
 __all__ = [
     "add_parser",
@@ -104,7 +105,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--device",
-        choices=("auto", "cpu", "cuda"),
+        choices=WARP_DEVICES,
         default="auto",
         help="mjwarp and --model fem: Warp device (auto: CUDA when present, else the CPU)",
     )
@@ -264,16 +265,12 @@ def _warp_device(device: str, model) -> str:
     on Warp's CPU device (a rollout ~20 min), so the command refuses rather than seem to hang.
     """
     from mjcodesign.errors import DesignError, UnsupportedError
-    from mjcodesign.optional import import_warp
+    from mjcodesign.optional import warp_device
 
     try:
-        wp = import_warp()
+        chosen = warp_device(device)
     except ImportError as exc:
         raise DesignError("the mjwarp backend needs mujoco-warp and warp-lang") from exc
-    has_cuda = wp.get_cuda_device_count() > 0
-    if device == "cuda" and not has_cuda:
-        raise UnsupportedError("--device cuda: Warp finds no CUDA device here")
-    chosen = "cuda" if device == "cuda" or (device == "auto" and has_cuda) else "cpu"
     if model.is_flex:
         if chosen == "cpu":
             raise UnsupportedError(
