@@ -53,3 +53,16 @@ def test_design_sweep_names_and_summary_rows():
     assert summary[0]["value"] == pytest.approx(0.1)
     assert summary[1]["value"] == pytest.approx(float(np.median([0.02, 0.1, 0.01])))
     assert set(summary[0]) == set(rows[0])  # the same columns as every other row
+
+
+def test_landscape_at_real_masses_uses_the_published_masses_and_skips_the_rest():
+    from mjcodesign.bench.landscape import bench_landscape
+
+    res = bench_landscape(
+        objects=("013_apple", "063-a_marbles"), poses=1, designs=("soft",), sweep=False, densities=("real",),
+        tendons=("force:10",),
+    )
+    assert "063-a_marbles" in res["skipped"] and "no published mass" in res["skipped"]["063-a_marbles"]
+    (block,) = res["blocks"]
+    assert block["mass"] == "real" and block["density_kg_m3"] is None
+    assert block["mass_kg"] == {"013_apple": pytest.approx(0.068, rel=1e-12)}  # the YCB list's 68 g

@@ -15,6 +15,9 @@ one ``mujoco.rollout`` call). Per drive and density it reports:
 ``sweep`` adds how the landscape moves with one setting at a time: the tendon (force tension, position
 ticks), the object density, and the disturbance (none, the default impulse in N·s, and the same Δv for
 every object).
+
+A density ``real`` places every object at its published mass (:func:`mjcodesign.objects.published_mass`,
+uniform density mass / volume); an object without one is listed under ``skipped``.
 """
 
 from __future__ import annotations
@@ -28,13 +31,13 @@ from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError
 from mjcodesign.jobs import GraspJob, SceneCache, load_grasp_object, run_jobs
 from mjcodesign.models.types import FingerModel
-from mjcodesign.objects import parse_density
+from mjcodesign.objects import parse_density, published_mass, real_density
 from mjcodesign.poses import sample_poses, to_gripper_pose
 from mjcodesign.scenarios import DEFAULT_IMPULSE, GraspScenario, parse_tendon
 from mjcodesign.scenarios.outcome import Failure
 from mjcodesign.sim import MujocoBackend
 
-__all__ = ["bench_landscape", "OBJECTS", "DESIGNS", "SWEEP_DESIGNS", "FAR", "CI"]
+__all__ = ["bench_landscape", "OBJECTS", "DESIGNS", "SWEEP_DESIGNS", "FAR", "CI", "REAL"]
 
 OBJECTS = (
     "012_strawberry",
@@ -60,6 +63,15 @@ _DELTA_V = 0.5
 _SWEEP_TENDONS = ("force:2", "force:4", "force:25", "position:500", "position:1500")
 _SWEEP_DENSITIES = (10.0, 400.0)
 """10 kg/m³: the authors' density 2 at real size for equal grip-to-weight."""
+REAL = "real"
+"""The density entry that places every object at its published mass."""
+
+
+def _rho(obj, density: str | float) -> float:
+    """The object's density [kg/m³] for a density entry: a preset, a number, or :data:`REAL`."""
+    if density == REAL:
+        return real_density(obj, published_mass(obj.name).mass)
+    return parse_density(density)
 
 
 def _group(name: str) -> str:
@@ -96,6 +108,8 @@ def bench_landscape(
     loaded, skipped = [], {}
     for name in objects:
         try:
+            if REAL in densities:
+                published_mass(name)  # an object without a published mass is skipped with the reason
             obj = load_grasp_object(name, "light", seed=seed)
             cands = sample_poses(obj, poses, seed=seed)
             loaded.append((obj, [to_gripper_pose(cands, i) for i in range(len(cands))]))
@@ -108,10 +122,9 @@ def bench_landscape(
     out_blocks = []
     for tendon in tendons if blocks else ():
         for density in densities:
-            rho = parse_density(density)
             out_blocks.append(
                 _block(
-                    loaded, stiffness, backend, scenes, model, tendon, rho, base, label=f"{tendon} {density}"
+                    loaded, stiffness, backend, scenes, model, tendon, density, base, label=f"{tendon} {density}"
                 )
             )
             if on_progress:
@@ -130,7 +143,7 @@ def bench_landscape(
         loaded = [(o, p[:sweep_poses]) for o, p in loaded]
         stiffness = {name: Stiffness.parse(name) for name in sweep_designs}
         out["sweep_designs"], out["sweep_poses"] = list(sweep_designs), sweep_poses
-        light = parse_density("light")
+        light = REAL if REAL in densities else parse_density("light")  # the base every change is set against
         settings = [(t, light, base, f"tendon {t}") for t in _SWEEP_TENDONS]
         for mode in tendons:
             settings.append((mode, light, base, f"base {mode}"))  # what each change is measured against
@@ -149,13 +162,14 @@ def bench_landscape(
 
 
 def _block(
-    loaded, stiffness, backend, scenes, model, tendon: str, rho: float, disturbance: dict, *, label: str
+    loaded, stiffness, backend, scenes, model, tendon: str, density, disturbance: dict, *, label: str
 ) -> dict:
-    """Every object, pose and design under one tendon drive, density and disturbance."""
+    """Every object, pose and design under one tendon drive, density (or :data:`REAL`) and disturbance."""
     drive = parse_tendon(tendon)
-    jobs = []
+    jobs, masses = [], {}
     for obj, poses in loaded:
-        mass = obj.mass * rho / obj.density
+        rho = _rho(obj, density)
+        mass = masses[obj.name] = obj.mass * rho / obj.density
         impulse = disturbance.get("impulse", mass * disturbance.get("delta_v", 0.0))
         scenario = GraspScenario(tendon=drive, impulse=float(min(impulse, 5.0)))
         for p, pose in enumerate(poses):
@@ -174,10 +188,10 @@ def _block(
     cpu0, wall0 = time.process_time(), time.perf_counter()
     outs = run_jobs(jobs, backend, scenes=scenes)
     cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
-    return _summary(jobs, outs, label, tendon, rho, disturbance, cpu, wall)
+    return {**_summary(jobs, outs, label, tendon, density, disturbance, cpu, wall), "mass_kg": masses}
 
 
-def _summary(jobs, outs, label, tendon, rho, disturbance, cpu, wall) -> dict:
+def _summary(jobs, outs, label, tendon, density, disturbance, cpu, wall) -> dict:
     groups: dict[str, list[bool]] = {}
     pairs: dict[tuple[str, str], list] = {}
     kinds: Counter = Counter()
@@ -208,7 +222,8 @@ def _summary(jobs, outs, label, tendon, rho, disturbance, cpu, wall) -> dict:
     return {
         "label": label,
         "tendon": tendon,
-        "density_kg_m3": rho,
+        "density_kg_m3": None if density == REAL else parse_density(density),
+        "mass": "real" if density == REAL else "density",
         "disturbance": disturbance,
         "rollouts": len(outs),
         "success": {g: float(np.mean(v)) for g, v in groups.items()},

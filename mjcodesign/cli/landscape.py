@@ -39,7 +39,7 @@ def _cmd_landscape(args) -> int:
         out=args.out,
         **kw,
         tendons=_names(args.tendons),
-        densities=_names(args.densities),
+        densities=("real",) if args.mass == "real" else _names(args.densities),
         model=args.model,
         seed=args.seed,
         on_progress=_note,
@@ -97,7 +97,18 @@ def add_bench_parser(bench_subparsers) -> None:
         "--designs", default=None, help="comma-separated designs (default: 3 presets and random:0-7)"
     )
     p.add_argument("--tendons", default="force:10,position:1000", help="comma-separated tendon drives")
-    p.add_argument("--densities", default="light,heavy", help="comma-separated densities (presets or kg/m³)")
+    p.add_argument(
+        "--densities",
+        default="light,heavy",
+        help="comma-separated densities: presets of the paper's relative scale, kg/m³, or real",
+    )
+    p.add_argument(
+        "--mass",
+        choices=("density", "real"),
+        default="density",
+        help="real: every object at its published mass (uniform density mass / volume), in place of "
+        "--densities; objects without one are skipped",
+    )
     p.add_argument("--model", choices=("chain", "flex"), default="chain")
     p.add_argument("--seed", type=int, default=0, help="pose sampler and CoACD seed")
     p.add_argument("--no-sweep", action="store_true", help="skip the tendon / density / impulse sweep")
