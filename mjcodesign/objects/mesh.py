@@ -33,7 +33,8 @@ __all__ = [
 ]
 
 DENSITY_PRESETS: dict[str, float] = {"light": 100.0, "heavy": 400.0}
-"""Object densities [kg/m³].
+"""Object densities [kg/m³]: the paper's relative scale (its protocol's light and heavy objects), not the
+masses of real objects; real YCB masses are :func:`~mjcodesign.objects.published_mass`.
 
 The paper writes "2 and 8" (kg/m³ in its text, g/cm³ in its appendix) while its real objects weigh
 15–180 g. Neither unit is realistic for a solid YCB-sized mesh: 2 kg/m³ makes 010_potted_meat_can
