@@ -90,6 +90,36 @@ def test_with_stiffness_equals_recompile_with_two_hinges_per_block(box_scene):
             assert_array_equal(getattr(m, name), getattr(ref, name), err_msg=name)
 
 
+@pytest.mark.parametrize("hinges", [1, 2])
+def test_compiled_hinges_follow_the_one_stiffness_rule(hinges):
+    """Each hinge of a compiled chain carries joint_stiffness of its block: n k for n hinges in series
+    (the block's compliance 1 / k kept) and Rayleigh damping damping_time · n k, as with_stiffness writes."""
+    import mujoco
+
+    from mjcodesign.models.chain import hinge_stiffness, joint_stiffness
+
+    obj, opts = box_object((_BOX,) * 3, _RHO), SimOptions(hinges_per_block=hinges)
+    design = Stiffness.parse(_ALTERNATING)
+    scene = build_scene(obj, FingerDesign(), design, FingerModel.CHAIN, auto_pose(obj), options=opts)
+    m = scene.model
+    for h, young in zip(scene.built.fingers, design.young, strict=True):
+        jids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n) for n in h.joints]
+        blocks = np.array(h.joint_blocks)
+        assert np.bincount(blocks).tolist() == [hinges] * 11
+        k, damping = joint_stiffness(FingerDesign(), young, opts)
+        assert_array_equal(m.jnt_stiffness[jids], k[blocks])
+        assert_array_equal(m.dof_damping[m.jnt_dofadr[jids]], damping[blocks])
+        # in series: 1 / k_block = sum over the block's hinges of 1 / k_hinge
+        np.testing.assert_allclose(
+            1.0 / np.bincount(blocks, weights=1.0 / m.jnt_stiffness[jids]),
+            hinge_stiffness(FingerDesign(), young, opts.stiffness_model),
+            rtol=1e-12,
+        )
+        np.testing.assert_allclose(
+            m.dof_damping[m.jnt_dofadr[jids]], opts.damping_time * m.jnt_stiffness[jids]
+        )
+
+
 def test_pose_below_ground_is_refused(box_scene):
     pose = GripperPose((0.0, 0.0, 0.1), (1.0, 0.0, 0.0, 0.0), (0.02, 0.02))
     with pytest.raises(PoseError, match="below the ground"):

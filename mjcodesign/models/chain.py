@@ -41,7 +41,14 @@ from mjcodesign.models.types import (
     tendon_exit_site,
 )
 
-__all__ = ["add_chain_finger", "hinge_stiffness", "hinge_axes", "contact_solrefs", "flexure_stops"]
+__all__ = [
+    "add_chain_finger",
+    "hinge_stiffness",
+    "joint_stiffness",
+    "hinge_axes",
+    "contact_solrefs",
+    "flexure_stops",
+]
 
 # Contact stiffness of a block face: a flat punch of the block's width, k_c = E w (N/m), and a
 # time constant from the block's mass, tau = 2 pi sqrt(m / k_c), floored at MuJoCo's stable 2 dt.
@@ -126,6 +133,21 @@ def flexure_stops(design: FingerDesign, axes: np.ndarray) -> np.ndarray:
     return _stops(design, tuple(float(a) for a in axes)).copy()
 
 
+def joint_stiffness(
+    design: FingerDesign, young: np.ndarray, options: SimOptions
+) -> tuple[np.ndarray, np.ndarray]:
+    """Stiffness [N m / rad] and damping [N m s / rad] of each hinge of every block, shape (n_blocks,) each.
+
+    A block carried by n hinges in series (``options.hinges_per_block``) has each at n k
+    (:func:`hinge_stiffness` k), so the block keeps its compliance 1 / k; the damping is Rayleigh,
+    ``options.damping_time`` times the hinge's stiffness. The one rule for a model built
+    (:func:`add_chain_finger`) and for another design written into a copy of it
+    (``mjcodesign.sim.mujoco_c.with_stiffness``).
+    """
+    k = hinge_stiffness(design, young, options.stiffness_model) * float(options.hinges_per_block)
+    return k, options.damping_time * k
+
+
 def contact_solrefs(blocks: list[Block], young: np.ndarray, density: float, timestep: float) -> np.ndarray:
     """(time constant [s], damping ratio) of every block's contacts from its modulus, shape (n_blocks, 2)."""
     k_c = np.asarray(young, dtype=float) * np.array([b.width for b in blocks])
@@ -201,6 +223,10 @@ class _ChainBuilder:
     handle: FingerHandle
     blocks: list[Block] = field(init=False)
     solrefs: list[tuple[float, float]] = field(init=False)
+    k: np.ndarray = field(init=False)
+    """Each hinge's stiffness per block [N m / rad] (:func:`joint_stiffness`)."""
+    damping: np.ndarray = field(init=False)
+    """Each hinge's damping per block [N m s / rad]."""
     stops: np.ndarray = field(init=False)
     waypoints: np.ndarray = field(init=False)
 
@@ -210,6 +236,7 @@ class _ChainBuilder:
         self.stops = flexure_stops(self.design, hinge_axes(self.design, self.options.stiffness_model))
         rows = contact_solrefs(self.blocks, self.young, self.design.density, self.options.timestep)
         self.solrefs = [(float(tau), float(ratio)) for tau, ratio in rows]
+        self.k, self.damping = joint_stiffness(self.design, self.young, self.options)
 
     def piece(self, body, i: int, a: float, b: float, origin: float, end: str) -> None:
         """Block ``i``'s piece between x=a and x=b on ``body`` (frame at x=origin); ``end`` is p or d."""
@@ -238,15 +265,15 @@ class _ChainBuilder:
             return (blk.x0 + quarter, blk.x1 - quarter)
         return (blk.mid,)
 
-    def hinge(self, body, name: str, i: int, x: float, k: float, axis: float) -> None:
-        """A hinge of block ``i`` at ``body``'s origin (finger x), ``k`` [N m/rad] and its Rayleigh damping."""
+    def hinge(self, body, name: str, i: int, x: float, axis: float) -> None:
+        """A hinge of block ``i`` at ``body``'s origin (finger x), with its stiffness and damping."""
         joint = body.add_joint(
             name=name,
             type=mujoco.mjtJoint.mjJNT_HINGE,
             axis=[0, -1, 0],
             pos=[0, 0, axis],
-            stiffness=float(k),
-            damping=float(self.options.damping_time * k),
+            stiffness=float(self.k[i]),
+            damping=float(self.damping[i]),
             armature=self.options.hinge_armature,
         )
         stop = self.hinge_range(i)
@@ -286,7 +313,7 @@ class _ChainBuilder:
         )
         self.handle.waypoint_sites.append(site.name)
 
-    def link(self, parent, i: int, origin_prev: float, k: float, axis: float, waypoint: np.ndarray):
+    def link(self, parent, i: int, origin_prev: float, axis: float, waypoint: np.ndarray):
         """Block ``i``'s bodies under ``parent`` (frame at x=origin_prev): hinges, pieces, waypoint site.
 
         Returns the last body and its frame's x.
@@ -294,16 +321,15 @@ class _ChainBuilder:
         blk = self.blocks[i]
         p = self.prefix
         points = self.hinge_points(i)
-        k_hinge = k * len(points)  # hinges in series: the block keeps its compliance 1/k
         if len(points) == 2:  # the middle link of a split block carries the waypoint
             mid = parent.add_body(name=f"{p}block{i}m", pos=[points[0] - origin_prev, 0, 0])
-            self.hinge(mid, f"{p}hinge{i}m", i, points[0], k_hinge, axis)
+            self.hinge(mid, f"{p}hinge{i}m", i, points[0], axis)
             self.piece(mid, i, points[0], points[1], points[0], "m")
             self.waypoint(mid, i, points[0], waypoint)
             self.handle.bodies.append(mid.name)
             parent, origin_prev = mid, points[0]
         body = parent.add_body(name=f"{p}block{i}", pos=[points[-1] - origin_prev, 0, 0])
-        self.hinge(body, f"{p}hinge{i}", i, points[-1], k_hinge, axis)
+        self.hinge(body, f"{p}hinge{i}", i, points[-1], axis)
         self.piece(body, i, points[-1], blk.x1, points[-1], "d")
         if i + 1 < len(self.blocks):
             nxt = self.blocks[i + 1]
@@ -393,7 +419,6 @@ def add_chain_finger(
     spec: mujoco.MjSpec, parent, design: FingerDesign, young: np.ndarray, prefix: str, options: SimOptions
 ) -> FingerHandle:
     """Add a chain finger under ``parent`` (whose frame is the finger frame) and return its handle."""
-    k = hinge_stiffness(design, young, options.stiffness_model)
     axes = hinge_axes(design, options.stiffness_model)
     handle = FingerHandle(
         prefix=prefix,
@@ -408,7 +433,7 @@ def add_chain_finger(
     body = parent
     origin_prev = 0.0
     for i in range(len(blocks)):
-        body, origin_prev = builder.link(body, i, origin_prev, k[i], axes[i], builder.waypoints[i])
+        body, origin_prev = builder.link(body, i, origin_prev, axes[i], builder.waypoints[i])
     builder.gap_stops()
     builder.tip(body)
     return handle

@@ -19,7 +19,7 @@ from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import SimulationDiverged
 from mjcodesign.models.builder import make_data
-from mjcodesign.models.chain import contact_solrefs, hinge_stiffness
+from mjcodesign.models.chain import contact_solrefs, joint_stiffness
 from mjcodesign.models.simulate import captured_warnings, check_state, has_warning, reset_warnings
 from mjcodesign.models.types import GripperPose
 from mjcodesign.scenarios.grasp import (
@@ -47,9 +47,9 @@ def _blocks(design: FingerDesign) -> tuple:
 def with_stiffness(scene: GraspScene, stiffness: Stiffness) -> mujoco.MjModel:
     """A copy of the scene's model with another design's stiffness.
 
-    Chain: hinge stiffness (:func:`mjcodesign.models.chain.hinge_stiffness` under the scene's stiffness
-    model, ~0.1 ms a finger for the FEM calibration), damping ``damping_time`` k and the blocks' contact
-    solref (:func:`mjcodesign.models.chain.contact_solrefs`) are rewritten instead of a recompile; the
+    Chain: hinge stiffness and damping (:func:`mjcodesign.models.chain.joint_stiffness`, the rule the
+    model was built with; ~0.1 ms a finger for the FEM calibration) and the blocks' contact solref
+    (:func:`mjcodesign.models.chain.contact_solrefs`) are rewritten instead of a recompile; the
     test checks they equal a recompiled model bitwise. Flex: each cell's stiffness record is rescaled to
     the design's cell modulus (:func:`mjcodesign.models.flex.rescale_cell_young`; equal to a recompile
     to round-off, tested).
@@ -76,10 +76,10 @@ def _stiffness_writer(scene: GraspScene) -> Callable[[Stiffness], mujoco.MjModel
 
     def chain(stiffness: Stiffness) -> mujoco.MjModel:
         m = copy.copy(scene.model)
-        for (jids, dofs, gids, owner, blocks_of, scale), young in zip(ids, stiffness.young, strict=True):
-            k = hinge_stiffness(design, young, opts.stiffness_model)[blocks_of] * scale
-            m.jnt_stiffness[jids] = k
-            m.dof_damping[dofs] = opts.damping_time * k
+        for (jids, dofs, gids, owner, blocks_of), young in zip(ids, stiffness.young, strict=True):
+            k, damping = joint_stiffness(design, young, opts)
+            m.jnt_stiffness[jids] = k[blocks_of]
+            m.dof_damping[dofs] = damping[blocks_of]
             m.geom_solref[gids] = contact_solrefs(blocks, young, design.density, opts.timestep)[owner]
         return m
 
@@ -87,10 +87,11 @@ def _stiffness_writer(scene: GraspScene) -> Callable[[Stiffness], mujoco.MjModel
 
 
 def _chain_ids(scene: GraspScene) -> list[tuple[np.ndarray, ...]]:
-    """Per finger: hinge ids and dofs, solref geoms and their blocks, each hinge's block and stiffness scale.
+    """Per finger: hinge ids and dofs, solref geoms and their blocks, and each hinge's block.
 
-    The scale is a hinge's stiffness over its block's. A block has one hinge, or two in series at twice its stiffness (``SimOptions.hinges_per_block``),
-    and one to three geoms (its proximal, middle and distal pieces).
+    A block has one hinge or two (``SimOptions.hinges_per_block``; their stiffness and damping:
+    :func:`mjcodesign.models.chain.joint_stiffness`), and one to three geoms (its proximal, middle and
+    distal pieces).
     """
     m = scene.model
     n_blocks = scene.built.design.n_blocks
@@ -98,7 +99,6 @@ def _chain_ids(scene: GraspScene) -> list[tuple[np.ndarray, ...]]:
     for h in scene.built.fingers:
         jids = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name) for name in h.joints])
         blocks_of = np.array(h.joint_blocks, dtype=int)
-        scale = np.bincount(blocks_of, minlength=n_blocks)[blocks_of].astype(float)
         gids, owner = [], []
         for b in range(n_blocks):
             for part in ("p", "m", "d"):
@@ -107,7 +107,7 @@ def _chain_ids(scene: GraspScene) -> list[tuple[np.ndarray, ...]]:
                     gids.append(g)
                     owner.append(b)
         out.append((jids, m.jnt_dofadr[jids].copy(), np.array(gids, dtype=int), np.array(owner, dtype=int),
-                    blocks_of, scale))  # fmt: skip
+                    blocks_of))  # fmt: skip
     return out
 
 
