@@ -10,7 +10,7 @@ Every command that writes a folder (``datagen``, ``train``, ``optimize``, ``eval
   for a kind that allows it; then its files are kept beside the new output (same-named ones replaced);
 - another kind's output, and a folder that is also one of the command's inputs (or lies inside one, or
   holds one), are always refused;
-- it never removes a file it did not write: entries the marker does not list are carried into the new
+- it never removes a file it did not write: files the marker does not list are carried into the new
   folder (hard links, else copies).
 
 :func:`check_output` applies the rule before any work. :func:`staged` then yields a temporary sibling
@@ -54,7 +54,7 @@ __all__ = [
 TMP_SUFFIX = ".tmp"
 """Suffix of :func:`write_atomic`'s temporary files (``.NAME.HEX.tmp``, hidden, beside the file)."""
 MARKER = ".mjcodesign-output.json"
-"""The file naming a folder's kind and the entries the command wrote (JSON)."""
+"""The file naming a folder's kind and the files the command wrote (JSON)."""
 _MARKER_FORMAT = "mjcodesign-output"
 _MARKER_VERSION = 1
 # A dataset is recognised by its own manifest (mjcodesign.data.store.MANIFEST and FORMAT; a test keeps
@@ -166,6 +166,9 @@ def _check(folder: OutputFolder) -> None:
         if src == real or real in src.parents or src in real.parents:
             rel = "is" if src == real else ("holds" if real in src.parents else "lies inside")
             raise OutputError(f"{where} {rel} the input {name} {given}: choose another folder")
+    cwd = Path(os.path.realpath(os.getcwd()))
+    if real == cwd or real in cwd.parents:  # replaced whole, it would leave the shell in a removed folder
+        raise OutputError(f"{where} is the working folder or holds it: name a folder inside it")
     if not real.exists():
         if os.path.lexists(folder.path):
             raise OutputError(f"{where} is a broken link")
@@ -248,7 +251,7 @@ def staged(folder: OutputFolder) -> Iterator[Path]:
     """A temporary sibling of ``folder`` to write the whole output into, swapped into place at the end.
 
     The folder is checked again first (it may have changed during the work). On a normal exit the
-    marker is written (listing the entries written), entries of the old folder that the old marker does
+    marker is written (listing the files written), files of the old folder that the old marker does
     not list are carried over, and the sibling replaces the folder in one exchange. On an exception the
     sibling is removed and the folder is left as it was. Raises :class:`OutputError` when it cannot write.
     """
@@ -288,14 +291,18 @@ def _missing(path: Path) -> list[Path]:
 
 
 def _finish(folder: OutputFolder, tmp: Path) -> None:
-    """Write the marker into ``tmp`` and carry over what the old folder holds that it did not write."""
-    written = sorted(e for e in os.listdir(tmp) if e != MARKER)
+    """Write the marker into ``tmp`` and carry over every file of the old folder that it did not write.
+
+    The marker lists every file written (paths relative to the folder). A file of the old folder is
+    kept unless the old marker lists it or the new output writes the same path (which replaces it).
+    """
+    written = sorted(rel for rel in _files(tmp) if rel != MARKER)
     marker = {
         "format": _MARKER_FORMAT,
         "version": _MARKER_VERSION,
         "kind": folder.kind.value,
         "command": folder.kind.command,
-        "entries": written,
+        "files": written,
         "written": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
     }
     (tmp / MARKER).write_text(json.dumps(marker, indent=1) + "\n", encoding="utf-8")
@@ -303,15 +310,38 @@ def _finish(folder: OutputFolder, tmp: Path) -> None:
     if not real.is_dir():
         return
     old = _read_json(real / MARKER) if folder_kind(real) is folder.kind else None
-    ours = set((old or {}).get("entries") or ()) | {MARKER}
-    for name in os.listdir(real):
-        if name in ours or (tmp / name).exists() or (tmp / name).is_symlink():
+    ours = set((old or {}).get("files") or ()) | {MARKER}
+    for rel in _files(real, dirs=True):
+        if rel in ours:
             continue
-        src, dst = real / name, tmp / name
-        if src.is_dir() and not src.is_symlink():
-            shutil.copytree(src, dst, symlinks=True, copy_function=_link_or_copy)
-        else:
+        src, dst = real / rel, tmp / rel
+        if os.path.isdir(src) and not os.path.islink(src):
+            if os.path.lexists(dst) and not dst.is_dir():
+                raise OutputError(
+                    f"{folder.flag} {folder.path}: the output writes a file where {rel}/ is kept"
+                )
+            dst.mkdir(parents=True, exist_ok=True)
+        elif not os.path.lexists(dst):
+            if not dst.parent.is_dir():
+                raise OutputError(
+                    f"{folder.flag} {folder.path}: the output writes a file where {rel} is kept"
+                )
             _link_or_copy(src, dst)
+
+
+def _files(root: Path, *, dirs: bool = False) -> list[str]:
+    """Relative paths of the files and links under ``root`` (and its folders, parents first, if ``dirs``)."""
+    out = []
+    for here, subdirs, names in os.walk(root):
+        base = Path(here).relative_to(root)
+        for d in list(subdirs):
+            if os.path.islink(Path(here) / d):  # a link to a folder is carried as a link
+                subdirs.remove(d)
+                names.append(d)
+            elif dirs:
+                out.append(str(base / d))
+        out.extend(str(base / n) for n in names)
+    return out
 
 
 def _link_or_copy(src, dst) -> None:
