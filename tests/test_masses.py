@@ -173,3 +173,60 @@ def test_density_datasets_keep_their_fingerprint():
     old["sim_options"] = dataclasses.asdict(SimOptions())
     text = json.dumps({"schema_version": SCHEMA_VERSION, **old}, sort_keys=True)
     assert cfg.fingerprint() == hashlib.sha256(text.encode()).hexdigest()
+
+
+def _two_ycb_pose_set():
+    """Two YCB objects x 2 rows with known volumes [m³] (what a dataset's mass / density gives)."""
+    from mjcodesign.codesign import PoseSet
+
+    n = 4
+    return PoseSet(
+        ("013_apple", "012_strawberry"),
+        np.array([0, 0, 1, 1]),
+        np.zeros((n, 8, 3), dtype=np.float32),
+        np.zeros((n, 3)),
+        np.tile(np.eye(4), (n, 1, 1)),
+        np.full((n, 2), 0.04),
+        np.array([2.5e-4, 2.5e-4, 4.8e-5, 4.8e-5]),
+    )
+
+
+def test_codesign_densities_per_object_from_the_published_masses():
+    from mjcodesign.codesign.problem import real_densities, row_densities
+    from mjcodesign.errors import DesignError
+
+    poses = _two_ycb_pose_set()
+    rho = real_densities(poses)
+    assert rho == {"013_apple": pytest.approx(0.068 / 2.5e-4), "012_strawberry": pytest.approx(0.018 / 4.8e-5)}
+    np.testing.assert_allclose(row_densities(poses, rho), [272.0, 272.0, 375.0, 375.0])
+    np.testing.assert_array_equal(row_densities(poses, 100.0), [100.0] * 4)
+    with pytest.raises(DesignError, match="012_strawberry"):
+        row_densities(poses, {"013_apple": 300.0})
+
+
+def test_optimize_feeds_each_object_its_own_density():
+    from mjcodesign.codesign import OptimizeConfig, optimize
+
+    sur = _RecordingSurrogate()
+    poses = _two_ycb_pose_set()
+    rho = {"013_apple": 272.0, "012_strawberry": 375.0}
+    optimize(sur, poses, rho, OptimizeConfig(max_iterations=1))
+    (batch,) = sur.batches  # joint mode: one batch of every row
+    np.testing.assert_array_equal(batch.density, [272.0, 272.0, 375.0, 375.0])
+
+
+class _RecordingSurrogate:
+    """Records the batches Algorithm 1 prepares; a flat loss (zero gradient) for every row."""
+
+    def __init__(self):
+        self.batches = []
+
+    def prepare(self, batch):
+        self.batches.append(batch)
+        return batch
+
+    def loss_and_grad(self, log_e, batch, loss=None):
+        from types import SimpleNamespace
+
+        n = len(batch.pose)
+        return SimpleNamespace(rows=np.ones(n), grad=np.zeros(22), total=float(n))

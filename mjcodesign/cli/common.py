@@ -24,6 +24,7 @@ __all__ = [
     "quiet_warp",
     "path_text",
     "add_out_folder",
+    "add_mass_mode",
     "port_number",
     "int_at_least",
     "finite_float",
@@ -56,6 +57,17 @@ def add_out_folder(p: argparse.ArgumentParser, what: str) -> None:
     )
     p.add_argument(
         "--overwrite", action="store_true", help="write into a non-empty folder, keeping its other files"
+    )
+
+
+def add_mass_mode(p: argparse.ArgumentParser, where: str) -> None:
+    """``--mass density|real`` on parser ``p``; ``where`` says what the real masses replace."""
+    p.add_argument(
+        "--mass",
+        choices=("density", "real"),
+        default="density",
+        help="real: every object at its published mass (YCB objects only; the YCB object list), uniform "
+        f"density mass / volume, {where}; density: from the density",
     )
 
 

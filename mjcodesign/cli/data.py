@@ -15,7 +15,7 @@ import os
 import sys
 from pathlib import Path
 
-from mjcodesign.cli.common import Parser, emit, int_at_least, quiet_warp, user_cache_dir
+from mjcodesign.cli.common import Parser, add_mass_mode, emit, int_at_least, quiet_warp, user_cache_dir
 from mjcodesign.optional import WARP_DEVICES
 
 __all__ = [
@@ -55,13 +55,7 @@ def add_parser(subparsers) -> None:
         help="object density per pose: light (100), heavy (400), a number [kg/m³], or uniform:LO,HI (the "
         "paper's relative scale, not real objects)",
     )
-    p.add_argument(
-        "--mass",
-        choices=("density", "real"),
-        default="density",
-        help="real: every object at its published mass (YCB objects only; the YCB object list), uniform "
-        "density mass / volume, --density unused; density: from --density",
-    )
+    add_mass_mode(p, "in place of --density")
     p.add_argument(
         "--tendon",
         default="force:10",

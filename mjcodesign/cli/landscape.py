@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import sys
 
-from mjcodesign.cli.common import emit, int_at_least, path_text
+from mjcodesign.cli.common import add_mass_mode, emit, int_at_least, path_text
 
 __all__ = ["add_bench_parser"]
 
@@ -102,13 +102,7 @@ def add_bench_parser(bench_subparsers) -> None:
         default="light,heavy",
         help="comma-separated densities: presets of the paper's relative scale, kg/m³, or real",
     )
-    p.add_argument(
-        "--mass",
-        choices=("density", "real"),
-        default="density",
-        help="real: every object at its published mass (uniform density mass / volume), in place of "
-        "--densities; objects without one are skipped",
-    )
+    add_mass_mode(p, "in place of --densities (objects without one are skipped)")
     p.add_argument("--model", choices=("chain", "flex"), default="chain")
     p.add_argument("--seed", type=int, default=0, help="pose sampler and CoACD seed")
     p.add_argument("--no-sweep", action="store_true", help="skip the tendon / density / impulse sweep")

@@ -11,7 +11,7 @@ import contextlib
 import json
 from pathlib import Path
 
-from mjcodesign.cli.common import add_out_folder, emit, int_at_least, path_text, user_cache_dir
+from mjcodesign.cli.common import add_mass_mode, add_out_folder, emit, int_at_least, path_text, user_cache_dir
 
 __all__ = ["add_bench_parser", "add_parser", "run", "run_bench"]
 
@@ -42,7 +42,12 @@ def add_parser(subparsers) -> None:
         help="first N candidates per object (paper: 10)",
     )
     p.add_argument("--mode", choices=_MODES, default="joint", help="one design for all objects, or one each")
-    p.add_argument("--density", default="light", help="object density [kg/m³] or light (100) / heavy (400)")
+    p.add_argument(
+        "--density",
+        default="light",
+        help="object density [kg/m³] or light (100) / heavy (400), the paper's relative scale",
+    )
+    add_mass_mode(p, "in the surrogate's input and the re-simulation, in place of --density")
     p.add_argument("--seed", type=int_at_least(0), default=0, help="draws candidate clouds")
     add_out_folder(p, "output")
     p.add_argument("--rrd", type=path_text, default=None, help="also log the loss curves to this Rerun file")
@@ -99,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
             poses=args.poses,
             per_object=args.poses_per_object,
             density=density,
+            mass=args.mass,
             out=args.out,
             config=cfg,
             overwrite=args.overwrite,

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mjcodesign.codesign.problem import PoseSet
+from mjcodesign.codesign.problem import PoseSet, row_densities
 from mjcodesign.codesign.selection import PoseSelection
 from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, N_LOG_E
 from mjcodesign.errors import DesignError
@@ -217,13 +217,14 @@ def _counted_loss(base, choose):
 def optimize(
     surrogate,
     poses: PoseSet,
-    density: float,
+    density: float | dict[str, float],
     config: OptimizeConfig | None = None,
     *,
     loss=None,
     on_step: Callable[[Step], None] | None = None,
 ) -> OptimizeResult:
-    """Algorithm 1 over the candidate ``poses`` of their objects at ``density`` [kg/m³].
+    """Algorithm 1 over the candidate ``poses`` of their objects at ``density`` [kg/m³] (one for all, or
+    one per object name: :func:`~mjcodesign.codesign.problem.row_densities`).
 
     ``surrogate``: a :class:`~mjcodesign.surrogate.Surrogate` (or anything with its ``prepare`` and
     ``loss_and_grad``); ``loss``: a :class:`~mjcodesign.surrogate.DesignLoss` (default: the paper's).
@@ -234,8 +235,7 @@ def optimize(
     from mjcodesign.surrogate import DesignLoss, GraspBatch, Poses
 
     cfg = config or OptimizeConfig()
-    if not (math.isfinite(density) and density > 0):
-        raise DesignError(f"density must be a finite value > 0 kg/m³, got {density}")
+    rho = row_densities(poses, density)
     k_objects = len(poses.objects)
     rows_of = [poses.rows(k) for k in range(k_objects)]
     if k_objects == 0 or any(len(r) == 0 for r in rows_of):
@@ -248,7 +248,7 @@ def optimize(
     batches = []
     for g in groups:
         rows = np.concatenate([rows_of[k] for k in g])
-        batches.append(surrogate.prepare(GraspBatch(sur_poses, rows, np.full(len(rows), float(density)))))
+        batches.append(surrogate.prepare(GraspBatch(sur_poses, rows, rho[rows])))
     sel = [PoseSelection(len(r), cfg.top_b, cfg.patience, cfg.tol) for r in rows_of]
     z0 = z_of(np.full((len(groups), N_LOG_E), cfg.init_log_e))
     t0 = time.perf_counter()

@@ -22,10 +22,10 @@ import numpy as np
 from mjcodesign.data import CLOUD_POINTS, PoseRows, open_dataset, partial_cloud, read_poses
 from mjcodesign.data.cloud import to_gripper
 from mjcodesign.errors import DesignError, PoseError
-from mjcodesign.objects import load_object
+from mjcodesign.objects import load_object, published_mass
 from mjcodesign.poses import read_candidates, scene_offset
 
-__all__ = ["PoseSet", "load_pose_set", "object_key"]
+__all__ = ["PoseSet", "load_pose_set", "object_key", "real_densities", "row_densities"]
 
 _LOAD_DENSITY = 1000.0  # [kg/m³] any density: a candidate's volume is mass / density
 
@@ -72,6 +72,39 @@ class PoseSet(PoseRows):
             openings=self.openings[take],
             volume=self.volume[take],
         )
+
+
+def row_densities(poses: PoseRows, density) -> np.ndarray:
+    """The object density [kg/m³] of every pose row, shape (P,).
+
+    ``density``: one value for every object, or a mapping from object name to its density (e.g.
+    :func:`real_densities`). Raises :class:`DesignError` for a missing object or a value that is not a
+    finite density > 0.
+    """
+    if isinstance(density, dict):
+        missing = [n for n in poses.objects if n not in density]
+        if missing:
+            raise DesignError(f"no density for {', '.join(missing[:5])}")
+        per_object = np.array([float(density[n]) for n in poses.objects])
+        rho = per_object[poses.object_of] if len(poses.objects) else np.zeros(0)
+    else:
+        rho = np.full(len(poses.object_of), float(density))
+    if not np.all(np.isfinite(rho) & (rho > 0)):
+        raise DesignError(f"densities must be finite values > 0 kg/m³, got {density}")
+    return rho
+
+
+def real_densities(poses: PoseRows) -> dict[str, float]:
+    """Per object of ``poses``, the uniform density [kg/m³] at which it weighs its published mass.
+
+    The volume is the poses' own (the mesh the candidates were made on). Raises :class:`MeshError` for
+    an object without a published mass (:func:`~mjcodesign.objects.published_mass`).
+    """
+    out = {}
+    for k, name in enumerate(poses.objects):
+        volume = float(poses.volume[poses.rows(k)[0]])
+        out[name] = published_mass(name).mass / volume
+    return out
 
 
 def load_pose_set(source: str | Path, *, seed: int = 0, cache_dir: str | Path | None = None) -> PoseSet:

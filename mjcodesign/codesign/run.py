@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from mjcodesign.codesign.optimize import Mode, OptimizeConfig, OptimizeResult, Step, optimize
-from mjcodesign.codesign.problem import PoseSet, load_pose_set, object_key
+from mjcodesign.codesign.problem import PoseSet, load_pose_set, object_key, real_densities
 from mjcodesign.codesign.report import (
     design_text,
     plot_curves,
@@ -25,6 +25,7 @@ from mjcodesign.codesign.report import (
     write_pose,
 )
 from mjcodesign.codesign.verify import verify
+from mjcodesign.errors import MeshError
 from mjcodesign.outputs import OutputFolder, OutputKind, check_output, staged
 
 __all__ = ["held_out_objects", "run_codesign"]
@@ -45,6 +46,7 @@ def run_codesign(
     density: float,
     out: str | Path,
     config: OptimizeConfig,
+    mass: str = "density",
     overwrite: bool = False,
     seed: int = 0,
     ground_truth: bool = True,
@@ -56,6 +58,9 @@ def run_codesign(
 
     ``out`` follows the output-folder rule of :mod:`mjcodesign.outputs`, checked before any work
     (``overwrite``: write beside another writer's files, keeping them); the files land there at once.
+    ``mass="real"`` puts every object at its published mass instead of ``density``
+    (:func:`~mjcodesign.codesign.problem.real_densities`): an optimised object without one is refused,
+    a held-out one left out and named in ``held_out_without_mass``.
     """
     from mjcodesign.surrogate import load_surrogate
 
@@ -68,6 +73,17 @@ def run_codesign(
     everything = load_pose_set(poses, seed=seed, cache_dir=cache_dir)
     chosen_set = everything.select([object_key(o) for o in objects], per_object)
     held = held_out_objects(surrogate.meta, everything.objects, chosen_set.objects)
+    no_mass: list[str] = []
+    if mass == "real":
+        density = real_densities(chosen_set)  # refuses an optimised object without a published mass
+        for name in held:
+            try:
+                density.update(real_densities(everything.select([name], per_object)))
+            except MeshError:
+                no_mass.append(name)
+        held = tuple(n for n in held if n not in no_mass)
+    elif mass != "density":
+        raise MeshError(f"mass must be density or real, got {mass!r}")
     held_set = everything.select(held, per_object) if held else None
     root = Path(out)
     say(f"optimising {len(chosen_set.objects)} objects ({config.mode.value})")
@@ -83,6 +99,7 @@ def run_codesign(
             sets["held_out"] = (held_set, joint, None)
         truth = verify(surrogate, sets, density, object_seed=object_seed, cache_dir=cache_dir, progress=say)
     record = _record(result, chosen_set, held, truth, checkpoint, poses, density, seed, root)
+    record.update(mass=mass, held_out_without_mass=no_mass)
     _write(folder, result, chosen_set, record)
     return record, result
 
@@ -112,7 +129,7 @@ def _record(result, poses: PoseSet, held, truth, checkpoint, source, density, se
         "wall_s": result.wall_s,
         "s_per_iteration": result.wall_s / max(1, result.iterations),
         "ground_truth": truth,
-        "density_kg_m3": float(density),
+        "density_kg_m3": {n: float(v) for n, v in density.items()} if isinstance(density, dict) else float(density),
         "seed": int(seed),
         "checkpoint": str(checkpoint),
         "poses": str(source),

@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from mjcodesign.codesign.problem import PoseSet, object_key
+from mjcodesign.codesign.problem import PoseSet, object_key, row_densities
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import PRESETS, Stiffness
 from mjcodesign.jobs import GraspJob, load_grasp_object, run_jobs
@@ -35,23 +35,26 @@ BASELINES = ("soft", "semi-rigid")
 """Presets the optimised design is compared with."""
 
 
-def pick_poses(surrogate, poses: PoseSet, design, density: float, loss=None) -> np.ndarray:
-    """Per object, the pose row of lowest L_opt for ``design`` (22 ln E), shape (K,)."""
+def pick_poses(surrogate, poses: PoseSet, design, density, loss=None) -> np.ndarray:
+    """Per object, the pose row of lowest L_opt for ``design`` (22 ln E), shape (K,).
+
+    ``density`` [kg/m³]: one for all objects or one per object name (:func:`row_densities`).
+    """
     from mjcodesign.surrogate import GraspBatch, Poses
 
     rows = np.arange(len(poses))
-    batch = GraspBatch(Poses.of(poses), rows, np.full(len(rows), float(density)))
+    batch = GraspBatch(Poses.of(poses), rows, row_densities(poses, density))
     per_row = surrogate.loss_and_grad(np.asarray(design, dtype=float), batch, loss=loss).rows
     return np.array([poses.rows(k)[np.argmin(per_row[poses.rows(k)])] for k in range(len(poses.objects))])
 
 
-def predicted_success(surrogate, poses: PoseSet, rows, designs, density: float):
+def predicted_success(surrogate, poses: PoseSet, rows, designs, density):
     """The surrogate's success and score at pose ``rows`` with ``designs`` (one per row, (n, 22))."""
     from mjcodesign.surrogate import GraspBatch, Poses
 
     rows = np.asarray(rows, dtype=np.int64)
     batch = GraspBatch(
-        Poses.of(poses), rows, np.full(len(rows), float(density)), np.asarray(designs, dtype=float)
+        Poses.of(poses), rows, row_densities(poses, density)[rows], np.asarray(designs, dtype=float)
     )
     pred = surrogate.predict(batch)
     return pred.success, pred.success_score
@@ -60,7 +63,7 @@ def predicted_success(surrogate, poses: PoseSet, rows, designs, density: float):
 def verify(
     surrogate,
     sets: dict[str, tuple[PoseSet, list | None, np.ndarray | None]],
-    density: float,
+    density: float | dict[str, float],
     *,
     object_seed: int = 0,
     cache_dir=None,
@@ -103,15 +106,17 @@ def verify(
             else:
                 rows = _pick_each(surrogate, poses, per_object, density, loss)
             ok, score = predicted_success(surrogate, poses, rows, np.array(per_object), density)
+            rho = row_densities(poses, density)
             for k, name in enumerate(poses.objects):
+                rho_k = float(rho[poses.rows(k)[0]])
                 if name not in objs:
                     objs[name] = load_grasp_object(
-                        sources.get(name, name), density, seed=object_seed, cache_dir=cache_dir
+                        sources.get(name, name), rho_k, seed=object_seed, cache_dir=cache_dir
                     )
                 design = Stiffness(per_object[k])
                 jobs.append(
                     GraspJob(obj=objs[name], pose=poses.gripper_pose(int(rows[k])), design=design,
-                             finger_model=model, scenario=scenario, density=float(density),
+                             finger_model=model, scenario=scenario, density=rho_k,
                              seed=object_seed, geometry=geometry, label=f"{set_name}/{label}/{name}")
                 )  # fmt: skip
                 meta.append((set_name, label, name, int(rows[k]), bool(ok[k]), float(score[k])))
