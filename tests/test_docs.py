@@ -86,7 +86,7 @@ def test_every_public_name_is_documented(site):
     for page in (site / "api").glob("*.html"):
         ids |= set(re.findall(r'id="(mjcodesign\.[^"]+)"', page.read_text(encoding="utf-8")))
     missing = []
-    for name in [*_packages(), "mjcodesign.jobs", "mjcodesign.errors", "mjcodesign.optional"]:
+    for name in [*_packages(), "mjcodesign.jobs", "mjcodesign.errors", "mjcodesign.optional", "mjcodesign.outputs"]:
         mod = importlib.import_module(name)
         missing += [f"{name}.{n}" for n in getattr(mod, "__all__", ()) if f"{name}.{n}" not in ids]
     assert not missing, f"public names missing from the API pages: {missing}"
