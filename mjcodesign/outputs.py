@@ -169,6 +169,11 @@ def _check(folder: OutputFolder) -> None:
     cwd = Path(os.path.realpath(os.getcwd()))
     if real == cwd or real in cwd.parents:  # replaced whole, it would leave the shell in a removed folder
         raise OutputError(f"{where} is the working folder or holds it: name a folder inside it")
+    base = real.parent  # the sibling is made there: it must be a writable folder (checked before any work)
+    while not os.path.lexists(base) and base != base.parent:
+        base = base.parent
+    if not base.is_dir() or not os.access(base, os.W_OK | os.X_OK):
+        raise OutputError(f"{where}: {base} is not a writable folder")
     if not real.exists():
         if os.path.lexists(folder.path):
             raise OutputError(f"{where} is a broken link")
