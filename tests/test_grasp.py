@@ -212,6 +212,34 @@ def test_pose_batch_equals_single_bitwise(box_scene):
     assert not np.array_equal(outs[0].object_path, outs[1].object_path)
 
 
+def test_both_batching_backends_share_run_poses(box_scene):
+    """run_poses is one method of the scene-batching base: the posed scenes through run_scenes, each
+    handed to the observer as pose{i}."""
+    from mjcodesign.scenarios.grasp import scene_at_pose
+    from mjcodesign.sim import MjwarpBackend, SceneBatchSimulator
+
+    assert MujocoBackend.run_poses is MjwarpBackend.run_poses is SceneBatchSimulator.run_poses
+
+    class Labels:
+        def __init__(self):
+            self.seen = []
+
+        def rollout(self, r):
+            self.seen.append(r.label)
+
+    scenario = GraspScenario(
+        impulse=0.0, settle_s=0.0, close_s=0.02, tighten_s=0.02, lift_s=0.02, hold_s=0.02
+    )
+    p0 = box_scene.pose
+    poses = [p0, GripperPose((0.002, 0.0, p0.position[2]), p0.quat, p0.openings)]
+    spy = Labels()
+    outs = MujocoBackend(nthread=1).run_poses(box_scene, scenario, poses, observer=spy)
+    ref = MujocoBackend(nthread=1).run_scenes([scene_at_pose(box_scene, p) for p in poses], scenario)
+    assert spy.seen == ["pose0", "pose1"]
+    for a, b in zip(outs, ref, strict=True):
+        assert_array_equal(a.object_path, b.object_path)
+
+
 def test_batch_flags_a_diverged_rollout(box_scene):
     # An undamped hinge 1e6 times too stiff blows up the explicit spring; MuJoCo then resets that
     # rollout's data (its clock restarts), which the batch must report, not average into outcomes.

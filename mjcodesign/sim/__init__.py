@@ -4,6 +4,7 @@ MuJoCo C (:class:`MujocoBackend`) and MuJoCo Warp (:class:`MjwarpBackend`) run g
 lives in :mod:`mjcodesign.sim.fem` (its adapter, ``FemBackend``, is what ``get_backend("fem")`` returns).
 """
 
+from mjcodesign.sim.batch import SceneBatchSimulator
 from mjcodesign.sim.mjwarp import MjwarpBackend
 from mjcodesign.sim.mujoco_c import (
     MujocoBackend,
@@ -25,6 +26,7 @@ from mjcodesign.sim.protocol import BACKENDS, Simulator, get_backend
 
 __all__ = [
     "BACKENDS",
+    "SceneBatchSimulator",
     "Simulator",
     "get_backend",
     "MujocoBackend",

@@ -25,7 +25,6 @@ import numpy as np
 
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError, UnsupportedError
-from mjcodesign.models.types import GripperPose
 from mjcodesign.optional import import_warp
 from mjcodesign.scenarios.grasp import (
     STATE_SPEC,
@@ -34,9 +33,9 @@ from mjcodesign.scenarios.grasp import (
     build_scene,
     drive_scene,
     phase_controls,
-    scene_at_pose,
 )
 from mjcodesign.scenarios.outcome import Failure, Outcome, failed_outcome, outcome_from_states, outcome_steps
+from mjcodesign.sim.batch import SceneBatchSimulator
 from mjcodesign.sim.mujoco_c import initial_state, scene_with_design
 from mjcodesign.sim.observe import Observer, Rollout
 
@@ -57,8 +56,12 @@ _NCONMAX_PER_WORLD = 256  # contacts per world (a grasp makes ~20-60)
 _NJMAX_PER_WORLD = 1024  # constraint rows per world
 
 
-class MjwarpBackend:
-    """MuJoCo Warp on ``device`` (``"cpu"`` for parity tests; built for GPUs): a ``Simulator``."""
+class MjwarpBackend(SceneBatchSimulator):
+    """MuJoCo Warp on ``device`` (``"cpu"`` for parity tests; built for GPUs): a ``Simulator``.
+
+    A batch of poses (:meth:`~mjcodesign.sim.batch.SceneBatchSimulator.run_poses`) is one world per
+    pose (batched ``body_pos``/``body_quat``) through :meth:`run_scenes`.
+    """
 
     name = "mjwarp"
 
@@ -106,23 +109,6 @@ class MjwarpBackend:
                 for s, lab in zip(stiffnesses, labels, strict=True)
             ]
         scenes = [scene_with_design(scene, s) for s in stiffnesses]
-        return self.run_scenes(scenes, scenario, observer=observer, labels=labels)
-
-    def run_poses(
-        self,
-        scene: GraspScene,
-        scenario: GraspScenario,
-        poses: list[GripperPose],
-        *,
-        observer: Observer | None = None,
-        labels: list[str] | None = None,
-    ) -> list[Outcome]:
-        """One world per pose of the scene's design (batched ``body_pos``/``body_quat``).
-
-        ``observer`` receives every rollout, labelled ``labels[i]`` (default ``pose{i}``).
-        """
-        labels = labels or [f"pose{i}" for i in range(len(poses))]
-        scenes = [scene_at_pose(scene, p) for p in poses]
         return self.run_scenes(scenes, scenario, observer=observer, labels=labels)
 
     def run_scenes(

@@ -21,7 +21,6 @@ from mjcodesign.errors import SimulationDiverged
 from mjcodesign.models.builder import make_data
 from mjcodesign.models.chain import contact_solrefs, joint_stiffness
 from mjcodesign.models.simulate import captured_warnings, check_state, has_warning, reset_warnings
-from mjcodesign.models.types import GripperPose
 from mjcodesign.scenarios.grasp import (
     STATE_SPEC,
     GraspScenario,
@@ -29,9 +28,9 @@ from mjcodesign.scenarios.grasp import (
     control_spec,
     drive_scene,
     phase_controls,
-    scene_at_pose,
 )
 from mjcodesign.scenarios.outcome import Failure, Outcome, failed_outcome, outcome_from_states
+from mjcodesign.sim.batch import SceneBatchSimulator
 from mjcodesign.sim.observe import Capture, Observer, Rollout
 
 __all__ = ["MujocoBackend", "initial_state", "scene_with_design", "scene_with_model", "with_stiffness"]
@@ -157,8 +156,12 @@ def _step_all(
     return None
 
 
-class MujocoBackend:
-    """MuJoCo C, a ``Simulator``; ``nthread`` defaults to every core the process may use."""
+class MujocoBackend(SceneBatchSimulator):
+    """MuJoCo C, a ``Simulator``; ``nthread`` defaults to every core the process may use.
+
+    A batch of poses (:meth:`~mjcodesign.sim.batch.SceneBatchSimulator.run_poses`) is one
+    ``mujoco.rollout`` call through :meth:`run_scenes`.
+    """
 
     name = "mujoco"
 
@@ -244,25 +247,6 @@ class MujocoBackend:
         write = _stiffness_writer(scene)
         scenes = [_scene_with(scene, write(s), s) for s in stiffnesses]
         return self._run_scenes(scenes, scenario, observer, labels, same_start=True)
-
-    def run_poses(
-        self,
-        scene: GraspScene,
-        scenario: GraspScenario,
-        poses: list[GripperPose],
-        *,
-        observer: Observer | None = None,
-        labels: list[str] | None = None,
-    ) -> list[Outcome]:
-        """The scene's design at every pose (one model structure): one ``mujoco.rollout`` call.
-
-        A pose moves the mount and palm in a copy of the model and sets the initial openings and the
-        controls (:func:`mjcodesign.scenarios.grasp.scene_at_pose`); raises :class:`PoseError` for a bad pose.
-        ``observer`` receives every rollout, labelled ``labels[i]`` (default ``pose{i}``).
-        """
-        labels = labels or [f"pose{i}" for i in range(len(poses))]
-        scenes = [scene_at_pose(scene, p) for p in poses]
-        return self.run_scenes(scenes, scenario, observer=observer, labels=labels)
 
     def run_scenes(
         self,
