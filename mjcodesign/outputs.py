@@ -314,6 +314,7 @@ def _finish(folder: OutputFolder, tmp: Path) -> None:
     real = folder.real
     if not real.is_dir():
         return
+    shutil.copymode(real, tmp)  # the folder keeps its permissions
     old = _read_json(real / MARKER) if folder_kind(real) is folder.kind else None
     ours = set((old or {}).get("files") or ()) | {MARKER}
     for rel in _files(real, dirs=True):

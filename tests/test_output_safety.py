@@ -129,6 +129,7 @@ def test_a_folder_it_did_not_write_is_refused_and_left_alone(command, contents, 
 def test_overwrite_writes_beside_the_users_files_and_a_rerun_keeps_them(work, here, capsys):
     out = here / "mine"
     (out / "poses" / "sub").mkdir(parents=True)
+    out.chmod(0o750)
     (out / "poses" / "keep.txt").write_text("mine")
     (out / "poses" / "sub" / "x").write_text("mine too")
     (out / "design.txt").write_text("13.5")
@@ -149,6 +150,7 @@ def test_overwrite_writes_beside_the_users_files_and_a_rerun_keeps_them(work, he
     assert "poses/box.json" not in tree and "poses/ball.json" in tree
     assert tree["poses/keep.txt"] == b"mine" and tree["poses/late.txt"] == b"added later"
     assert tree["poses/sub/x"] == b"mine too" and tree["link"] == "/nonexistent"
+    assert out.stat().st_mode & 0o777 == 0o750  # the folder replaced whole keeps its permissions
 
 
 def test_another_kind_and_an_input_are_refused_even_with_overwrite(work, here, capsys):
