@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 from mjcodesign.codesign import Mode, OptimizeConfig, PoseSet, load_pose_set, optimize
+from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, N_LOG_E
 
 __all__ = ["bench_optimize"]
 
@@ -42,7 +43,16 @@ def _random_surrogate(seed: int):
         torch.manual_seed(seed)
         net = GraspNet(ModelConfig())
     z = np.zeros
-    norm = Normalizer(z(22) + 15.25, np.ones(22), 250.0, 87.0, z(9), np.ones(9), z(7), np.ones(7))
+    norm = Normalizer(
+        z(N_LOG_E) + 0.5 * (LOG_E_MIN + LOG_E_MAX),
+        np.ones(N_LOG_E),
+        250.0,
+        87.0,
+        z(9),
+        np.ones(9),
+        z(7),
+        np.ones(7),
+    )
     return Surrogate(net, norm, lift=0.03, lifted_fraction=0.5)
 
 

@@ -31,6 +31,7 @@ import time
 import numpy as np
 import torch
 
+from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, N_LOG_E
 from mjcodesign.errors import DesignError
 from mjcodesign.surrogate import (
     GraspBatch,
@@ -79,7 +80,8 @@ def _paired(a, b, repeats: int) -> tuple[np.ndarray, np.ndarray]:
 def _surrogate(config: ModelConfig, rng: np.random.Generator) -> tuple[Surrogate, Poses]:
     model = GraspNet(config).eval()
     norm = Normalizer(
-        log_e_mean=np.full(22, 15.25), log_e_std=np.ones(22), density_mean=250.0, density_std=87.0,
+        log_e_mean=np.full(N_LOG_E, 0.5 * (LOG_E_MIN + LOG_E_MAX)), log_e_std=np.ones(N_LOG_E),
+        density_mean=250.0, density_std=87.0,
         out_mean=np.zeros(9), out_std=np.ones(9), frame_mean=np.zeros(7), frame_std=np.ones(7),
     )  # fmt: skip
     n = _OBJECTS * _POSES
@@ -120,7 +122,7 @@ def bench_surrogate(*, repeats: int = 5, seed: int = 0, model: ModelConfig | Non
         x = torch.randn(b, width)
         pose = rng.integers(0, len(poses), b)
         batch = sur.prepare(
-            GraspBatch(poses, pose, rng.uniform(100, 400, b), rng.uniform(13.5, 17.0, (b, 22)))
+            GraspBatch(poses, pose, rng.uniform(100, 400, b), rng.uniform(LOG_E_MIN, LOG_E_MAX, (b, N_LOG_E)))
         )
 
         def bare(x=x):
@@ -166,7 +168,7 @@ def bench_surrogate(*, repeats: int = 5, seed: int = 0, model: ModelConfig | Non
     # Design gradient over 46 x 10 (object, pose) rows against the bare MLP's forward and backward.
     n = _OBJECTS * _POSES
     gbatch = sur.prepare(GraspBatch(poses, np.arange(n), rng.uniform(100, 400, n)))
-    design = rng.uniform(13.5, 17.0, 22)
+    design = rng.uniform(LOG_E_MIN, LOG_E_MAX, N_LOG_E)
     x460 = torch.randn(n, width, requires_grad=True)
 
     def bare_fwd_bwd():
