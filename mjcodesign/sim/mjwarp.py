@@ -99,7 +99,8 @@ class MjwarpBackend(SceneBatchSimulator):
         """One world per design; a world whose state turns non-finite is a failed outcome.
 
         Flex: MJWarp shares ``flex_stiffness`` across worlds, so every design is a model of its own, run
-        one after the other (each one world); batch a flex design over poses with :meth:`run_poses`.
+        one after the other (each one world); batch a flex design over poses with
+        :meth:`~mjcodesign.sim.batch.SceneBatchSimulator.run_poses`.
         ``observer`` receives every rollout, labelled ``labels[i]`` (default ``design{i}``).
         """
         labels = labels or [f"design{i}" for i in range(len(stiffnesses))]
