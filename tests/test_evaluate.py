@@ -1,8 +1,7 @@
-"""Evaluation by re-simulation (``mjcodesign evaluate``): cells recomputable from the rollouts, success
-from the simulator, individual designs only on their own objects, bad input refused.
+"""Evaluation on a frozen suite (``mjcodesign evaluate``): every rollout under common random numbers,
+success from the simulator, intervals recomputable from the rows, identical reruns, bad input refused.
 
-A small version of the paper's table: two objects (an in-domain YCB strawberry and an out-of-domain
-egad-like shape), one density, the fixed pose, two impulses.
+A small suite: an in-domain YCB strawberry and an out-of-domain egad-like shape, two poses each.
 """
 
 import json
@@ -16,21 +15,25 @@ import pytest
 from mjcodesign.design.stiffness import Stiffness, read_design_file, write_design_file
 from mjcodesign.errors import DesignError, StiffnessError
 from mjcodesign.evaluation import (
-    EvalConfig,
-    cell,
+    SuiteError,
+    SuiteRun,
+    analyse,
+    build_suite,
+    load_suite,
     parse_design_groups,
-    prepare_objects,
-    record_examples,
-    run_evaluation,
-    summary_table,
+    record_suite_examples,
+    run_suite,
+    select_policy,
 )
 from mjcodesign.jobs import GraspJob, run_jobs
 from mjcodesign.outputs import MARKER
 from mjcodesign.scenarios.grasp import GraspScenario, paper_impulse
+from mjcodesign.scenarios.perturb import Perturbation
 from mjcodesign.sim.protocol import get_backend
 
-_OBJECTS = ("012_strawberry",)
-_OOD = ("egad-like:1",)
+_OBJECTS = ("012_strawberry", "egad-like:1")
+_SHORT = GraspScenario(tighten_s=0.1, lift_s=0.2, hold_s=0.1, post_hold_s=0.05)
+_FILES = {"results.json", "summary.json", "table.md", "paired.md", "per_object.csv", "forest.png", MARKER}
 
 
 def _cli(*args: str, cwd: Path) -> subprocess.CompletedProcess:
@@ -57,127 +60,196 @@ def test_design_file_round_trip(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def evaluated(tmp_path_factory):
+def suite_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("suite") / "suite.json"
+    build_suite(_OBJECTS, poses_per_object=2, seed=0).save(path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def suite(suite_file):
+    return load_suite(suite_file)
+
+
+@pytest.fixture(scope="module")
+def evaluated(suite, tmp_path_factory):
     root = tmp_path_factory.mktemp("designs")
     write_design_file(root / "joint.json", Stiffness.preset("paper-optimized"))
     (root / "ind").mkdir()
     write_design_file(root / "ind" / "012_strawberry.json", Stiffness.random(7))
-    write_design_file(root / "ind" / "013_apple.json", Stiffness.random(8))
     groups = parse_design_groups(f"soft,joint:{root / 'joint.json'},individual:{root / 'ind'}")
-    config = EvalConfig(
+    run = SuiteRun(
         designs=groups,
-        in_domain=_OBJECTS,
-        out_of_domain=_OOD,
-        densities=("light",),
-        pose_sampling=("fixed",),
+        perturbations=2,
         impulses=(0.1, 0.4),
-        candidates=3,
+        pose_policies=("fixed", "oracle"),
+        scenario=_SHORT,
     )
-    objects = prepare_objects(config)
-    scenario = GraspScenario(tighten_s=0.1, lift_s=0.2, hold_s=0.1, post_hold_s=0.05)
-    rows = run_evaluation(config, objects, scenario=scenario)
-    return config, objects, rows, scenario
+    return run, run_suite(suite, run)
 
 
-def test_rows_cover_every_cell(evaluated):
-    config, objects, rows, _ = evaluated
-    assert all(o.candidates is not None for o in objects), [o.error for o in objects]
-    # soft and joint on both objects, individual on the in-domain one only, two impulses each.
-    assert len(rows) == (2 * 2 + 1) * 2
-    ind = [r for r in rows if r["group"] == "individual"]
-    assert {r["object"] for r in ind} == {"012_strawberry"}
-    assert all(r["design"] == Stiffness.random(7).as_list() for r in ind)
+def test_rows_cover_every_rollout_with_shared_draws(suite, evaluated):
+    run, result = evaluated
+    rows = result["rows"]
+    keys = {(r["object"], r["impulse_paper_ns"], r["pose"], r["draw"], r["design"]) for r in rows}
+    assert len(keys) == len(rows)
+    for so in suite.objects:
+        n_design = 3 if so.domain == "in-domain" else 2  # the individual design only on its object
+        mine = [r for r in rows if r["object"] == so.name]
+        assert len(mine) == len(so.poses) * 2 * 2 * n_design
+    # Common random numbers: one draw per (object, pose, draw index), whatever the design or disturbance.
+    draws: dict[tuple, dict] = {}
     for r in rows:
-        assert r["candidate"] == 0 and r["predicted_success"] is None
-        assert np.all(np.isfinite(r["body_force"])) and np.all(np.isfinite(r["displacement"]))
-    # The table's cells are counts over the rows.
-    for e in summary_table(rows, config):
-        for key, c in e["cells"].items():
-            dom, dens = key.split("/")
-            sel = [
-                r
-                for r in rows
-                if r["design_label"] == e["design_label"]
-                and r["domain"] == dom
-                and r["density"] == dens
-                and r["impulse_paper_ns"] == 0.1
-            ]
-            assert c["rollouts"] == len(sel) and c["success"] == sum(r["success"] for r in sel)
+        assert draws.setdefault((r["object"], r["pose"], r["draw"]), r["perturbation"]) == r["perturbation"]
+    assert len({json.dumps(p, sort_keys=True) for p in draws.values()}) == len(draws)  # all distinct
+    assert all(np.isfinite(r["hold_force_n"]) and np.isfinite(r["slip_m"]) for r in rows)
 
 
-def test_success_comes_from_the_simulator(evaluated):
-    """Every row's outcome equals the same grasp run directly (MuJoCo C is deterministic)."""
-    config, objects, rows, scenario = evaluated
-    cands = {o.name: o.candidates for o in objects}
-    for r in rows[:: max(1, len(rows) // 4)]:
-        c = cands[r["object"]]
+def test_success_comes_from_the_simulator(suite, evaluated):
+    run, result = evaluated
+    from mjcodesign.jobs import load_grasp_object
+
+    so = suite.objects[0]
+    obj = load_grasp_object(so.source, "light")
+    for r in [x for x in result["rows"] if x["object"] == so.name][:4]:
+        g = next(g for g in run.designs if g.label == r["design"])
+        scenario = GraspScenario(**{**_SHORT.__dict__, "impulse": paper_impulse(r["impulse_paper_ns"])})
         job = GraspJob(
-            obj=c.obj,
-            pose=c.poses[r["candidate"]],
-            design=Stiffness(r["design"]),
-            scenario=GraspScenario(**{**_fields(scenario), "impulse": paper_impulse(r["impulse_paper_ns"])}),
+            obj=obj,
+            pose=so.poses[r["pose"]],
+            design=g.for_object(so.name),
+            scenario=scenario,
             density=r["density_kg_m3"],
+            perturbation=Perturbation(**r["perturbation"]),
         )
-        o = run_jobs([job], get_backend("mujoco"))[0]
-        assert o.success == r["success"] and list(o.body_force) == r["body_force"]
-
-
-def _fields(s: GraspScenario) -> dict:
-    keep = ("settle_s", "close_s", "tighten_s", "lift", "lift_s", "hold_s", "post_hold_s", "lifted_fraction")
-    return {k: getattr(s, k) for k in keep}
+        out = run_jobs([job], get_backend("mujoco"))[0]
+        assert out.success == r["success"] and list(out.body_force) == r["body_force"]
 
 
 def test_larger_impulse_never_helps(evaluated):
-    """The same grasp under a larger disturbance: a grasp lost at 0.1 is not held at 0.4."""
-    _, _, rows, _ = evaluated
-    by = {}
-    for r in rows:
-        by.setdefault((r["design_label"], r["object"]), {})[r["impulse_paper_ns"]] = r["success"]
-    for v in by.values():
-        assert v[0.4] <= v[0.1]
+    _, result = evaluated
+    by = {(r["object"], r["pose"], r["draw"], r["design"], r["impulse_paper_ns"]): r for r in result["rows"]}
+    for (o, k, j, d, imp), r in by.items():
+        if imp == 0.4 and not r["sample_error"]:
+            small = by[(o, k, j, d, 0.1)]
+            assert small["success"] or not r["success"], (o, k, j, d)
 
 
-def test_cli_writes_the_report(tmp_path):
-    out = tmp_path / "report"
-    p = _cli(
-        "--designs", "soft", "--objects", "012_strawberry", "--density", "light",
-        "--pose-sampling", "fixed", "--impulse", "0.1", "--candidates", "2", "--out", str(out / "sub"), "--json",
-        "--rrd", str(tmp_path / "ex.rrd"),
-        cwd=tmp_path,
-    )  # fmt: skip
+def test_intervals_are_recomputable_from_the_rows(suite, evaluated):
+    run, result = evaluated
+    labels = [g.label for g in run.designs]
+    summary = analyse(result, labels, ["fixed", "oracle"])
+    reg = next(r for r in summary["regimes"] if r["impulse_paper_ns"] == 0.1)
+    fixed = [
+        r for r in result["rows"] if r["impulse_paper_ns"] == 0.1 and r["pose"] == 0 and not r["sample_error"]
+    ]
+    for d in ("soft", labels[1]):
+        for split, obj in ((o.domain, o.name) for o in suite.objects):
+            mine = [r["success"] for r in fixed if r["design"] == d and r["object"] == obj]
+            assert reg["policies"]["fixed"]["designs"][d][split]["value"] == pytest.approx(np.mean(mine))
+    # The oracle's pose is each (object, design)'s best pose: never below the fixed pose.
+    for d in labels:
+        for split in ("in-domain", "out-of-domain"):
+            f, o = (reg["policies"][p]["designs"][d][split] for p in ("fixed", "oracle"))
+            if f is not None:
+                assert o["value"] >= f["value"]
+
+
+def test_planted_failure_is_found_at_its_size(evaluated):
+    """A design that fails every rollout on a fixed object, else identical: the difference is that object's."""
+    _, result = evaluated
+    soft = [r for r in result["rows"] if r["design"] == "soft" and r["impulse_paper_ns"] == 0.1]
+    planted = [
+        dict(r, design="planted", success=False if r["object"] == "012_strawberry" else r["success"])
+        for r in soft
+    ]
+    summary = analyse({"rows": soft + planted, "surrogate_choice": {}}, ["planted", "soft"], [])
+    pair = next(p for p in summary["regimes"][0]["policies"]["all"]["paired"] if p["split"] == "in-domain")
+    valid = [r["success"] for r in soft if r["object"] == "012_strawberry" and not r["sample_error"]]
+    assert pair["difference"]["value"] == pytest.approx(-np.mean(valid))
+    out = next(p for p in summary["regimes"][0]["policies"]["all"]["paired"] if p["split"] == "out-of-domain")
+    assert out["difference"]["value"] == 0.0 and out["wins"] == out["losses"] == 0
+
+
+def test_same_suite_and_seed_give_identical_rows(suite_file, evaluated):
+    run, result = evaluated
+    assert run_suite(load_suite(suite_file), run)["rows"] == result["rows"]
+
+
+def test_oracle_picks_the_best_pose_then_the_first():
+    rows = [
+        {
+            "density": "light",
+            "impulse_paper_ns": 0.1,
+            "design": "d",
+            "object": "o",
+            "pose": k,
+            "draw": j,
+            "success": s,
+            "sample_error": False,
+        }
+        for k, outcomes in enumerate([(True, False), (True, True), (True, True)])
+        for j, s in enumerate(outcomes)
+    ]
+    assert {r["pose"] for r in select_policy(rows, "oracle")} == {1}
+    assert {r["pose"] for r in select_policy(rows, "fixed")} == {0}
+
+
+def test_cli_writes_the_report_and_reruns_bitwise(tmp_path, suite_file):
+    a, b = tmp_path / "a", tmp_path / "b"
+    args = ("--suite", str(suite_file), "--designs", "soft,semi-rigid", "--perturbations", "2", "--json")
+    p = _cli(*args, "--out", str(a), "--rrd", str(tmp_path / "ex.rrd"), cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     summary = json.loads(p.stdout)
-    assert summary["rollouts"] == 1
-    assert len(summary["recorded"]) == 1 and (tmp_path / "ex.rrd").stat().st_size > 0  # its one grasp
-    out = out / "sub"  # made with its parent
-    assert {f.name for f in out.iterdir()} == {"table.md", "disturbance.md", "results.json", "success.png", MARKER}
-    res = json.loads((out / "results.json").read_text())
-    c = summary["table"][0]["cells"]["in-domain/light"]
-    assert c == cell(res["rollouts"], design_label="soft", domain="in-domain", density="light")
-    assert "69.6" in (out / "table.md").read_text()  # the paper's figure beside ours
+    assert {f.name for f in a.iterdir()} == _FILES
+    assert summary["suite"]["digest"] == load_suite(suite_file).digest
+    assert summary["recorded"] and (tmp_path / "ex.rrd").stat().st_size > 0
+    table = (a / "table.md").read_text()
+    assert "69.6" in table  # the paper's own soft figure, in its own column
+    assert "| paper, in-domain (their Table 1) |" in table
+    q = _cli(*args, "--out", str(b), cwd=tmp_path)
+    assert q.returncode == 0, q.stderr
+    assert (a / "results.json").read_bytes() == (b / "results.json").read_bytes()
+    assert "evaluate: rollouts by object 2/2" in q.stderr  # one plain line per object in a log
 
 
 @pytest.mark.parametrize(
     "args",
     [
         ("--designs", "soft,nope"),
-        ("--designs", "joint:/nonexistent/d.json"),
+        ("--designs", "joint:BADLEN"),
         ("--designs", "soft,soft"),
         ("--density", "medium"),
         ("--pose-sampling", "surrogate"),  # no --ckpt
-        ("--pose-sampling", "fixed", "--impulse", "nan"),
-        ("--pose-sampling", "fixed", "--objects", "no_such_object"),
-        ("--pose-sampling", "fixed", "--candidates", "0"),
-        ("--pose-sampling", "fixed", "--anygrasp", "/nonexistent"),
-        ("--pose-sampling", "fixed", "--rrd", "/nonexistent/x.rrd"),
+        ("--pose-sampling", "psychic"),
+        ("--impulse", "nan"),
+        ("--perturbations", "0"),
+        ("--suite", "VERSION99"),
+        ("--suite", "/nonexistent/suite.json"),
+        ("--suite", "default", "--objects", "012_strawberry"),
+        ("--quick", "--objects", "012_strawberry"),
+        ("--objects", "no_such_object"),
+        ("--candidates", "0"),
+        ("--anygrasp", "/nonexistent"),
+        ("--rrd", "/nonexistent/x.rrd"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(tmp_path, args, monkeypatch, capsys):
     from mjcodesign.cli.main import main
 
     monkeypatch.chdir(tmp_path)
+    inputs = tmp_path / "inputs"
+    inputs.mkdir()
+    (inputs / "short.txt").write_text("14.0,15.0,16.0")
+    (inputs / "v99.json").write_text(json.dumps({"format": "mjcodesign-eval-suite", "version": 99}))
+    args = tuple(
+        a.replace("BADLEN", str(inputs / "short.txt")).replace("VERSION99", str(inputs / "v99.json"))
+        for a in args
+    )
     out = tmp_path / "out"
-    argv = ["evaluate", "--objects", "012_strawberry", *args, "--out", str(out)]  # a later flag wins
+    argv = ["evaluate", "--quick", *args, "--out", str(out)]
+    if "--suite" in args or "--objects" in args:
+        argv.remove("--quick")
     try:
         code = main(argv)
     except SystemExit as exc:  # argparse's refusals
@@ -185,96 +257,76 @@ def test_bad_input_exits_2_with_one_line(tmp_path, args, monkeypatch, capsys):
     err = capsys.readouterr().err
     assert code == 2, err
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
-    assert not out.exists() and sorted(tmp_path.iterdir()) == [], list(tmp_path.iterdir())
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["inputs"], list(tmp_path.iterdir())
 
 
-def test_config_refuses_bad_values():
-    g = parse_design_groups("soft")
+def test_suite_file_round_trip_and_refusals(suite_file, tmp_path):
+    built = build_suite(_OBJECTS[:1], poses_per_object=2, seed=0)
+    again = load_suite(built.save(tmp_path / "s.json") and tmp_path / "s.json")
+    assert [o.poses for o in again.objects] == [o.poses for o in built.objects]
+    assert again.perturbation == built.perturbation and again.digest == built.digest
+    bad = json.loads(Path(suite_file).read_text())
+    bad["objects"][0]["poses"][0]["quat"] = [2.0, 0.0, 0.0, 0.0]
+    (tmp_path / "bad.json").write_text(json.dumps(bad))
+    with pytest.raises(SuiteError):
+        load_suite(tmp_path / "bad.json")
     with pytest.raises(DesignError):
-        EvalConfig(designs=g, in_domain=_OBJECTS, out_of_domain=(), densities=("medium",))
-    with pytest.raises(DesignError):
-        EvalConfig(designs=g, in_domain=(), out_of_domain=())
-    with pytest.raises(DesignError):
-        EvalConfig(designs=(), in_domain=_OBJECTS, out_of_domain=())
+        SuiteRun(designs=parse_design_groups("soft"), perturbations=0)
 
 
-def test_surrogate_pose_sampling_takes_the_best_predicted_candidate(tiny_checkpoint):
-    from mjcodesign.surrogate import GraspBatch, Poses, load_surrogate
+def test_recorded_examples_are_the_best_and_worst_per_design(suite, evaluated):
+    run, result = evaluated
 
-    sur = load_surrogate(tiny_checkpoint)
-    config = EvalConfig(
-        designs=parse_design_groups("soft,semi-rigid"),
-        in_domain=_OBJECTS,
-        out_of_domain=(),
-        densities=("light",),
-        pose_sampling=("fixed", "surrogate"),
-        impulses=(0.1,),
-        candidates=3,
-    )
-    objects = prepare_objects(config, n_points=256)
-    scenario = GraspScenario(tighten_s=0.1, lift_s=0.2, hold_s=0.1, post_hold_s=0.05)
-    rows = run_evaluation(config, objects, sur, scenario=scenario)
-    c = objects[0].candidates
-    assert len(c) >= 2 and c.clouds.shape[1:] == (256, 3)
-    for r in rows:
-        assert isinstance(r["predicted_success"], bool) and np.isfinite(r["predicted_score"])
-        # The prediction recomputed independently, for every candidate: the surrogate's pick is its best.
-        p = len(c)
-        poses = Poses(c.clouds, c.com, c.up, np.full(p, c.obj.mass / c.obj.density))
-        log_e = np.tile(np.asarray(r["design"]), (p, 1))
-        score = sur.predict(
-            GraspBatch(poses, np.arange(p), np.full(p, r["density_kg_m3"]), log_e)
-        ).success_score
-        expect = int(np.argmax(score)) if r["pose_sampling"] == "surrogate" else 0
-        assert r["candidate"] == expect
-        assert r["predicted_score"] == pytest.approx(float(score[expect]), rel=1e-9, abs=1e-12)
+    class Seen:
+        def __init__(self):
+            self.labels = []
 
+        def rollout(self, r):
+            self.labels.append(r.label)
 
-def test_cli_with_a_checkpoint(tiny_checkpoint, tmp_path):
-    out = tmp_path / "report"
-    p = _cli(
-        "--ckpt", str(tiny_checkpoint), "--designs", "soft", "--objects", "012_strawberry", "--density", "light",
-        "--pose-sampling", "fixed,surrogate", "--impulse", "0.1", "--candidates", "2", "--out", str(out), "--json",
-        cwd=tmp_path,
-    )  # fmt: skip
-    assert p.returncode == 0, p.stderr
-    rows = json.loads((out / "results.json").read_text())["rollouts"]
-    assert {r["pose_sampling"] for r in rows} == {"fixed", "surrogate"}
-    assert all(isinstance(r["predicted_success"], bool) for r in rows)
-    empty = tmp_path / "not_a_checkpoint"
-    empty.mkdir()
-    p = _cli("--ckpt", str(empty), "--objects", "012_strawberry", "--out", str(tmp_path / "o2"), cwd=tmp_path)
-    assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1, p.stderr
-    assert not (tmp_path / "o2").exists()
+        def snapshot(self, s):
+            pass
 
+        def close(self):
+            pass
 
-class _Labels:
-    """An observer that keeps what it is handed."""
-
-    def __init__(self):
-        self.rollouts = []
-
-    def rollout(self, rollout):
-        self.rollouts.append(rollout)
-
-    def snapshot(self, snapshot):
-        pass
-
-    def close(self):
-        pass
-
-
-def test_recorded_examples_are_the_best_and_worst_per_group(evaluated):
-    config, objects, rows, _ = evaluated
-    seen = _Labels()
-    labels = record_examples(rows, objects, config, seen, per_group=1)
-    assert sorted(r.label for r in seen.rollouts) == sorted(labels)  # run_jobs batches by scene
-    for g in config.designs:
-        mine = [r for r in rows if r["design_label"] == g.label and r["impulse_paper_ns"] == 0.1]
+    seen = Seen()
+    labels = record_suite_examples(suite, run, result["rows"], seen, per_design=1)
+    assert sorted(seen.labels) == sorted(labels)
+    first = [r for r in result["rows"] if r["impulse_paper_ns"] == 0.1 and not r["sample_error"]]
+    for g in run.designs:
+        mine = [r for r in first if r["design"] == g.label]
         tags = {lab[len(g.label) + 1 :].split("/")[0] for lab in labels if lab.startswith(g.label + "/")}
         assert ("best" in tags) == any(r["success"] for r in mine)
         assert ("worst" in tags) == (not all(r["success"] for r in mine))
 
+
+def test_surrogate_policy_takes_the_best_predicted_pose(tiny_checkpoint, suite):
+    from mjcodesign.evaluation import ObjectCandidates, predict_candidates
+    from mjcodesign.jobs import load_grasp_object
+    from mjcodesign.surrogate import load_surrogate
+
+    sur = load_surrogate(tiny_checkpoint)
+    run = SuiteRun(
+        designs=parse_design_groups("soft,semi-rigid"),
+        perturbations=1,
+        pose_policies=("fixed", "surrogate"),
+        scenario=_SHORT,
+    )
+    result = run_suite(suite, run, surrogate=sur, n_points=256)
+    for so in suite.objects:
+        obj = load_grasp_object(so.source, "light")
+        c = ObjectCandidates(
+            obj, so.poses, np.stack([p.matrix() for p in so.poses]), so.pose_source, np.arange(len(so.poses))
+        ).with_clouds(256, 0)
+        for g in run.designs:
+            scores, _ = predict_candidates(sur, c, g.design, 100.0)
+            best = int(c.source_index[int(np.argmax(scores))])
+            assert result["surrogate_choice"][so.name]["light"][g.label]["pose"] == best
+    picked = select_policy(result["rows"], "surrogate", result["surrogate_choice"])
+    assert {(r["object"], r["design"]) for r in picked} == {
+        (o.name, g.label) for o in suite.objects for g in run.designs
+    }
 
 
 def test_anygrasp_fixed_pose_is_the_authors_first_surviving_row(reference_dir):
@@ -289,3 +341,15 @@ def test_anygrasp_fixed_pose_is_the_authors_first_surviving_row(reference_dir):
     assert c.source == path.name
     every = import_anygrasp(obj, load_external(path), load_mesh("012_strawberry").vertices, source=path.name)
     assert list(c.source_index) == sorted(every.source_index)[:3]  # the authors' order, not the ranking
+
+
+def test_the_shipped_default_suite():
+    from mjcodesign.objects import YCB_IN_DOMAIN
+
+    s = load_suite("default")
+    inside = [o for o in s.objects if o.domain == "in-domain"]
+    assert sorted(o.name for o in inside) == sorted(YCB_IN_DOMAIN)
+    assert sorted({o.fold for o in inside}) == list(range(s.folds))  # every in-domain object in a fold
+    assert all(o.fold is None for o in s.objects if o.domain == "out-of-domain")
+    short = [o for o in s.objects if len(o.poses) < s.poses_per_object]
+    assert s.poses_per_object == 10 and all(o.note for o in short)  # fewer poses only with the reason

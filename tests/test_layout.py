@@ -218,5 +218,7 @@ def test_every_package_is_in_the_distribution():
     data = cfg.get("package-data", {})
     for r in roots:
         for f in r.rglob("*.json"):
-            pkg = folder_of.get(f.parent.resolve())
-            assert pkg and "*.json" in data.get(pkg, []), f"{f} is not package data of {pkg}"
+            owner = next(d for d in f.resolve().parents if d in folder_of)  # the nearest package folder
+            pkg = folder_of[owner]
+            rel = f.resolve().relative_to(owner)
+            assert any(rel.match(g) for g in data.get(pkg, [])), f"{f} is not package data of {pkg}"

@@ -1,4 +1,4 @@
-"""``mjcodesign evaluate``: the paper's Table 1 and disturbance sweep, re-simulated.
+"""``mjcodesign evaluate``: designs compared by re-simulation on a frozen suite, with intervals.
 
 Every input is checked before anything runs or is written; a refused command exits 2 with one line and
 leaves no folder behind. The report lands in ``--out`` only when the run finished.
@@ -7,150 +7,229 @@ leaves no folder behind. The report lands in ``--out`` only when the run finishe
 from __future__ import annotations
 
 import argparse
-import os
+import dataclasses
 import sys
 import time
 from pathlib import Path
 
-from mjcodesign.cli.common import emit, int_at_least, path_text, user_cache_dir
+from mjcodesign.cli.common import emit, finite_float, int_at_least, path_text, user_cache_dir
 
 __all__ = ["add_parser", "run"]
 
-_RECORDED_PER_GROUP = 2  # best and worst rollouts per design group re-run into --rrd
+_RECORDED_PER_DESIGN = 2  # best and worst rollouts per design re-run into --rrd
+_QUICK_OBJECTS = "012_strawberry,013_apple,025_mug,egad-like:1,egad-like:7"  # 3 in-domain, 2 out
+_QUICK_POSES = 2
+_QUICK_PERTURBATIONS = 2
 
 
 def add_parser(subparsers) -> None:
     """Register ``evaluate`` on an ``argparse`` subparsers object."""
     p = subparsers.add_parser(
-        "evaluate", help="re-simulate designs over object sets: the paper's Table 1 and disturbance sweep"
+        "evaluate",
+        help="compare designs by re-simulation on a frozen suite: success with intervals, paired tests",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument(
-        "--ckpt",
-        type=path_text,
+        "--suite",
         default=None,
-        help="surrogate checkpoint (needed for --pose-sampling surrogate)",
-    )
-    p.add_argument(
-        "--designs",
-        default="soft,semi-rigid",
-        help="comma-separated: presets, random:SEED, joint:FILE (a design file), individual:DIR (OBJECT.json files)",
+        help="suite file (JSON) or 'default' (the shipped one: 46 in-domain + 42 out-of-domain objects, "
+        "10 poses each); without it, --objects builds an ad-hoc suite; with neither, 'default'",
     )
     p.add_argument(
         "--objects",
-        default="ycb-in-domain,ood",
-        help="comma-separated sets (ycb-in-domain, ycb-ood, egad-like, ood), folders, YCB names or mesh files; "
-        "the paper's 46 training objects form the in-domain column, everything else the out-of-domain one",
-    )
-    p.add_argument("--density", default="light,heavy", help="comma-separated: light, heavy")
-    p.add_argument("--pose-sampling", default="fixed,surrogate", help="comma-separated: fixed, surrogate")
-    p.add_argument(
-        "--impulse", default="0.1,0.2,0.4", help="disturbances in the paper's units [N s], comma-separated"
+        default=None,
+        help="instead of --suite: comma-separated sets (ycb-in-domain, ycb-ood, egad-like, ood), folders, "
+        "YCB names or mesh files, posed now (--poses-per-object)",
     )
     p.add_argument(
-        "--candidates", type=int_at_least(1), default=10, help="surrogate sampling picks among the first N"
+        "--poses-per-object", type=int_at_least(1), default=10, help="poses sampled per object of --objects"
+    )
+    p.add_argument("--save-suite", type=path_text, default=None, help="also write the ad-hoc suite here")
+    p.add_argument(
+        "--designs",
+        default="soft,semi-rigid,paper-optimized",
+        help="comma-separated: presets, random:SEED, joint:FILE (a design file), individual:DIR (OBJECT.json files)",
     )
     p.add_argument(
-        "--anygrasp", type=path_text, default=None, help="folder of the authors' AnyGrasp OBJECT.npz poses"
+        "--pose-sampling",
+        default="fixed,oracle",
+        help="comma-separated pose policies: fixed (first pose), surrogate (needs --ckpt), oracle (the "
+        "simulator's best); every report also gives 'all' (every pose)",
+    )
+    p.add_argument(
+        "--perturbations",
+        type=int_at_least(1),
+        default=8,
+        help="perturbed rollouts per (object, pose, design)",
+    )
+    p.add_argument(
+        "--palm-mm", type=finite_float, default=2.0, help="ad-hoc suite: palm position error ± [mm]"
+    )
+    p.add_argument(
+        "--palm-deg", type=finite_float, default=2.0, help="ad-hoc suite: palm rotation error ± [deg]"
+    )
+    p.add_argument(
+        "--mass-range", type=finite_float, default=0.10, help="ad-hoc suite: object mass error ± [-]"
+    )
+    p.add_argument(
+        "--friction-range",
+        type=finite_float,
+        default=0.20,
+        help="ad-hoc suite: finger–object friction error ± [-]",
+    )
+    p.add_argument(
+        "--tendon-range",
+        type=finite_float,
+        default=0.05,
+        help="ad-hoc suite: tendon tension / servo gain error ± [-]",
+    )
+    p.add_argument(
+        "--quick", action="store_true", help=f"a small suite for CI ({_QUICK_OBJECTS}; 2 poses, 2 draws)"
+    )
+    p.add_argument(
+        "--ckpt", type=path_text, default=None, help="surrogate checkpoint (for --pose-sampling surrogate)"
+    )
+    p.add_argument("--density", default="light", help="comma-separated densities: light, heavy or kg/m³")
+    p.add_argument(
+        "--impulse", default="0.1", help="disturbances in the paper's units [N s], comma-separated (a sweep)"
+    )
+    p.add_argument(
+        "--candidates", type=int_at_least(1), default=None, help="use only each object's first N suite poses"
+    )
+    p.add_argument(
+        "--anygrasp",
+        type=path_text,
+        default=None,
+        help="ad-hoc suite: folder of the authors' AnyGrasp OBJECT.npz poses",
     )
     p.add_argument("--model", choices=("chain", "flex"), default="chain")
-    p.add_argument("--seed", type=int_at_least(0), default=0)
+    p.add_argument(
+        "--seed", type=int_at_least(0), default=0, help="seed of the perturbation draws (and ad-hoc poses)"
+    )
     p.add_argument(
         "--out",
         type=path_text,
         required=True,
-        help="report folder (table.md, disturbance.md, results.json, success.png)",
+        help="report folder (results.json, summary.json, table.md, paired.md, per_object.csv, forest.png)",
+    )
+    p.add_argument(
+        "--overwrite", action="store_true", help="write into a non-empty folder, keeping its other files"
     )
     p.add_argument(
         "--rrd",
         type=path_text,
         default=None,
-        help="also record the best and worst grasps per group for Rerun",
+        help="also record the best and worst grasps per design for Rerun",
     )
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON line")
     p.set_defaults(func=run)
 
 
-def _objects(text: str) -> tuple[tuple[str, ...], tuple[str, ...]]:
+def _names(text: str) -> tuple[str, ...]:
     from mjcodesign.data import resolve_objects
-    from mjcodesign.evaluation import domain_of, parse_list
+    from mjcodesign.evaluation import parse_list
 
     names: list[str] = []
     for item in parse_list(text, "objects"):
         for n in resolve_objects(item):
             if n not in names:
                 names.append(n)
-    inside = tuple(n for n in names if domain_of(n) == "in-domain")
-    return inside, tuple(n for n in names if domain_of(n) != "in-domain")
+    return names
 
 
-def _impulses(text: str) -> tuple[float, ...]:
+def _floats(text: str, flag: str) -> tuple[float, ...]:
     from mjcodesign.errors import DesignError
     from mjcodesign.evaluation import parse_list
 
     try:
-        return tuple(float(v) for v in parse_list(text, "impulse"))
+        return tuple(float(v) for v in parse_list(text, flag))
     except ValueError:
-        raise DesignError(f"--impulse: numbers in the paper's N s, comma-separated, got {text!r}") from None
+        raise DesignError(f"--{flag}: numbers, comma-separated, got {text!r}") from None
 
 
-def _config(args: argparse.Namespace):
-    from mjcodesign.evaluation import EvalConfig, parse_design_groups, parse_list
+def _run_config(args: argparse.Namespace):
+    from mjcodesign.evaluation import parse_design_groups, parse_list
+    from mjcodesign.evaluation.rollouts import SuiteRun
+    from mjcodesign.objects import parse_density
 
-    inside, outside = _objects(args.objects)
+    densities = parse_list(args.density, "density")
+    for d in densities:
+        parse_density(d)
+    return SuiteRun(
+        designs=parse_design_groups(args.designs),
+        perturbations=_QUICK_PERTURBATIONS if args.quick else args.perturbations,
+        densities=densities,
+        impulses=_floats(args.impulse, "impulse"),
+        pose_policies=parse_list(args.pose_sampling, "pose-sampling"),
+        model=args.model,
+        seed=args.seed,
+    )
+
+
+def _suite_source(args: argparse.Namespace):
+    """('file', suite) or ('build', (names, poses per object, perturbation model)), all checked."""
+    from mjcodesign.errors import DesignError
+    from mjcodesign.evaluation.suite import PerturbationModel, load_suite
+
+    adhoc = args.objects is not None or args.quick
+    if sum((args.suite is not None, args.objects is not None, args.quick)) > 1:
+        raise DesignError("give one of --suite, --objects and --quick")
     if args.anygrasp is not None and not Path(args.anygrasp).is_dir():
         from mjcodesign.errors import PoseError
 
         raise PoseError(f"--anygrasp: {args.anygrasp} is not a folder")
-    return EvalConfig(
-        designs=parse_design_groups(args.designs),
-        in_domain=inside,
-        out_of_domain=outside,
-        densities=parse_list(args.density, "density"),
-        pose_sampling=parse_list(args.pose_sampling, "pose-sampling"),
-        impulses=_impulses(args.impulse),
-        candidates=args.candidates,
-        anygrasp=args.anygrasp,
-        model=args.model,
-        seed=args.seed,
-        cache_dir=str(user_cache_dir()),
+    ranges = PerturbationModel(
+        palm_position_m=args.palm_mm / 1000.0,
+        palm_rotation_deg=args.palm_deg,
+        mass=args.mass_range,
+        friction=args.friction_range,
+        tendon=args.tendon_range,
     )
+    if not adhoc:
+        if ranges != PerturbationModel():
+            raise DesignError(
+                "a frozen suite fixes its perturbation ranges: build an ad-hoc one with --objects"
+            )
+        return "file", load_suite(args.suite or "default")
+    names = _names(_QUICK_OBJECTS if args.quick else args.objects)
+    poses = _QUICK_POSES if args.quick else args.poses_per_object
+    return "build", (names, poses, ranges)
 
 
-def _check_out(out: Path) -> None:
-    from mjcodesign.errors import OutputError
-
-    if out.exists() and not out.is_dir():
-        raise OutputError(f"--out {out} is a file")
-    if out.is_dir() and any(out.iterdir()) and not (out / "results.json").is_file():
-        raise OutputError(f"--out {out} holds other files: give an empty folder or an earlier report's")
-    base = out
-    while not base.exists():  # the folders are made when the report is written
-        base = base.parent
-    if not base.is_dir() or not os.access(base, os.W_OK):
-        raise OutputError(f"--out {out}: {base} is not a writable folder")
+def _trim(suite, n: int | None):
+    if n is None:
+        return suite
+    objects = tuple(
+        dataclasses.replace(o, poses=o.poses[:n], source_index=o.source_index[:n]) for o in suite.objects
+    )
+    return dataclasses.replace(suite, objects=objects)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``evaluate``; library errors propagate (exit 2 there)."""
-    from rich.console import Console
-    from rich.progress import Progress
-
-    from mjcodesign.errors import DesignError
-    from mjcodesign.evaluation import prepare_objects, record_examples, run_evaluation, write_report
-
-    config = _config(args)
-    out = Path(args.out)
-    _check_out(out)
+    from mjcodesign.errors import DesignError, OutputError
+    from mjcodesign.evaluation.analysis import analyse
+    from mjcodesign.evaluation.rollouts import record_suite_examples, run_suite
+    from mjcodesign.evaluation.suite import build_suite
+    from mjcodesign.evaluation.suite_report import suite_header, write_suite_report
     from mjcodesign.outputs import OutputKind, check_output
 
-    check_output(out, OutputKind.EVALUATION, inputs={"--ckpt": args.ckpt, "--anygrasp": args.anygrasp})
+    run_cfg = _run_config(args)
+    kind, source = _suite_source(args)
+    folder = check_output(
+        args.out,
+        OutputKind.EVALUATION,
+        overwrite=args.overwrite,
+        inputs={"--ckpt": args.ckpt, "--anygrasp": args.anygrasp, "--suite": args.suite},
+    )
     if args.rrd is not None and not Path(args.rrd).resolve().parent.is_dir():
-        from mjcodesign.errors import OutputError
-
         raise OutputError(f"--rrd {args.rrd}: folder {Path(args.rrd).parent} does not exist")
-    surrogate = None
-    n_points = None
-    if config.needs_surrogate:
+    if args.save_suite is not None and kind != "build":
+        raise DesignError("--save-suite writes an ad-hoc suite: give --objects")
+    if args.save_suite is not None and not Path(args.save_suite).resolve().parent.is_dir():
+        raise OutputError(f"--save-suite {args.save_suite}: its folder does not exist")
+    surrogate, n_points = None, 1024
+    if run_cfg.needs_surrogate:
         if args.ckpt is None:
             raise DesignError(
                 "--pose-sampling surrogate needs --ckpt DIR (a checkpoint from `mjcodesign train`)"
@@ -159,56 +238,133 @@ def run(args: argparse.Namespace) -> int:
 
         surrogate = load_surrogate(args.ckpt)
         n_points = int(surrogate.meta["dataset"]["cloud_points"])
+    cache = user_cache_dir()
     t0 = time.perf_counter()
-    console = Console(stderr=True)
-    with Progress(console=console, transient=True, disable=not console.is_terminal) as bar:
-        tasks: dict[str, int] = {}
-
-        def progress(stage: str, done: int, total: int) -> None:
-            if stage not in tasks:
-                tasks[stage] = bar.add_task(stage, total=total)
-            bar.update(tasks[stage], completed=done)
-
-        kwargs = {} if n_points is None else {"n_points": n_points}
-        objects = prepare_objects(config, progress=progress, **kwargs)
-        for o in objects:
-            if o.error:
-                print(f"warning: {o.name}: {o.error}", file=sys.stderr)
-        if not any(o.candidates is not None for o in objects):
-            raise DesignError("no object could be loaded and posed (see the warnings above)")
-        rows = run_evaluation(config, objects, surrogate, progress=progress)
+    with _progress() as progress:
+        if kind == "build":
+            names, poses, ranges = source
+            suite = build_suite(
+                names,
+                name="quick" if args.quick else "adhoc",
+                poses_per_object=poses,
+                seed=args.seed,
+                perturbation=ranges,
+                anygrasp=args.anygrasp,
+                cache_dir=cache,
+                progress=lambda s, d, t: progress("posing objects", d, t),
+                warn=_warn,
+            )
+            if args.save_suite:
+                suite = suite.save(args.save_suite)
+        else:
+            suite = source
+        suite = _trim(suite, args.candidates)
+        result = run_suite(
+            suite,
+            run_cfg,
+            surrogate=surrogate,
+            n_points=n_points,
+            cache_dir=cache,
+            progress=lambda s, d, t: progress("rollouts by object", d, t),
+            warn=_warn,
+        )
+    if not result["rows"]:
+        raise DesignError("no object could be loaded and simulated (see the warnings above)")
+    labels = [g.label for g in run_cfg.designs]
+    analysis = analyse(result, labels, list(run_cfg.pose_policies), seed=args.seed)
     wall = time.perf_counter() - t0
     meta = {
-        "wall_time_s": wall,
+        "designs": labels,
+        "perturbations": run_cfg.perturbations,
+        "densities": list(run_cfg.densities),
+        "impulses_paper_ns": list(run_cfg.impulses),
+        "pose_policies": list(run_cfg.pose_policies),
+        "model": run_cfg.model,
+        "seed": run_cfg.seed,
+        "perturbation_model": suite.perturbation.as_dict(),
         "checkpoint": args.ckpt,
-        "designs": [{"label": g.label, "group": g.group} for g in config.designs],
-        "impulses_paper_ns": list(config.impulses),
-        "model": config.model,
-        "seed": config.seed,
-        "command": sys.argv,
+        "command": args.command_line,
+        "wall_time_s": wall,
+        "rollout_wall_time_s": result["wall_time_s"],
+        "rollouts_per_s": len(result["rows"]) / max(result["wall_time_s"], 1e-9),
     }
     if args.rrd:
         from mjcodesign.cli.viz import open_recorder
 
         recorder = open_recorder(args)
         try:
-            meta["recorded"] = record_examples(rows, objects, config, recorder, per_group=_RECORDED_PER_GROUP)
+            meta["recorded"] = record_suite_examples(
+                suite, run_cfg, result["rows"], recorder, per_design=_RECORDED_PER_DESIGN, cache_dir=cache
+            )
         except BaseException:
             recorder.close(discard=True)
             raise
         recorder.close()
-    summary = write_report(out, rows, objects, config, meta)
-    summary["out"] = str(out)
-    summary["rollouts"] = len(rows)
+    summary = write_suite_report(folder, result, analysis, labels, suite_header(suite), meta)
+    summary["out"] = str(args.out)
     emit(summary if args.json else _flat(summary), args.json)
     return 0
 
 
+def _warn(message: str) -> None:
+    print(f"warning: {message}", file=sys.stderr, flush=True)
+
+
+class _progress:
+    """A rich bar with an ETA in a terminal; one plain line per finished unit on stderr otherwise."""
+
+    def __enter__(self):
+        from rich.console import Console
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+        self.console = Console(stderr=True)
+        self.tty = self.console.is_terminal
+        self.bar = Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            TextColumn("{task.completed}/{task.total}"),
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+            console=self.console,
+            transient=True,
+            disable=not self.tty,
+        )
+        self.bar.__enter__()
+        self.tasks: dict[str, int] = {}
+        self.t0 = time.perf_counter()
+        return self.update
+
+    def update(self, stage: str, done: int, total: int) -> None:
+        if stage not in self.tasks:
+            self.tasks[stage] = self.bar.add_task(stage, total=total)
+        self.bar.update(self.tasks[stage], completed=done)
+        if not self.tty:
+            print(
+                f"evaluate: {stage} {done}/{total} ({time.perf_counter() - self.t0:.0f} s)",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    def __exit__(self, *exc):
+        return self.bar.__exit__(*exc)
+
+
 def _flat(summary: dict) -> list[dict]:
     rows = []
-    for e in summary["table"]:
-        row = {"group": e["design_label"], "pose": e["pose_sampling"]}
-        for k, c in e["cells"].items():
-            row[k] = "—" if c["rate"] is None else f"{100 * c['rate']:.1f}% ({c['success']}/{c['rollouts']})"
-        rows.append(row)
+    for reg in summary["regimes"]:
+        for policy, entry in reg["policies"].items():
+            for d, splits in entry["designs"].items():
+                row = {
+                    "density": reg["density"],
+                    "impulse": reg["impulse_paper_ns"],
+                    "pose": policy,
+                    "design": d,
+                }
+                for split, iv in splits.items():
+                    row[split] = (
+                        "—"
+                        if iv is None
+                        else f"{100 * iv['value']:.1f}% [{100 * iv['low']:.1f}, {100 * iv['high']:.1f}] n={iv['n']}"
+                    )
+                rows.append(row)
     return rows

@@ -1,54 +1,83 @@
-"""Evaluation by re-simulation: the paper's Table 1 and its disturbance sweep (``mjcodesign evaluate``).
+"""Evaluation by re-simulation: designs compared on a frozen suite, with intervals (``mjcodesign evaluate``).
 
 Success always comes from the simulator; the surrogate (optional, imported lazily) only chooses poses.
 
-- :mod:`~mjcodesign.evaluation.config`: :class:`EvalConfig`, design groups and design files;
+- :mod:`~mjcodesign.evaluation.suite`: :class:`Suite`, objects with frozen poses and the perturbation
+  model, versioned files (``--suite``), :func:`build_suite` for an ad-hoc one;
+- :mod:`~mjcodesign.evaluation.config`: design groups (``--designs``) and the paper's Table 1 figures;
 - :mod:`~mjcodesign.evaluation.candidates`: per object, its first candidates and their point clouds;
-- :mod:`~mjcodesign.evaluation.run`: :func:`run_evaluation`, one row per rollout;
-- :mod:`~mjcodesign.evaluation.report`: the tables, ``results.json`` and a bar chart.
+- :mod:`~mjcodesign.evaluation.rollouts`: :func:`run_suite`, every rollout (objects × poses × draws ×
+  designs) under common random numbers;
+- :mod:`~mjcodesign.evaluation.stats` and :mod:`~mjcodesign.evaluation.analysis`: Wilson intervals per
+  object, bootstrap intervals over objects, paired differences with permutation p-values;
+- :mod:`~mjcodesign.evaluation.suite_report`: ``results.json``, ``summary.json``, ``table.md``,
+  ``paired.md``, ``per_object.csv`` and ``forest.png``.
 """
 
-from mjcodesign.evaluation.candidates import ObjectCandidates, object_candidates
-from mjcodesign.evaluation.config import (
-    DENSITIES,
-    DOMAINS,
-    PAPER_TABLE1,
-    POSE_SAMPLING,
-    DesignGroup,
-    EvalConfig,
-    parse_design_groups,
-    parse_list,
+from mjcodesign.evaluation.analysis import ALL_POSES, analyse, per_object_cells, select_policy
+from mjcodesign.evaluation.candidates import ObjectCandidates, object_candidates, predict_candidates
+from mjcodesign.evaluation.config import PAPER_TABLE1, DesignGroup, parse_design_groups, parse_list
+from mjcodesign.evaluation.rollouts import (
+    MAX_REDRAWS,
+    POSE_POLICIES,
+    SuiteRun,
+    record_suite_examples,
+    run_suite,
 )
-from mjcodesign.evaluation.report import (
-    cell,
-    disturbance_markdown,
-    disturbance_table,
-    summary_table,
-    table1_markdown,
-    write_report,
+from mjcodesign.evaluation.stats import (
+    Interval,
+    PairedDifference,
+    bootstrap_mean,
+    mean_interval,
+    paired_difference,
+    wilson,
 )
-from mjcodesign.evaluation.run import EvalObject, domain_of, prepare_objects, record_examples, run_evaluation
+from mjcodesign.evaluation.suite import (
+    DEFAULT_SUITE,
+    SUITE_FORMAT,
+    SUITE_VERSION,
+    PerturbationModel,
+    Suite,
+    SuiteError,
+    SuiteObject,
+    build_suite,
+    load_suite,
+)
+from mjcodesign.evaluation.suite_report import PAPER_MEASURED, suite_header, write_suite_report
 
 __all__ = [
-    "DENSITIES",
-    "DOMAINS",
+    "ALL_POSES",
+    "DEFAULT_SUITE",
+    "MAX_REDRAWS",
+    "PAPER_MEASURED",
     "PAPER_TABLE1",
-    "POSE_SAMPLING",
+    "POSE_POLICIES",
+    "SUITE_FORMAT",
+    "SUITE_VERSION",
     "DesignGroup",
-    "EvalConfig",
-    "EvalObject",
+    "Interval",
     "ObjectCandidates",
-    "cell",
-    "disturbance_markdown",
-    "disturbance_table",
-    "domain_of",
+    "PairedDifference",
+    "PerturbationModel",
+    "Suite",
+    "SuiteError",
+    "SuiteObject",
+    "SuiteRun",
+    "analyse",
+    "bootstrap_mean",
+    "build_suite",
+    "load_suite",
+    "mean_interval",
     "object_candidates",
+    "paired_difference",
     "parse_design_groups",
     "parse_list",
-    "prepare_objects",
-    "record_examples",
-    "run_evaluation",
-    "summary_table",
-    "table1_markdown",
-    "write_report",
+    "per_object_cells",
+    "predict_candidates",
+    "record_suite_examples",
+    "run_suite",
+    "select_policy",
+    "suite_header",
+    "wilson",
+    "write_suite_report",
 ]

@@ -20,7 +20,7 @@ from mjcodesign.models.types import GripperPose
 from mjcodesign.objects import GraspObject, load_mesh
 from mjcodesign.poses import import_anygrasp, load_external, sample_poses, scene_offset, to_gripper_pose
 
-__all__ = ["ObjectCandidates", "object_candidates"]
+__all__ = ["ObjectCandidates", "object_candidates", "predict_candidates"]
 
 CLOUD_POINTS = (
     1024  # the dataset's partial-cloud size (mjcodesign.data.CLOUD_POINTS); a checkpoint may say otherwise
@@ -119,3 +119,24 @@ def object_candidates(
         str(cands.source),
         np.asarray(cands.source_index)[order],
     )
+
+
+def predict_candidates(
+    surrogate, cands: ObjectCandidates, design, rho: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The surrogate's (success score, success) for every candidate of one object (clouds needed).
+
+    ``surrogate`` is a :class:`mjcodesign.surrogate.Surrogate`; ``design`` a Stiffness; ``rho`` the
+    object's density [kg/m³].
+    """
+    from mjcodesign.surrogate import GraspBatch, Poses
+
+    if cands.clouds is None:
+        raise PoseError(f"{cands.obj.name}: the surrogate needs the candidates' clouds (with_clouds)")
+    volume = cands.obj.mass / cands.obj.density
+    poses = Poses(cands.clouds, cands.com, cands.up, np.full(len(cands), volume))
+    p = len(cands)
+    pred = surrogate.predict(
+        GraspBatch(poses, np.arange(p), np.full(p, rho), np.tile(design.log_e.ravel(), (p, 1)))
+    )
+    return np.asarray(pred.success_score, dtype=float), np.asarray(pred.success, dtype=bool)

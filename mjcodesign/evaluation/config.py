@@ -1,4 +1,4 @@
-"""What an evaluation runs: the design groups, object sets, densities, pose rules and impulses.
+"""The designs an evaluation compares (``--designs``), design files, and the paper's Table 1 figures.
 
 A design group is named on the command line (``--designs``):
 
@@ -15,28 +15,16 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from mjcodesign.design.stiffness import DESIGN_FILE_SUFFIXES, Stiffness, read_design_file
 from mjcodesign.errors import DesignError, MjcodesignError
-from mjcodesign.objects import DENSITY_PRESETS
 
 __all__ = [
-    "DENSITIES",
-    "DOMAINS",
     "PAPER_TABLE1",
-    "POSE_SAMPLING",
     "DesignGroup",
-    "EvalConfig",
     "parse_design_groups",
     "parse_list",
 ]
 
-POSE_SAMPLING = ("fixed", "surrogate")
-"""``fixed``: the first candidate; ``surrogate``: the best of the first :attr:`EvalConfig.candidates`
-candidates by the surrogate's predicted success score, per design."""
-DOMAINS = ("in-domain", "out-of-domain")
-DENSITIES = tuple(DENSITY_PRESETS)
 
 PAPER_TABLE1: dict[tuple[str, str, str, str], float] = {
     # (group, pose sampling, domain, density) -> success [%], as the issue quotes the paper's Table 1
@@ -116,49 +104,3 @@ def parse_list(text: str, what: str) -> tuple[str, ...]:
     if len(set(items)) != len(items):
         raise DesignError(f"--{what}: an entry is listed twice in {text!r}")
     return items
-
-
-@dataclass(frozen=True)
-class EvalConfig:
-    """Everything that decides an evaluation's rollouts."""
-
-    designs: tuple[DesignGroup, ...]
-    in_domain: tuple[str, ...]
-    """Objects of the in-domain column (names or paths)."""
-    out_of_domain: tuple[str, ...]
-    densities: tuple[str, ...] = ("light", "heavy")
-    pose_sampling: tuple[str, ...] = ("fixed", "surrogate")
-    impulses: tuple[float, ...] = (0.1, 0.2, 0.4)
-    """Disturbances in the paper's units [N s in their 5x scene] (``paper_impulse`` maps them); the
-    first is the table's, all of them make the disturbance sweep."""
-    candidates: int = 10
-    """Surrogate pose sampling picks among this many first candidates (the paper: 10)."""
-    anygrasp: str | None = None
-    """A folder of the authors' AnyGrasp ``OBJECT.npz`` files: their poses replace the sampler's for
-    the objects they cover."""
-    model: str = "chain"
-    seed: int = 0
-    cache_dir: str | None = None
-
-    def __post_init__(self) -> None:
-        if not self.designs:
-            raise DesignError("an evaluation needs at least one design group")
-        if not (self.in_domain or self.out_of_domain):
-            raise DesignError("an evaluation needs at least one object")
-        for d in self.densities:
-            if d not in DENSITY_PRESETS:
-                raise DesignError(f"density {d!r}: choose from {', '.join(DENSITY_PRESETS)}")
-        for s in self.pose_sampling:
-            if s not in POSE_SAMPLING:
-                raise DesignError(f"pose sampling {s!r}: choose from {', '.join(POSE_SAMPLING)}")
-        if not self.impulses or not all(np.isfinite(i) and i >= 0 for i in self.impulses):
-            raise DesignError(f"impulses must be finite values >= 0 (paper N s), got {self.impulses}")
-        if isinstance(self.candidates, bool) or int(self.candidates) < 1:
-            raise DesignError(f"candidates must be >= 1, got {self.candidates}")
-        if isinstance(self.seed, bool) or int(self.seed) < 0:
-            raise DesignError(f"seed must be >= 0, got {self.seed}")
-
-    @property
-    def needs_surrogate(self) -> bool:
-        """Whether a checkpoint is needed (surrogate pose sampling)."""
-        return "surrogate" in self.pose_sampling

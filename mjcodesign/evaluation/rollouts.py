@@ -1,0 +1,315 @@
+"""Every rollout of a suite: objects × poses × perturbation draws × designs (× densities × disturbances).
+
+Designs are compared on the same poses and the same draws (common random numbers): the draws of an
+(object, pose) come from their own seeded stream (:meth:`PerturbationModel.stream`), whatever the
+designs, worker count or order. A palm draw whose start overlaps the object or the ground by more than
+the pose sampler accepts (:data:`~mjcodesign.poses.candidates.MAX_PENETRATION`) is drawn again: a robot
+whose error would put its open fingers into the object meets it on the way down instead, and a start
+inside it is not a grasp. Success comes from the simulator (MuJoCo C through :func:`run_jobs`); the
+surrogate only scores poses for the ``surrogate`` pose policy.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.errors import DesignError, MjcodesignError, PoseError
+from mjcodesign.evaluation.candidates import ObjectCandidates, predict_candidates
+from mjcodesign.evaluation.config import DesignGroup
+from mjcodesign.evaluation.suite import Suite, SuiteObject
+from mjcodesign.jobs import GraspJob, SceneCache, load_grasp_object, run_jobs
+from mjcodesign.models.types import FingerModel
+from mjcodesign.objects import parse_density
+from mjcodesign.poses.candidates import MAX_PENETRATION
+from mjcodesign.scenarios.grasp import GraspScenario, paper_impulse, scene_at_pose
+from mjcodesign.scenarios.outcome import Outcome
+from mjcodesign.scenarios.perturb import Perturbation, perturbed_scene, start_penetration
+from mjcodesign.sim.protocol import get_backend
+
+__all__ = ["MAX_REDRAWS", "POSE_POLICIES", "SuiteRun", "record_suite_examples", "run_suite"]
+
+POSE_POLICIES = ("fixed", "surrogate", "oracle")
+"""``fixed``: each object's first pose; ``surrogate``: the surrogate's best pose for the design;
+``oracle``: the simulator's best pose for the design (measured on the same draws: an upper bound of any
+pose selector, optimistic by the winner's curse). Every report also gives ``all``: every pose."""
+MAX_REDRAWS = 50
+"""Draws tried per perturbation before the pose's draw is given up (counted in ``draws_given_up``)."""
+
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True, kw_only=True)
+class SuiteRun:
+    """What runs on a suite: designs, draws per pose, regimes, disturbances, pose policies."""
+
+    designs: tuple[DesignGroup, ...]
+    perturbations: int = 8
+    """Perturbed rollouts per (object, pose, design)."""
+    densities: tuple[str, ...] = ("light",)
+    """Object densities: presets or kg/m³ (each is a regime of its own)."""
+    impulses: tuple[float, ...] = (0.1,)
+    """Disturbances in the paper's units [N s] (``paper_impulse`` maps them); the first is the table's."""
+    pose_policies: tuple[str, ...] = ("fixed",)
+    model: str = "chain"
+    seed: int = 0
+    """Seed of the perturbation draws."""
+    scenario: GraspScenario = field(default_factory=GraspScenario)
+
+    def __post_init__(self) -> None:
+        if not self.designs:
+            raise DesignError("an evaluation needs at least one design")
+        labels = [g.label for g in self.designs]
+        if len(set(labels)) != len(labels):
+            raise DesignError("a design is listed twice")
+        if isinstance(self.perturbations, bool) or int(self.perturbations) < 1:
+            raise DesignError(f"--perturbations must be >= 1, got {self.perturbations}")
+        for d in self.densities:
+            parse_density(d)
+        if not self.impulses or not all(np.isfinite(i) and i >= 0 for i in self.impulses):
+            raise DesignError(f"impulses must be finite values >= 0 (paper N s), got {self.impulses}")
+        for p in self.pose_policies:
+            if p not in POSE_POLICIES:
+                raise DesignError(f"pose sampling {p!r}: choose from {', '.join(POSE_POLICIES)}")
+        if isinstance(self.seed, bool) or int(self.seed) < 0:
+            raise DesignError(f"seed must be >= 0, got {self.seed}")
+        FingerModel(self.model)
+
+    @property
+    def needs_surrogate(self) -> bool:
+        """Whether a checkpoint is needed (``surrogate`` pose policy)."""
+        return "surrogate" in self.pose_policies
+
+
+def _draws(
+    suite: Suite, run: SuiteRun, so: SuiteObject, base, k: int
+) -> tuple[list[Perturbation | None], int]:
+    """The ``run.perturbations`` draws of pose ``k`` (None where given up) and how many were redrawn."""
+    rng = suite.perturbation.stream(run.seed, so.name, k)
+    pose = so.poses[k]
+    out: list[Perturbation | None] = []
+    redrawn = 0
+    for _ in range(run.perturbations):
+        for _attempt in range(MAX_REDRAWS):
+            p = suite.perturbation.draw(rng)
+            try:
+                if start_penetration(perturbed_scene(base, run.scenario, p, pose=pose)) <= MAX_PENETRATION:
+                    out.append(p)
+                    break
+            except PoseError:
+                pass
+            redrawn += 1
+        else:
+            out.append(None)
+    return out, redrawn
+
+
+def _outcome_row(o: Outcome, scenario: GraspScenario) -> dict:
+    f = np.asarray(o.body_force, dtype=float)
+    return {
+        "success": bool(o.success),
+        "sample_error": any(x.is_sample_error for x in o.failures),
+        "failures": [x.value for x in o.failures],
+        "reason": o.reason,
+        "hold_force_n": float(np.linalg.norm(f[3:])),
+        "slip_m": float(np.linalg.norm(o.displacement)),
+        "lift_margin_m": float(o.lift_height - scenario.lifted_fraction * scenario.lift),
+        "lift_height_m": float(o.lift_height),
+        "body_force": [float(x) for x in f],
+        "displacement": [float(x) for x in o.displacement],
+    }
+
+
+def _surrogate_choice(surrogate, obj, so: SuiteObject, run: SuiteRun, rho: float, n_points: int) -> dict:
+    """Per design label: the pose the surrogate scores best (suite pose index) and every pose's score."""
+    cands = ObjectCandidates(
+        obj,
+        so.poses,
+        np.stack([p.matrix() for p in so.poses]),
+        so.pose_source,
+        np.arange(len(so.poses)),
+    ).with_clouds(n_points, run.seed)
+    out = {}
+    for g in run.designs:
+        if g.for_object(so.name) is None:
+            continue
+        scores, _ = predict_candidates(surrogate, cands, g.for_object(so.name), rho)
+        best = int(cands.source_index[int(np.argmax(scores))])
+        out[g.label] = {
+            "pose": best,
+            "scores": {int(i): float(s) for i, s in zip(cands.source_index, scores, strict=True)},
+        }
+    return out
+
+
+def run_suite(
+    suite: Suite,
+    run: SuiteRun,
+    *,
+    surrogate=None,
+    n_points: int = 1024,
+    cache_dir=None,
+    progress: Progress | None = None,
+    warn: Callable[[str], None] | None = None,
+) -> dict:
+    """Run every rollout; ``{"rows": [...], "objects": [...], "surrogate_choice": {...}, "wall_time_s"}``.
+
+    Rows are in a fixed order (object, density, impulse, pose, draw, design) and hold no wall time, so
+    the same suite and seed give identical rows. An object that cannot be loaded is reported in
+    ``objects`` with its error and left out (``warn`` receives one line).
+    """
+    if run.needs_surrogate and surrogate is None:
+        raise DesignError("the surrogate pose policy needs a checkpoint (--ckpt)")
+    backend = get_backend("mujoco")
+    t0 = time.perf_counter()
+    rows: list[dict] = []
+    objects: list[dict] = []
+    choice: dict[str, dict] = {}
+    densities = [(str(d), parse_density(d)) for d in run.densities]
+    for n_done, so in enumerate(suite.objects):
+        try:
+            obj = load_grasp_object(so.source, "light", seed=suite.seed, cache_dir=cache_dir)
+        except MjcodesignError as exc:
+            objects.append({"name": so.name, "domain": so.domain, "error": f"{type(exc).__name__}: {exc}"})
+            if warn:
+                warn(f"{so.name}: left out ({type(exc).__name__}: {exc})")
+            continue
+        scenes = SceneCache(size=len(densities) * len(run.impulses) + 1)
+        first = GraspJob(
+            obj=obj,
+            pose=so.poses[0],
+            design=next(
+                (g.for_object(so.name) for g in run.designs if g.for_object(so.name)),
+                Stiffness.preset("soft"),
+            ),
+            finger_model=run.model,
+            scenario=run.scenario,
+            density=densities[0][1],
+        )
+        base = scenes.scene(first)
+        draws, redrawn, given_up = [], 0, 0
+        for k in range(len(so.poses)):
+            try:
+                scene_at_pose(base, so.poses[k])
+            except PoseError:  # the frozen pose itself cannot be simulated: every draw of it is given up
+                draws.append([None] * run.perturbations)
+                given_up += run.perturbations
+                continue
+            d, r = _draws(suite, run, so, base, k)
+            draws.append(d)
+            redrawn += r
+            given_up += sum(x is None for x in d)
+        jobs, meta = [], []
+        for dens, rho in densities:
+            if surrogate is not None:
+                choice.setdefault(so.name, {})[dens] = _surrogate_choice(
+                    surrogate, obj, so, run, rho, n_points
+                )
+            for imp in run.impulses:
+                scenario = dataclasses.replace(run.scenario, impulse=paper_impulse(imp))
+                for k, pose in enumerate(so.poses):
+                    for j, p in enumerate(draws[k]):
+                        if p is None:
+                            continue
+                        for g in run.designs:
+                            design = g.for_object(so.name)
+                            if design is None:  # an individual design exists for its own objects only
+                                continue
+                            jobs.append(
+                                GraspJob(
+                                    obj=obj,
+                                    pose=pose,
+                                    design=design,
+                                    finger_model=run.model,
+                                    scenario=scenario,
+                                    density=rho,
+                                    seed=run.seed,
+                                    perturbation=p,
+                                    label=f"{g.label}/{so.name}/{dens}/{imp}/{k}/{j}",
+                                )
+                            )
+                            meta.append((dens, rho, imp, k, j, g, p, scenario))
+        outs = run_jobs(jobs, backend, scenes=scenes)
+        for (dens, rho, imp, k, j, g, p, scenario), o in zip(meta, outs, strict=True):
+            rows.append(
+                {
+                    "object": so.name,
+                    "domain": so.domain,
+                    "fold": so.fold,
+                    "density": dens,
+                    "density_kg_m3": rho,
+                    "impulse_paper_ns": float(imp),
+                    "pose": k,
+                    "draw": j,
+                    "design": g.label,
+                    "perturbation": p.as_dict(),
+                    **_outcome_row(o, scenario),
+                }
+            )
+        objects.append(
+            {
+                "name": so.name,
+                "domain": so.domain,
+                "fold": so.fold,
+                "poses": len(so.poses),
+                "redrawn": redrawn,
+                "draws_given_up": given_up,
+                "error": None,
+            }
+        )
+        if progress:
+            progress("objects", n_done + 1, len(suite.objects))
+    return {
+        "rows": rows,
+        "objects": objects,
+        "surrogate_choice": choice,
+        "wall_time_s": time.perf_counter() - t0,
+    }
+
+
+def record_suite_examples(
+    suite: Suite, run: SuiteRun, rows: list[dict], observer, *, per_design: int = 2, cache_dir=None
+) -> list[str]:
+    """Re-run the best and worst rollouts of every design into ``observer``; their labels.
+
+    Per design, among the first regime's rollouts the simulator could use: ``per_design`` held ones
+    with the highest lift and ``per_design`` failed ones with the lowest, each with its own draw.
+    """
+    if not rows:
+        return []
+    first = (rows[0]["density"], rows[0]["impulse_paper_ns"])
+    usable = [r for r in rows if (r["density"], r["impulse_paper_ns"]) == first and not r["sample_error"]]
+    picked = []
+    for g in run.designs:
+        mine = [r for r in usable if r["design"] == g.label]
+        best = sorted((r for r in mine if r["success"]), key=lambda r: -r["lift_height_m"])[:per_design]
+        worst = sorted((r for r in mine if not r["success"]), key=lambda r: r["lift_height_m"])[:per_design]
+        picked += [(g, r, "best") for r in best] + [(g, r, "worst") for r in worst]
+    by_name = {o.name: o for o in suite.objects}
+    loaded: dict[str, object] = {}
+    jobs = []
+    for g, r, tag in picked:
+        so = by_name[r["object"]]
+        if so.name not in loaded:
+            loaded[so.name] = load_grasp_object(so.source, "light", seed=suite.seed, cache_dir=cache_dir)
+        scenario = dataclasses.replace(run.scenario, impulse=paper_impulse(r["impulse_paper_ns"]))
+        jobs.append(
+            GraspJob(
+                obj=loaded[so.name],
+                pose=so.poses[r["pose"]],
+                design=g.for_object(so.name),
+                finger_model=run.model,
+                scenario=scenario,
+                density=r["density_kg_m3"],
+                perturbation=Perturbation(**r["perturbation"]),
+                label=f"{g.label}/{tag}/{so.name}/pose{r['pose']}/draw{r['draw']}",
+            )
+        )
+    if jobs:
+        run_jobs(jobs, get_backend("mujoco"), observer)
+    return [j.label for j in jobs]

@@ -1,0 +1,340 @@
+"""A frozen, versioned evaluation suite: objects, their poses, and the perturbation model.
+
+A suite is a JSON file (``format`` :data:`SUITE_FORMAT`, ``version`` :data:`SUITE_VERSION`): every
+object with its domain, fold and source, the palm poses sampled once for it (4x4 matrices and the two
+openings, with the seed that sampled them), and the perturbation model whose draws every design shares.
+Results name the suite by ``name`` and by the SHA-256 of its file (:attr:`Suite.digest`).
+
+The perturbation ranges (uniform, independent, each ± its value) and where each comes from:
+
+- palm position ±2 mm per axis and rotation ±2° per axis: the Franka arm's pose repeatability
+  (±0.1 mm, its datasheet) is small beside a wrist or fixed camera's hand–eye calibration error, which
+  is of the order of millimetres and a degree or two; ±2 mm and ±2° stand for the two together;
+- object mass ±10 %: a household object's mass varies with its filling and the scale's error;
+- finger–object friction ±20 %: the spread of friction coefficients of a rubbery gripping surface
+  against common object materials (paper, plastic, fruit skin, metal);
+- tendon drive ±5 %: the XL330's torque constant and current sensing vary from unit to unit, and the
+  spool radius with the print.
+
+All ranges are options (:class:`PerturbationModel`).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import hashlib
+import json
+import math
+import zlib
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from mjcodesign.errors import DesignError, MjcodesignError
+from mjcodesign.models.types import GripperPose
+from mjcodesign.objects import YCB_IN_DOMAIN
+from mjcodesign.scenarios.perturb import Perturbation
+
+__all__ = [
+    "DEFAULT_SUITE",
+    "SUITE_FORMAT",
+    "SUITE_VERSION",
+    "PerturbationModel",
+    "Suite",
+    "SuiteError",
+    "SuiteObject",
+    "build_suite",
+    "load_suite",
+]
+
+SUITE_FORMAT = "mjcodesign-eval-suite"
+SUITE_VERSION = 1
+"""The suite file format's version; a file of another version is refused."""
+DEFAULT_SUITE = "default-v1"
+"""The shipped suite ``--suite default`` reads: the paper's 46 in-domain objects and the 42 of the
+``ood`` set, 10 poses each."""
+DEFAULT_FOLDS = 5
+"""Object-level folds of the in-domain objects (``fold``), for K-fold held-out surrogates."""
+_PERTURB_STREAM = 0x5E7  # the perturbation draws' own random stream, apart from the suite's pose seed
+
+
+class SuiteError(MjcodesignError):
+    """A suite file that cannot be used: unknown format or version, missing or malformed fields."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class PerturbationModel:
+    """Uniform ranges (± each value) of what a real robot does differently on each execution."""
+
+    palm_position_m: float = 0.002
+    """Palm position error per world axis [m]."""
+    palm_rotation_deg: float = 2.0
+    """Palm rotation error per world axis [deg] (a rotation vector's components)."""
+    mass: float = 0.10
+    """Object mass error, relative [-]."""
+    friction: float = 0.20
+    """Finger–object friction error, relative [-]."""
+    tendon: float = 0.05
+    """Tendon tension or servo gain error, relative [-]."""
+
+    def __post_init__(self) -> None:
+        for name, value in asdict(self).items():
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+                raise DesignError(f"perturbation range {name} must be a finite value >= 0, got {value!r}")
+        for name in ("mass", "friction", "tendon"):
+            if getattr(self, name) >= 1:
+                raise DesignError(
+                    f"perturbation range {name} must be < 1 (a factor 1 ± it), got {getattr(self, name)}"
+                )
+
+    def draw(self, rng: np.random.Generator) -> Perturbation:
+        """One draw (nine uniform numbers from ``rng``, in a fixed order)."""
+        u = rng.uniform(-1.0, 1.0, size=9)
+        return Perturbation(
+            palm_offset=tuple(self.palm_position_m * u[0:3]),
+            palm_rotation=tuple(np.deg2rad(self.palm_rotation_deg) * u[3:6]),
+            mass_scale=1.0 + self.mass * u[6],
+            friction_scale=1.0 + self.friction * u[7],
+            tendon_scale=1.0 + self.tendon * u[8],
+        )
+
+    def stream(self, seed: int, obj: str, pose: int) -> np.random.Generator:
+        """The draws' generator of one (object, pose): shared by every design (common random numbers)."""
+        return np.random.default_rng([int(seed), _PERTURB_STREAM, zlib.crc32(obj.encode()), int(pose)])
+
+    def as_dict(self) -> dict:
+        """JSON-ready fields."""
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class SuiteObject:
+    """One object of a suite and its poses."""
+
+    name: str
+    """The object's name (a YCB name, ``egad-like:N``, or a mesh file's stem)."""
+    source: str
+    """What loads it: the YCB name, ``egad-like:N`` or the mesh file's path."""
+    domain: str
+    """``in-domain`` (the paper's training objects) or ``out-of-domain``."""
+    fold: int | None
+    """Object-level fold of an in-domain object (None out of domain)."""
+    poses: tuple[GripperPose, ...]
+    pose_source: str = "sampler"
+    """``sampler`` or the AnyGrasp file the poses came from."""
+    source_index: tuple[int, ...] = ()
+    """Row of each pose in its source."""
+    note: str = ""
+    """Why the object has fewer poses than asked, when it does."""
+
+
+@dataclass(frozen=True)
+class Suite:
+    """Objects with their poses, and the perturbation model."""
+
+    name: str
+    objects: tuple[SuiteObject, ...]
+    seed: int
+    """The seed that sampled the poses and drew the folds."""
+    poses_per_object: int
+    """Poses asked per object (an object may hold fewer: its ``note`` says why)."""
+    perturbation: PerturbationModel = field(default_factory=PerturbationModel)
+    folds: int = DEFAULT_FOLDS
+    created: str = ""
+    digest: str = ""
+    """SHA-256 of the file it was read from or written to ('' before either)."""
+
+    def __post_init__(self) -> None:
+        if not self.objects:
+            raise SuiteError(f"suite {self.name!r} holds no object")
+        names = [o.name for o in self.objects]
+        if len(set(names)) != len(names):
+            raise SuiteError(f"suite {self.name!r} lists an object twice")
+        for o in self.objects:
+            if not o.poses:
+                raise SuiteError(f"suite {self.name!r}: object {o.name} has no pose")
+
+    def to_json(self) -> dict:
+        """The file's content (the digest is of this, so it is not part of it)."""
+        return {
+            "format": SUITE_FORMAT,
+            "version": SUITE_VERSION,
+            "name": self.name,
+            "created": self.created,
+            "seed": self.seed,
+            "poses_per_object": self.poses_per_object,
+            "folds": self.folds,
+            "perturbation": self.perturbation.as_dict(),
+            "objects": [
+                {
+                    "name": o.name,
+                    "source": o.source,
+                    "domain": o.domain,
+                    "fold": o.fold,
+                    "pose_source": o.pose_source,
+                    "note": o.note,
+                    "poses": [
+                        {
+                            "position": list(p.position),
+                            "quat": list(p.quat),
+                            "openings": list(p.openings),
+                            "source_index": int(i),
+                        }
+                        for p, i in zip(o.poses, o.source_index or range(len(o.poses)), strict=True)
+                    ],
+                }
+                for o in self.objects
+            ],
+        }
+
+    def save(self, path: str | Path) -> Suite:
+        """Write the suite to ``path`` (atomically); the suite with its digest."""
+        from mjcodesign.outputs import write_atomic
+
+        raw = json.dumps(self.to_json(), indent=1).encode()
+        write_atomic(path, raw)
+        return _with_digest(self, raw)
+
+
+def _with_digest(suite: Suite, raw: bytes) -> Suite:
+    from dataclasses import replace
+
+    return replace(suite, digest=hashlib.sha256(raw).hexdigest())
+
+
+def load_suite(source: str | Path) -> Suite:
+    """A suite from a file, or ``default`` for the shipped one; :class:`SuiteError` if unusable."""
+    if str(source) in ("default", DEFAULT_SUITE):
+        ref = resources.files("mjcodesign.evaluation").joinpath(f"suites/{DEFAULT_SUITE}.json")
+        raw = ref.read_bytes()
+        where = f"the shipped suite {DEFAULT_SUITE}"
+    else:
+        path = Path(source)
+        if not path.is_file():
+            raise SuiteError(f"--suite {source}: no such file (give a suite file or 'default')")
+        try:
+            raw = path.read_bytes()
+        except OSError as exc:
+            raise SuiteError(f"--suite {source}: cannot read it ({exc.strerror})") from None
+        where = str(path)
+    try:
+        data = json.loads(raw)
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        raise SuiteError(f"{where} is not JSON") from None
+    if not isinstance(data, dict) or data.get("format") != SUITE_FORMAT:
+        raise SuiteError(f"{where} is not an evaluation suite (format {SUITE_FORMAT!r})")
+    if data.get("version") != SUITE_VERSION:
+        raise SuiteError(
+            f"{where}: suite version {data.get('version')!r} is not supported (this mjcodesign reads {SUITE_VERSION})"
+        )
+    try:
+        objects = tuple(
+            SuiteObject(
+                name=str(o["name"]),
+                source=str(o["source"]),
+                domain=str(o["domain"]),
+                fold=None if o["fold"] is None else int(o["fold"]),
+                poses=tuple(
+                    GripperPose(tuple(p["position"]), tuple(p["quat"]), tuple(p["openings"]))
+                    for p in o["poses"]
+                ),
+                pose_source=str(o.get("pose_source", "sampler")),
+                source_index=tuple(int(p["source_index"]) for p in o["poses"]),
+                note=str(o.get("note", "")),
+            )
+            for o in data["objects"]
+        )
+        suite = Suite(
+            name=str(data["name"]),
+            objects=objects,
+            seed=int(data["seed"]),
+            poses_per_object=int(data["poses_per_object"]),
+            perturbation=PerturbationModel(**data["perturbation"]),
+            folds=int(data.get("folds", DEFAULT_FOLDS)),
+            created=str(data.get("created", "")),
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise SuiteError(f"{where}: malformed suite ({type(exc).__name__}: {exc})") from None
+    except MjcodesignError as exc:
+        raise SuiteError(f"{where}: {exc}") from None
+    return _with_digest(suite, raw)
+
+
+Progress = Callable[[str, int, int], None]
+
+
+def build_suite(
+    sources: Sequence[str],
+    *,
+    name: str = "adhoc",
+    poses_per_object: int = 10,
+    seed: int = 0,
+    perturbation: PerturbationModel | None = None,
+    folds: int = DEFAULT_FOLDS,
+    anygrasp: str | Path | None = None,
+    cache_dir: str | Path | None = None,
+    progress: Progress | None = None,
+    warn: Callable[[str], None] | None = None,
+) -> Suite:
+    """Sample ``poses_per_object`` poses of every object once (seed ``seed``) and freeze them in a suite.
+
+    ``sources``: YCB names, ``egad-like:N`` or mesh files. In-domain objects (the paper's 46) get an
+    object-level fold (a seeded permutation dealt into ``folds`` folds). An object with fewer accepted
+    poses than asked keeps what it has, with a note that ``warn`` also receives; one that cannot be
+    loaded or posed is left out with a warning. Raises :class:`SuiteError` when no object is left.
+    """
+    from mjcodesign.evaluation.candidates import object_candidates
+    from mjcodesign.jobs import load_grasp_object
+
+    if isinstance(poses_per_object, bool) or int(poses_per_object) < 1:
+        raise DesignError(f"--poses-per-object must be >= 1, got {poses_per_object}")
+    if isinstance(folds, bool) or int(folds) < 2:
+        raise DesignError(f"folds must be >= 2, got {folds}")
+    inside = sorted(s for s in sources if s in YCB_IN_DOMAIN)
+    order = np.random.default_rng([seed, 0xF01D]).permutation(len(inside))
+    fold_of = {inside[j]: int(i % folds) for i, j in enumerate(order)}
+    objects = []
+    for i, src in enumerate(sources):
+        try:
+            obj = load_grasp_object(src, "light", seed=seed, cache_dir=cache_dir)
+            cands = object_candidates(
+                obj, poses_per_object, seed=seed, anygrasp=anygrasp, cache_dir=cache_dir
+            )
+        except MjcodesignError as exc:
+            if warn:
+                warn(f"{src}: left out of the suite ({type(exc).__name__}: {exc})")
+            continue
+        note = ""
+        if len(cands) < poses_per_object:
+            note = f"{len(cands)} of {poses_per_object} poses: the sampler accepted no more"
+            if warn:
+                warn(f"{obj.name}: {note}")
+        objects.append(
+            SuiteObject(
+                name=obj.name,
+                source=str(src),
+                domain="in-domain" if src in YCB_IN_DOMAIN else "out-of-domain",
+                fold=fold_of.get(src),
+                poses=tuple(cands.poses),
+                pose_source=cands.source,
+                source_index=tuple(int(k) for k in cands.source_index),
+                note=note,
+            )
+        )
+        if progress:
+            progress("objects", i + 1, len(sources))
+    if not objects:
+        raise SuiteError("no object could be loaded and posed")
+    suite = Suite(
+        name=name,
+        objects=tuple(objects),
+        seed=int(seed),
+        poses_per_object=int(poses_per_object),
+        perturbation=perturbation or PerturbationModel(),
+        folds=int(folds),
+        created=_dt.datetime.now(_dt.UTC).date().isoformat(),
+    )
+    return _with_digest(suite, json.dumps(suite.to_json(), indent=1).encode())
