@@ -104,8 +104,10 @@ def test_run_benchmark_writes_atomically(tmp_path, monkeypatch):
     monkeypatch.setitem(bench.BENCHMARKS, "toy", "json:loads")
     out = tmp_path / "toy.json"
     out.write_text("old")
-    assert bench.run_benchmark("toy", out=out, s='{"a": [1, 2]}') == {"a": [1, 2]}
-    assert json.loads(out.read_text()) == {"a": [1, 2]}
+    res = bench.run_benchmark("toy", out=out, s='{"a": [1, 2]}')
+    assert res.pop("provenance")["benchmark"] == "toy" and res == {"a": [1, 2]}
+    on_disk = json.loads(out.read_text())
+    assert on_disk.pop("provenance")["benchmark"] == "toy" and on_disk == {"a": [1, 2]}
     assert sorted(p.name for p in tmp_path.iterdir()) == ["toy.json"]  # no temporary file left
     with pytest.raises(OutputError):
         bench.run_benchmark("toy", out=tmp_path, s="{}")  # a folder: the rename fails, nothing is left
@@ -315,9 +317,12 @@ def test_bench_finger_reports_progress_per_model_on_stderr_only():
 
     calls = []
     res = run_benchmark("finger", models=["chain"], seconds=0.01, progress=lambda *a: calls.append(a))
-    assert calls == [("chain", 0)] and set(res) == {"chain"}
+    assert calls == [("chain", 0)] and set(res) == {"chain", "provenance"}
     r = _run("bench", "finger", "--models", "chain", "--seconds", "0.01", "--json")
-    assert r.returncode == 0 and set(json.loads(r.stdout)) == {"chain"}, r.stderr  # stdout: the JSON alone
+    assert r.returncode == 0, r.stderr
+    rec = json.loads(r.stdout)  # stdout: the JSON alone, with the command that made it
+    assert set(rec) == {"chain", "provenance"}
+    assert rec["provenance"]["command"] == "mjcodesign bench finger --models chain --seconds 0.01 --json"
 
 
 def test_finger_export_flex_notes_the_approximate_tendon_on_stderr(tmp_path):
