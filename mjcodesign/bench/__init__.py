@@ -31,6 +31,7 @@ BENCHMARKS: dict[str, str] = {
     "datagen": "mjcodesign.bench.datagen:bench_datagen",
     "optimize": "mjcodesign.bench.optimize:bench_optimize",
     "surrogate": "mjcodesign.bench.surrogate:bench_surrogate",
+    "evaluate": "mjcodesign.bench.evaluate:bench_evaluate",
 }
 """Benchmark name -> ``"module:function"``; the function takes keyword arguments and returns a dict."""
 

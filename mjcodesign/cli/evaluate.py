@@ -14,7 +14,7 @@ from pathlib import Path
 
 from mjcodesign.cli.common import emit, finite_float, int_at_least, path_text, user_cache_dir
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_bench_parser", "add_parser", "run", "run_bench"]
 
 _RECORDED_PER_DESIGN = 2  # best and worst rollouts per design re-run into --rrd
 _QUICK_OBJECTS = "012_strawberry,013_apple,025_mug,egad-like:1,egad-like:7"  # 3 in-domain, 2 out
@@ -368,3 +368,41 @@ def _flat(summary: dict) -> list[dict]:
                     )
                 rows.append(row)
     return rows
+
+
+def add_bench_parser(bench_subparsers) -> None:
+    """Register ``bench evaluate``: raw ``mujoco.rollout`` against the suite pipeline, same scenes."""
+    b = bench_subparsers.add_parser(
+        "evaluate",
+        help="suite evaluation throughput against raw mujoco.rollout on the same scenes (JSON)",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    b.add_argument("--objects", default="013_apple,025_mug,egad-like:3", help="comma-separated objects")
+    b.add_argument("--poses-per-object", type=int_at_least(1), default=3)
+    b.add_argument("--perturbations", type=int_at_least(1), default=4)
+    b.add_argument("--designs", default="soft,semi-rigid,paper-optimized,random:1")
+    b.add_argument("--repeats", type=int_at_least(1), default=2, help="pipeline/raw pairs, back to back")
+    b.add_argument("--out", type=path_text, default=None, help="also write the record here")
+    b.add_argument("--json", action="store_true")
+    b.set_defaults(func=run_bench)
+
+
+def run_bench(args: argparse.Namespace) -> int:
+    """Run ``bench evaluate``."""
+    from mjcodesign.bench import run_benchmark
+    from mjcodesign.evaluation import parse_design_groups
+
+    parse_design_groups(args.designs)
+    res = run_benchmark(
+        "evaluate",
+        command=args.command_line,
+        out=args.out,
+        objects=_names(args.objects),
+        poses_per_object=args.poses_per_object,
+        perturbations=args.perturbations,
+        designs=args.designs,
+        repeats=args.repeats,
+        cache_dir=user_cache_dir(),
+    )
+    emit(res, args.json)
+    return 0

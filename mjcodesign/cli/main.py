@@ -167,6 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_optimize.add_bench_parser(bsub)
     cli_surrogate.add_bench_parser(bsub)
     cli_landscape.add_bench_parser(bsub)
+    cli_evaluate.add_bench_parser(bsub)
     cli_viz.add_parser(sub)
     cli_grasp.add_parser(sub)
     cli_crosscheck.add_parser(sub)
