@@ -353,3 +353,19 @@ def test_the_shipped_default_suite():
     assert all(o.fold is None for o in s.objects if o.domain == "out-of-domain")
     short = [o for o in s.objects if len(o.poses) < s.poses_per_object]
     assert s.poses_per_object == 10 and all(o.note for o in short)  # fewer poses only with the reason
+
+
+def test_bench_evaluate_times_the_same_rollouts():
+    from mjcodesign.bench import run_benchmark
+
+    res = run_benchmark(
+        "evaluate",
+        objects=("egad-like:1",),
+        poses_per_object=1,
+        perturbations=2,
+        designs="soft,semi-rigid",
+        repeats=1,
+    )
+    assert res["rollouts"] == res["raw_rollouts"] == 4
+    assert len(res["pipeline_vs_raw"]) == 1 and 0 < res["pipeline_vs_raw"][0] < 2
+    assert res["provenance"]["benchmark"] == "evaluate"
