@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from mjcodesign.data import partial_cloud
-from mjcodesign.data.cloud import to_gripper
+from mjcodesign.data.cloud import gripper_up, to_gripper
 from mjcodesign.errors import PoseError
 from mjcodesign.models.types import GripperPose
 from mjcodesign.objects import GraspObject, load_mesh
@@ -50,7 +50,7 @@ class ObjectCandidates:
     @property
     def up(self) -> np.ndarray:
         """World vertical in the gripper frame, (P, 3)."""
-        return self.matrices[:, 2, :3]
+        return gripper_up(self.matrices)
 
     def with_clouds(self, n_points: int, seed: int) -> ObjectCandidates:
         """The same candidates with their partial clouds (``n_points`` each) and COM.
