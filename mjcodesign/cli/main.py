@@ -190,7 +190,7 @@ def _reaches_warp(args: argparse.Namespace) -> bool:
     """
     command, what = args.command, getattr(args, "what", None)
     if command == "bench":
-        return what in ("fem", "poses", "datagen", "landscape", "optimize")
+        return what in ("fem", "poses", "datagen", "landscape", "optimize", "evaluate")
     if command == "grasp":
         return (
             getattr(args, "model", None) == "fem"

@@ -149,13 +149,19 @@ def per_object_csv(analysis: dict) -> str:
     return buf.getvalue()
 
 
+def _short(label: str) -> str:
+    """A design label as a plot shows it: a file's name instead of its path."""
+    kind, sep, arg = label.partition(":")
+    return f"{kind}:{Path(arg).name}" if sep and kind in ("joint", "individual") else label
+
+
 def forest_plot(analysis: dict, designs: list[str], path: Path) -> None:
     """Each design's success and each pair's difference with intervals, per split (first regime)."""
     reg = analysis["regimes"][0]
     policy = next((p for p in reg["policies"] if p != ALL_POSES), ALL_POSES)
     entry = reg["policies"][policy]
     fig = new_figure(
-        (5.0 * len(SPLITS), 2.0 + 0.35 * (len(designs) + len(entry["paired"]))),
+        (7.5 * len(SPLITS), 2.0 + 0.35 * (len(designs) + len(entry["paired"]))),
         unavailable="forest.png needs matplotlib",
     )
     axes = fig.subplots(
@@ -173,7 +179,7 @@ def forest_plot(analysis: dict, designs: list[str], path: Path) -> None:
                     fmt="o",
                     capsize=3,
                 )
-        ax.set_yticks(range(len(designs)), designs)
+        ax.set_yticks(range(len(designs)), [_short(d) for d in designs])
         ax.set_xlim(0, 100)
         ax.set_xlabel("success [%]")
         ax.set_title(f"{split} ({policy} pose)")
@@ -190,7 +196,7 @@ def forest_plot(analysis: dict, designs: list[str], path: Path) -> None:
                 capsize=3,
             )
         ax.axvline(0.0, color="0.5", lw=0.8)
-        ax.set_yticks(range(len(pairs)), [f"{p['a']} − {p['b']}" for p in pairs])
+        ax.set_yticks(range(len(pairs)), [f"{_short(p['a'])} − {_short(p['b'])}" for p in pairs])
         ax.set_xlabel("paired difference [points]")
         ax.invert_yaxis()
     fig.suptitle(
