@@ -77,9 +77,12 @@ def test_friction_scales_the_finger_object_pair_only(box_scene):
     m = perturbed_scene(box_scene, scenario, Perturbation(friction_scale=0.8)).model
     obj = m.geom_bodyid == box_scene.object_body
     finger = box_scene.finger_mask[m.geom_bodyid]
-    np.testing.assert_allclose(m.geom_friction[obj | finger, 0], 0.8 * m0.geom_friction[obj | finger, 0])
-    assert_array_equal(m.geom_friction[~(obj | finger)], m0.geom_friction[~(obj | finger)])
+    np.testing.assert_allclose(m.geom_friction[finger, 0], 0.8 * m0.geom_friction[finger, 0])
+    assert_array_equal(m.geom_friction[~finger], m0.geom_friction[~finger])
     assert_array_equal(m.geom_friction[:, 1:], m0.geom_friction[:, 1:])  # torsional, rolling unchanged
+    # The pair's coefficient is the larger one, the fingers': the object's is MuJoCo's minimum.
+    assert np.all(m.geom_friction[obj, 0] == mujoco.mjMINMU)
+    assert np.all(m.geom_friction[finger, 0] > m.geom_friction[obj, 0])
 
 
 def _actuators(scene):

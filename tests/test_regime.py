@@ -2,6 +2,7 @@
 
 import math
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -78,9 +79,9 @@ def test_friction_is_compiled_into_the_finger_geoms_alone(mu):
     finger = scene.finger_mask[m.geom_bodyid]
     obj = m.geom_bodyid == scene.object_body
     assert np.all(m.geom_friction[finger, 0] == mu)
-    # MuJoCo takes the larger coefficient of a contact's two geoms: the object's 0 leaves the finger's
-    # for a finger contact, and the ground's 1 for the object on the ground.
-    assert np.all(m.geom_friction[obj, 0] == 0.0)
+    # MuJoCo takes the larger coefficient of a contact's two geoms: the object's minimum (mjMINMU)
+    # leaves the finger's for a finger contact, and the ground's 1 for the object on the ground.
+    assert np.all(m.geom_friction[obj, 0] == mujoco.mjMINMU)
     assert m.geom_friction[scene.ground_geom, 0] == 1.0
 
 

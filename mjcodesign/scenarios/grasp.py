@@ -88,8 +88,9 @@ _SQUEEZE = 0.003  # auto pose: closing target inside the object's half-width [m]
 REST_GAP = 5e-4
 """Height of the object's lowest point above the ground at t=0 [m]."""
 _MIN_HOLD_STEPS = 4  # the hold-force samples need a few steps before the impulse
-_OBJECT_FRICTION = (0.0, 0.005, 0.0001)
-# Sliding 0: MuJoCo takes the larger of two geoms' coefficients, so a finger contact gets the finger's
+_OBJECT_FRICTION = (mujoco.mjMINMU, 0.005, 0.0001)
+# Sliding mjMINMU (1e-5, the smallest coefficient MuJoCo Warp accepts without warning of NaN; 0 made it
+# warn): MuJoCo takes the larger of two geoms' coefficients, so a finger contact gets the finger's
 # (SimOptions.friction, the paper's mu = 1 by default) and an object-ground contact the ground's (1),
 # the same numbers as when the object carried mu = 1 too; a finger friction below 1 now takes effect.
 # Object geoms get solmix 0, so a finger contact takes the finger block's solref (its stiffness from E,
@@ -224,7 +225,9 @@ class GraspScenario:
                 raise DesignError(f"delta_v must be in [0, {_MAX_DELTA_V:g}] m/s, got {self.delta_v}")
             if self.impulse != DEFAULT_IMPULSE:
                 raise DesignError("give the disturbance as an impulse [N s] or a delta_v [m/s], not both")
-        if self.friction is not None and not (np.isfinite(self.friction) and 0 < self.friction <= _MAX_FRICTION):
+        if self.friction is not None and not (
+            np.isfinite(self.friction) and 0 < self.friction <= _MAX_FRICTION
+        ):
             raise DesignError(f"friction must be in (0, {_MAX_FRICTION:g}], got {self.friction}")
 
     def impulse_on(self, mass: float) -> float:
@@ -244,7 +247,9 @@ _MAX_DELTA_V = 20.0  # [m/s]: far beyond any disturbance a grasp could hold
 _MAX_FRICTION = 5.0  # far above any dry contact of the gripper's materials
 
 
-REAL_REGIME = GraspScenario(tendon=TendonPosition(ticks=PAPER_TICKS), delta_v=PAPER_DELTA_V, friction=PAPER_FRICTION)
+REAL_REGIME = GraspScenario(
+    tendon=TendonPosition(ticks=PAPER_TICKS), delta_v=PAPER_DELTA_V, friction=PAPER_FRICTION
+)
 """The grasp as the hardware runs it, where the code can: the XL330 servo at the paper's 1000 ticks
 (:class:`~mjcodesign.scenarios.drive.TendonPosition`), the paper's disturbance relative to the object
 (:data:`PAPER_DELTA_V`), the finger–object friction at the top of :data:`TAPE_FRICTION_RANGE`. With

@@ -1,7 +1,8 @@
 """What a real robot does differently each time: one perturbed draw of a grasp, written into a scene copy.
 
 A :class:`Perturbation` moves and turns the palm (arm repeatability and camera calibration), scales the
-object's mass (inertia with it: same shape, uniform density), the finger–object sliding friction and
+object's mass (inertia with it: same shape, uniform density), the fingers' sliding friction (the finger–object
+pair's) and
 the tendon drive (the force mode's tension, or the position servo's gain and tension limit).
 :func:`perturbed_scene` writes one into a copy of a compiled scene without recompiling, so a batch of
 perturbed scenes shares one model structure and runs through one ``mujoco.rollout`` call.
@@ -91,8 +92,8 @@ def perturbed_scene(
     The result's ``drive`` names the scenario's tendon drive, so that backends leave it as it is.
 
     Writes into a model copy: object ``body_mass`` and ``body_inertia`` times ``mass_scale``; the sliding
-    friction of the object's and the fingers' geoms times ``friction_scale`` (MuJoCo takes the larger of
-    the two geoms' coefficients, so both are scaled for the finger–object pair); the tendon actuators'
+    friction of the fingers' geoms times ``friction_scale`` (MuJoCo takes the larger of two geoms'
+    coefficients and the object's geoms carry MuJoCo's minimum, so the finger–object pair scales); the tendon actuators'
     gear (force mode: tension = gear · control) or the servo's gain, bias and force range (position mode)
     times ``tendon_scale``. Then the palm moves (:func:`perturbed_pose`, :func:`scene_at_pose`, whose
     ``mj_setConst`` also takes the new mass into the derived constants). Raises :class:`PoseError` when
@@ -102,8 +103,8 @@ def perturbed_scene(
     b = scene.object_body
     m.body_mass[b] *= p.mass_scale
     m.body_inertia[b] *= p.mass_scale
-    geoms = np.flatnonzero((m.geom_bodyid == b) | scene.finger_mask[m.geom_bodyid])
-    m.geom_friction[geoms, 0] *= p.friction_scale
+    # The pair takes the larger coefficient, the fingers' (the object's geoms carry MuJoCo's minimum).
+    m.geom_friction[scene.finger_mask[m.geom_bodyid], 0] *= p.friction_scale
     force_mode = isinstance(scenario.tendon, TendonForce)
     actuators = [
         mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
