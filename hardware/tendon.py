@@ -1,6 +1,9 @@
 """Tendon motors: Dynamixel XL330-M288 on protocol 2.0 through dynamixel-sdk.
 
-One motor per finger pulls that finger's tendon. Positions are in encoder ticks (4096 per turn).
+One motor per finger pulls that finger's tendon. Positions are in encoder ticks (4096 per turn). The
+motors run as the simulator's servo (:class:`mjcodesign.design.servo.TendonPosition`, the config's
+``drive``): its operating mode (current-based position), its Current Limit and, by default, its goal,
+written once with no velocity profile.
 A pull is a displacement from the *slack* position, which is the present position read when the
 motors are opened; each finger has its own displacement limits, and a command outside them is
 refused before anything is written. Every exit path (normal, exception, SIGINT/SIGTERM through
@@ -19,6 +22,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
 
+from mjcodesign.design.servo import PAPER_TICKS, TICKS_PER_TURN, XL330_OPERATING_MODE, TendonPosition
 from mjcodesign.errors import HardwareError
 
 from .xl330 import ADDR, XL330_MODEL_NUMBER
@@ -32,9 +36,7 @@ __all__ = [
     "PAPER_PULL_TICKS",
 ]
 
-TICKS_PER_REV = 4096
-PAPER_PULL_TICKS = 1000  # the paper's hardware tendon pull, of 4096 ticks per turn
-OPERATING_MODE_CURRENT_POSITION = 5  # current-based position control: limits the tendon force
+PAPER_PULL_TICKS = PAPER_TICKS  # the paper's hardware tendon pull, of 4096 ticks per turn
 _PROTOCOL = 2.0
 _COMM_SUCCESS = 0  # dynamixel_sdk.COMM_SUCCESS
 _T = TypeVar("_T")
@@ -64,7 +66,7 @@ class FingerMotor:
             raise HardwareError(
                 f"finger {self.label}: limits [{self.min_ticks}, {self.max_ticks}] must contain 0"
             )
-        if self.max_ticks - self.min_ticks > 4 * TICKS_PER_REV:
+        if self.max_ticks - self.min_ticks > 4 * TICKS_PER_TURN:
             raise HardwareError(f"finger {self.label}: limits span more than 4 turns")
 
     @property
@@ -96,6 +98,8 @@ class TendonConfig:
         latency_ms: Latency of the USB-serial adapter [ms]. A reply is awaited for
             ``bytes * t_byte + 2 * latency_ms + 2`` ms, the SDK's formula, which fixes the latency
             at 16 ms (the FTDI default); raise it for slow adapters or a loaded host.
+        drive: The servo every motor runs as, the simulator's own: its Current Limit is written at
+            open, and its goal is what `TendonMotors.pull` pulls by default.
     """
 
     port: str
@@ -106,6 +110,7 @@ class TendonConfig:
     tolerance_ticks: int = 10
     safe_stop_s: float = 2.0
     latency_ms: float = 16.0
+    drive: TendonPosition = field(default_factory=TendonPosition)
     poll_s: float = field(default=0.01, repr=False)
 
     def __post_init__(self) -> None:
@@ -122,6 +127,8 @@ class TendonConfig:
             raise HardwareError("safe_stop_s and poll_s must be positive")
         if not (0 < self.latency_ms <= 1000):
             raise HardwareError(f"latency_ms must be in (0, 1000] ms, got {self.latency_ms}")
+        if not isinstance(self.drive, TendonPosition):
+            raise HardwareError(f"the tendon motors run a TendonPosition servo, got {self.drive!r}")
 
     def check_pull(self, ticks: int) -> None:
         """Raise `HardwareError` if pulling every tendon by `ticks` is outside any limit."""
@@ -153,8 +160,9 @@ class TendonMotors:
     """Driver of the tendon motors. Use as a context manager; it opens in `__enter__`.
 
     Opening pings every ID and checks the model number (XL330-M288 = 1200), switches torque off,
-    sets the operating mode (an EEPROM item, so only with torque off), switches torque on and
-    reads the slack positions. Closing switches torque off on every motor and closes the port.
+    writes the drive's operating mode and Current Limit (EEPROM items, so only with torque off),
+    switches torque on, clears the velocity profile (the goal is approached at full speed, as the
+    simulator assumes) and reads the slack positions. Closing switches torque off on every motor and closes the port.
     """
 
     def __init__(self, config: TendonConfig) -> None:
@@ -204,9 +212,13 @@ class TendonMotors:
                         f"{XL330_MODEL_NUMBER} (XL330-M288)"
                     )
             self.torque(False)
+            drive = self.config.drive
             for motor in self.config.motors:
-                self._write(motor, "operating_mode", 1, OPERATING_MODE_CURRENT_POSITION)
+                self._write(motor, "operating_mode", 1, XL330_OPERATING_MODE)
+                self._write(motor, "current_limit", 2, drive.current_limit_register)
             self.torque(True)
+            for motor in self.config.motors:
+                self._write(motor, "profile_velocity", 4, 0)
             self._slack = self.present()
         except BaseException as exc:
             self.__exit__(type(exc), exc, None)
@@ -282,12 +294,14 @@ class TendonMotors:
 
         self._retry("sync write of goal position", once)
 
-    def pull(self, ticks: int) -> dict[int, int]:
-        """Pull every tendon `ticks` from its slack position and wait until it arrives.
+    def pull(self, ticks: int | None = None) -> dict[int, int]:
+        """Pull every tendon `ticks` (default: the drive's goal) from its slack position and wait.
 
         Returns the final displacement of each motor by ID [tick]. A displacement outside a
         finger's limits is refused before anything is written.
         """
+        if ticks is None:
+            ticks = self.config.drive.goal_ticks
         self.config.check_pull(ticks)
         if not self._torque_on:
             raise HardwareError("tendon motors are not torqued on")
@@ -342,7 +356,7 @@ class TendonMotors:
             ) from None
 
     def _write(self, motor: FingerMotor, item: str, size: int, value: int) -> None:
-        writer = {1: self._ph.write1ByteTxRx, 4: self._ph.write4ByteTxRx}[size]
+        writer = {1: self._ph.write1ByteTxRx, 2: self._ph.write2ByteTxRx, 4: self._ph.write4ByteTxRx}[size]
 
         def once() -> None:
             result, error = writer(self._port, motor.dxl_id, ADDR[item], value)

@@ -32,7 +32,12 @@ _BOX = 0.05  # box side [m]
 def _scene(rho: float, options: SimOptions | None = None):
     obj = box_object((_BOX,) * 3, rho)
     return build_scene(
-        obj, FingerDesign(), Stiffness.preset("paper-optimized"), FingerModel.CHAIN, auto_pose(obj), options=options
+        obj,
+        FingerDesign(),
+        Stiffness.preset("paper-optimized"),
+        FingerModel.CHAIN,
+        auto_pose(obj),
+        options=options,
     )
 
 
@@ -107,6 +112,12 @@ def test_real_regime_preset():
     lo, hi = TAPE_FRICTION_RANGE
     assert lo <= REAL_REGIME.friction <= hi
     assert REAL_REGIME.tension is None  # the position servo, not a fixed force
+    assert REAL_REGIME.tendon.ticks == 1000 and REAL_REGIME.tendon.spool_radius == 0.008  # the authors' horn
+    # the paper's 10 cm lift at the arm's speed: smooth-step peak speed 1.5 h / T = 0.17 m/s (Franka 1.7 m/s
+    # at the hardware's dynamics factor 0.1), peak acceleration 6 h / T² under its 1.3 m/s²
+    assert REAL_REGIME.lift == 0.1
+    assert 1.5 * REAL_REGIME.lift / REAL_REGIME.lift_s == pytest.approx(0.17, rel=1e-12)
+    assert 6 * REAL_REGIME.lift / REAL_REGIME.lift_s**2 < 1.3
 
 
 def test_grasp_cli_takes_the_disturbance_as_delta_v_and_the_friction(capsys):
@@ -114,7 +125,17 @@ def test_grasp_cli_takes_the_disturbance_as_delta_v_and_the_friction(capsys):
 
     from mjcodesign.cli.main import main
 
-    argv = ["grasp", "--object", "013_apple", "--mass", "real", "--delta-v", "paper", "--friction", "tape-min"]
+    argv = [
+        "grasp",
+        "--object",
+        "013_apple",
+        "--mass",
+        "real",
+        "--delta-v",
+        "paper",
+        "--friction",
+        "tape-min",
+    ]
     assert main([*argv, "--design", "semi-rigid", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["delta_v_m_s"] == PAPER_DELTA_V and out["friction"] == TAPE_FRICTION_RANGE[0]

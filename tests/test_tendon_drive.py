@@ -48,13 +48,19 @@ def test_parse_tendon_reads_both_modes_and_refuses_the_rest():
 
 
 def test_xl330_servo_numbers_follow_from_the_hardware():
-    # T_max = τ_stall / r = 0.52 N m / 10 mm; pull = r 2π ticks / 4096; v = ω₀ r with ω₀ = 103 rpm
+    # T_max = τ_stall / r = 0.52 N m / 8 mm (the authors' horn); pull = r 2π ticks / 4096 = 12.3 mm at
+    # the paper's 1000 ticks; v = ω₀ r with ω₀ = 103 rpm
     p = TendonPosition()
-    assert p.max_tension == pytest.approx(52.0)
-    assert p.pull == pytest.approx(0.010 * 2 * math.pi * 1000 / 4096)
-    assert p.pull_speed == pytest.approx(103 / 60 * 2 * math.pi * 0.010)
+    assert p.spool_radius == 0.008 and p.ticks == 1000
+    assert p.max_tension == pytest.approx(65.0)
+    assert p.pull == pytest.approx(0.008 * 2 * math.pi * 1000 / 4096)
+    assert p.pull_speed == pytest.approx(103 / 60 * 2 * math.pi * 0.008)
     # a lower current limit lowers the tension limit in proportion (torque ∝ current below stall)
-    assert TendonPosition(current_limit=0.735).max_tension == pytest.approx(26.0)
+    assert TendonPosition(current_limit=0.735).max_tension == pytest.approx(32.5)
+    # the register holds 1 mA units and tops at the factory default 1750
+    assert TendonPosition(current_limit=0.9).current_limit_register == 900
+    with pytest.raises(DesignError):
+        TendonPosition(current_limit=1.8)
     # b / k must exceed dt / 2 = 1 ms for the explicit servo spring to be stable (drive.apply_drive)
     assert p.damping / p.stiffness > 1e-3
 
@@ -148,7 +154,7 @@ def test_datagen_config_takes_either_drive():
     pos = DatagenConfig(**common, density=density, tendon=data_tendon("position:1000"))
     assert pos.scenario.tendon == TendonPosition(ticks=1000) and pos.tension is None
     d = pos.as_dict()["tendon"]
-    assert d["mode"] == "position" and d["ticks"] == 1000 and d["max_tension_n"] == pytest.approx(52.0)
+    assert d["mode"] == "position" and d["ticks"] == 1000 and d["max_tension_n"] == pytest.approx(65.0)
     assert pos.fingerprint() != force.fingerprint()
     with pytest.raises(DesignError, match="tendon drive"):
         DatagenConfig(**common, density=density, tension=None)
@@ -176,3 +182,54 @@ def test_grasp_cli_takes_the_tendon_drive(tmp_path, capsys):
         assert main([*base, *bad]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and match in err[0], err
+
+
+def _finger_tensions(box, design: str, drive: TendonPosition, **scenario):
+    """Each finger's tendon tension [N] at every step of a grasp rollout, and the phase starts."""
+    scene = build_scene(box, FingerDesign(), Stiffness.parse(design), FingerModel.CHAIN, auto_pose(box))
+    sc = GraspScenario(tendon=drive, **scenario)
+    scene = drive_scene(scene, sc)
+    m = scene.model
+    ctrl, starts = phase_controls(scene, sc)
+    acts = [
+        [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a) for a in h.actuators]
+        for h in scene.built.fingers
+    ]
+    d = mujoco.MjData(m)
+    mujoco.mj_setState(m, d, initial_state(scene), STATE_SPEC)
+    out = np.full((len(ctrl), len(acts)), np.nan)
+    for t in range(len(ctrl)):
+        mujoco.mj_setState(m, d, ctrl[t], control_spec())
+        mujoco.mj_step(m, d)
+        out[t] = [d.actuator_force[a].sum() for a in acts]
+    return out, starts
+
+
+_STALL_TENSION = 0.52 / 0.008  # XL330-M288-T stall torque at 5 V [N m] over the 8 mm horn [m] = 65 N
+
+
+@pytest.mark.parametrize(("design", "current"), [("soft", 1.75), ("semi-rigid", 1.75), ("semi-rigid", 0.735)])
+def test_servo_tension_never_exceeds_the_stall_tension_or_the_current_limits_share(box, design, current):
+    # T ≤ τ_stall / r, and T ≤ τ_stall (I_limit / I_stall) / r below the 1.47 A stall current: through the
+    # whole grasp (pull, 10 cm lift, disturbance), at the paper's 1000 ticks, where the box blocks the fingers.
+    drive = TendonPosition(current_limit=current)
+    limit = _STALL_TENSION * min(current, 1.47) / 1.47
+    tension, starts = _finger_tensions(box, design, drive, lift=0.1, lift_s=0.88, delta_v=0.5)
+    assert np.all(np.isfinite(tension))
+    assert tension.max() <= limit * (1 + 1e-9)
+    assert tension.min() >= 0.0  # a tendon only pulls
+    assert tension[starts["lift"] - 1].min() == pytest.approx(limit, rel=1e-6)  # blocked: saturated
+
+
+def test_a_stiffer_finger_meets_a_higher_tension_at_the_same_goal(box):
+    # At a goal the fingers can follow (100 ticks, 1.2 mm of tendon), the servo's tension is k (ℓ − ℓ*):
+    # a stiffer finger shortens its tendon less under the same pull, so the error, and the tension, are
+    # larger. Order soft < paper-optimized < semi-rigid (ln E of the flexures 14 < mixed < 17), all
+    # below the 65 N limit.
+    drive = TendonPosition(ticks=100)
+    end = {}
+    for design in ("soft", "paper-optimized", "semi-rigid"):
+        tension, starts = _finger_tensions(box, design, drive, impulse=0.0)
+        end[design] = float(tension[starts["lift"] - 1].mean())
+    assert end["soft"] < end["paper-optimized"] < end["semi-rigid"] < drive.max_tension
+    assert end["semi-rigid"] > 2 * end["soft"]

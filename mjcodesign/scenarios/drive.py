@@ -3,20 +3,13 @@
 * :class:`TendonForce` pulls each finger's tendon with a tension that ramps to ``tension`` [N] over the
   tighten phase: an ideal force source, as in the authors' simulator (``sim_gen.py``: force 100 in
   their scaled units).
-* :class:`TendonPosition` is the hardware's drive: a Dynamixel XL330-M288-T per finger in
-  current-based position mode (operating mode 5) winding the tendon on a spool. The goal position is
-  ``ticks`` of 4096 from the slack position; the motor moves towards it at most at its no-load speed and
-  pulls with at most the torque its current allows. Modelled as a tendon length target
-  ``ℓ* = ℓ₀ − r·2π·ticks/4096`` ramped at the no-load speed, tracked by a pull-only servo spring
-  ``T = clip(k (ℓ − ℓ*), 0, T_max)`` with ``T_max = τ(I_limit) / r``, and the motor's back-EMF as a
-  damper ``b ℓ̇`` on the tendon.
-
-Hardware facts (ROBOTIS e-manual, XL330-M288-T): stall torque 0.52 N·m at 1.47 A and
-5.0 V, no-load speed 103 rpm at 5 V, 4096 ticks per turn, Current Limit (register 38) factory default
-1750 mA, which current-based position mode uses as its limit. At 5 V the supply caps the current at the
-stall current, so the tension limit is 0.52 N·m / r: 52 N on a 10 mm spool. The paper's hardware pulls
-1000 ticks (``hardware/tendon.py: PAPER_PULL_TICKS``). The spool radius is not published; 10 mm is an
-assumption (the NOTES' own example), and a documented parameter.
+* :class:`TendonPosition` (:mod:`mjcodesign.design.servo`, where the motor's datasheet facts and the
+  horn are cited) is the hardware's drive, shared by the simulator and the robot: an XL330-M288-T per
+  finger in current-based position mode winding the tendon on the authors' 8 mm motor horn. Here it is
+  modelled as a tendon length target ``ℓ* = ℓ₀ − r·2π·ticks/4096`` ramped at the no-load speed (the
+  goal is written once, and the motor runs without a velocity profile), tracked by a pull-only servo
+  spring ``T = clip(k (ℓ − ℓ*), 0, T_max)`` with ``T_max = τ(I_limit) / r``, and the motor's back-EMF
+  as a damper ``b ℓ̇`` on the tendon.
 
 :func:`parse_tendon` reads the CLI's ``force:N`` and ``position:TICKS``.
 """
@@ -29,6 +22,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from mjcodesign.design.servo import PAPER_TICKS, TendonPosition
 from mjcodesign.errors import DesignError
 from mjcodesign.models.types import SimOptions
 
@@ -40,35 +34,8 @@ __all__ = [
     "parse_tendon",
     "tendon_targets",
     "apply_drive",
-    "TICKS_PER_TURN",
-    "XL330_STALL_TORQUE",
-    "XL330_STALL_CURRENT",
-    "XL330_NO_LOAD_SPEED",
-    "XL330_CURRENT_LIMIT",
     "PAPER_TICKS",
 ]
-
-TICKS_PER_TURN = 4096
-"""Encoder ticks per motor output turn (XL330)."""
-XL330_STALL_TORQUE = 0.52
-"""Stall torque [N·m] at 5.0 V (ROBOTIS e-manual, XL330-M288-T)."""
-XL330_STALL_CURRENT = 1.47
-"""Stall current [A] at 5.0 V (ROBOTIS e-manual); torque is taken proportional to current below it."""
-XL330_NO_LOAD_SPEED = 103.0 / 60.0 * 2.0 * math.pi
-"""No-load speed [rad/s] at 5 V: 103 rpm (ROBOTIS e-manual)."""
-XL330_CURRENT_LIMIT = 1.75
-"""Current Limit, register 38, factory default [A] (1750 mA; the hardware code does not change it)."""
-PAPER_TICKS = 1000
-"""The paper's hardware tendon pull [ticks of 4096] (``hardware/tendon.py: PAPER_PULL_TICKS``)."""
-_SPOOL_RADIUS = 0.010
-"""Spool radius [m]: not published; 10 mm is an assumption."""
-_SATURATION_TICKS = 64
-"""Tendon error [ticks] at which the servo reaches its tension limit: sets the servo stiffness
-k = T_max / (64 ticks of tendon), 52 N over 0.98 mm on a 10 mm spool. The XL330's position gain in
-current units is not published; the grasp outcomes change little when this is halved or doubled
-(docs/benchmarks.md, position-mode servo stiffness), because a closed grasp saturates the current."""
-_MAX_TENSION = 200.0
-"""Largest tension [N] either mode accepts: far above any hobby servo on a spool of a few mm."""
 
 
 class TendonSpecError(DesignError):
@@ -96,89 +63,6 @@ class TendonForce:
     def text(self) -> str:
         """The ``--tendon`` text of this drive."""
         return f"force:{self.tension:g}"
-
-
-@dataclass(frozen=True, kw_only=True)
-class TendonPosition:
-    """The XL330 in current-based position mode winding the tendon on a spool (the hardware's drive).
-
-    The goal is ``ticks`` from the slack position; the length target moves towards it at the motor's
-    no-load speed from the start of the tighten phase, and a pull-only servo tracks it with at most
-    :attr:`max_tension`.
-    """
-
-    ticks: float = float(PAPER_TICKS)
-    """Goal position from the slack position [ticks of 4096] (paper's hardware: 1000)."""
-    spool_radius: float = _SPOOL_RADIUS
-    """Spool radius [m] (assumed 10 mm; not published)."""
-    current_limit: float = XL330_CURRENT_LIMIT
-    """Current limit [A] (register 38; factory default 1.75 A)."""
-    speed: float = XL330_NO_LOAD_SPEED
-    """Largest motor speed [rad/s] the goal is approached with (no-load speed at 5 V)."""
-    saturation_ticks: float = float(_SATURATION_TICKS)
-    """Tendon error [ticks] at which the servo reaches :attr:`max_tension` (sets its stiffness)."""
-
-    def __post_init__(self) -> None:
-        for name, lo, hi in (
-            ("ticks", 0.0, 4.0 * TICKS_PER_TURN),
-            ("spool_radius", 1e-3, 0.05),
-            ("current_limit", 1e-3, 10.0),
-            ("speed", 1e-3, 1e3),
-            ("saturation_ticks", 1.0, 1e4),
-        ):
-            v = getattr(self, name)
-            if (
-                isinstance(v, bool)
-                or not isinstance(v, int | float)
-                or not (math.isfinite(v) and lo <= v <= hi)
-            ):
-                raise DesignError(f"{name} must be a number in [{lo:g}, {hi:g}], got {v!r}")
-            object.__setattr__(self, name, float(v))
-        if self.ticks == 0:
-            raise DesignError("a position-mode tendon needs ticks > 0 (0 never pulls)")
-        if self.max_tension > _MAX_TENSION:
-            raise DesignError(
-                f"tension limit {self.max_tension:.0f} N exceeds {_MAX_TENSION:g} N: check the spool radius"
-            )
-
-    @property
-    def mode(self) -> str:
-        """``position``."""
-        return "position"
-
-    @property
-    def torque_limit(self) -> float:
-        """Motor torque limit [N·m]: torque ∝ current up to the 5 V stall current."""
-        return XL330_STALL_TORQUE * min(self.current_limit, XL330_STALL_CURRENT) / XL330_STALL_CURRENT
-
-    @property
-    def max_tension(self) -> float:
-        """Tension limit [N]: the torque limit over the spool radius (52 N at the defaults)."""
-        return self.torque_limit / self.spool_radius
-
-    @property
-    def pull(self) -> float:
-        """Tendon length the goal winds in [m]: ``r · 2π · ticks / 4096``."""
-        return self.spool_radius * 2.0 * math.pi * self.ticks / TICKS_PER_TURN
-
-    @property
-    def pull_speed(self) -> float:
-        """Largest tendon speed [m/s]: the no-load speed times the spool radius."""
-        return self.speed * self.spool_radius
-
-    @property
-    def stiffness(self) -> float:
-        """Servo stiffness on the tendon length [N/m]: :attr:`max_tension` at ``saturation_ticks``."""
-        return self.max_tension / (self.spool_radius * 2.0 * math.pi * self.saturation_ticks / TICKS_PER_TURN)
-
-    @property
-    def damping(self) -> float:
-        """Servo damping on the tendon speed [N·s/m]: the motor's back-EMF line, stall torque over no-load speed, at the spool."""
-        return XL330_STALL_TORQUE / XL330_NO_LOAD_SPEED / self.spool_radius**2
-
-    def text(self) -> str:
-        """The ``--tendon`` text of this drive."""
-        return f"position:{self.ticks:g}"
 
 
 TendonDrive = TendonForce | TendonPosition

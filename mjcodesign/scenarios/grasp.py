@@ -63,6 +63,8 @@ __all__ = [
     "TAPE_FRICTION_FLOOR",
     "TAPE_FRICTION_RANGE",
     "REAL_REGIME",
+    "REAL_LIFT_S",
+    "PAPER_HARDWARE_LIFT",
     "REST_GAP",
     "STATE_SPEC",
     "GraspScenario",
@@ -247,14 +249,29 @@ _MAX_DELTA_V = 20.0  # [m/s]: far beyond any disturbance a grasp could hold
 _MAX_FRICTION = 5.0  # far above any dry contact of the gripper's materials
 
 
+PAPER_HARDWARE_LIFT = 0.10
+"""The paper's hardware lift [m]: after the tendon pull, the arm lifts the object 10 cm."""
+_ARM_PEAK_SPEED = 0.17
+"""Peak lift speed [m/s] of the hardware's arm: the Franka's Cartesian limit 1.7 m/s (its control
+interface's documented limits) at the relative dynamics factor 0.1 the hardware drives it with
+(``mjcodesign.hardware.arm.ArmConfig.speed_factor``); its acceleration limit 13 m/s² becomes 1.3."""
+REAL_LIFT_S = 1.5 * PAPER_HARDWARE_LIFT / _ARM_PEAK_SPEED
+"""Duration [s] of the real regime's 10 cm lift: the smooth-step's peak speed 1.5 h / T is the arm's
+0.17 m/s (0.88 s; its peak acceleration 6 h / T² = 0.77 m/s² stays under the arm's 1.3 m/s²)."""
+
 REAL_REGIME = GraspScenario(
-    tendon=TendonPosition(ticks=PAPER_TICKS), delta_v=PAPER_DELTA_V, friction=PAPER_FRICTION
+    tendon=TendonPosition(ticks=PAPER_TICKS),
+    lift=PAPER_HARDWARE_LIFT,
+    lift_s=REAL_LIFT_S,
+    delta_v=PAPER_DELTA_V,
+    friction=PAPER_FRICTION,
 )
-"""The grasp as the hardware runs it, where the code can: the XL330 servo at the paper's 1000 ticks
-(:class:`~mjcodesign.scenarios.drive.TendonPosition`), the paper's disturbance relative to the object
-(:data:`PAPER_DELTA_V`), the finger–object friction at the top of :data:`TAPE_FRICTION_RANGE`. With
-real object masses (``--mass real``, :func:`mjcodesign.objects.published_mass`) it is the regime of a
-real grasp; it is not the default of any command."""
+"""The grasp as the hardware runs it, where the code can: the XL330 servo on the authors' 8 mm horn at
+the paper's 1000 ticks (:class:`~mjcodesign.scenarios.drive.TendonPosition`), the paper's 10 cm lift at
+the arm's speed, the paper's disturbance relative to the object (:data:`PAPER_DELTA_V`), the
+finger–object friction at the top of :data:`TAPE_FRICTION_RANGE`. With real object masses (``--mass
+real``, :func:`mjcodesign.objects.published_mass`) it is the regime of a real grasp; it is not the
+default of any command."""
 
 
 class _ReadTension(float):
