@@ -44,6 +44,7 @@ from mjcodesign.objects import (
     published_mass,
 )
 from mjcodesign.poses import read_candidates, sample_poses, to_gripper_pose
+from mjcodesign.poses.checks import check_candidate_object, check_reach
 from mjcodesign.scenarios.grasp import (
     GraspScenario,
     GraspScene,
@@ -364,7 +365,8 @@ def resolve_pose(
 
     A file is a candidate file (``FILE.npz`` for its first row, the best, or ``FILE.npz:ROW`` for row
     ``ROW`` counted from 0) or JSON with ``pose`` (4x4) and ``openings`` (2). ``cache_dir`` keeps the
-    sampler's signed-distance grid for ``best``.
+    sampler's signed-distance grid for ``best``. A file's pose must reach the object, and a candidate
+    file must have been made for it (:mod:`mjcodesign.poses.checks`): :class:`PoseError` otherwise.
     """
     geometry = geometry or FingerDesign()
     if text == "auto":
@@ -373,14 +375,16 @@ def resolve_pose(
         return to_gripper_pose(sample_poses(obj, _BEST_OF, seed=seed, design=geometry, cache_dir=cache_dir))
     path, row = _pose_file(text)
     if path.suffix == ".npz":
-        return to_gripper_pose(read_candidates(path), row)
+        cands = read_candidates(path)
+        check_candidate_object(path, obj)
+        return check_reach(to_gripper_pose(cands, row), obj, geometry)
     if path.suffix == ".npy":
         raise PoseError(f"{path}: a pose file is an .npz from `mjcodesign poses --out` or JSON, not .npy")
     if not path.is_file():
         raise PoseError(f"pose file not found: {path}")
     try:
         raw = json.loads(path.read_text(encoding="utf-8"))
-        return GripperPose.from_matrix(raw["pose"], tuple(raw["openings"]))
+        return check_reach(GripperPose.from_matrix(raw["pose"], tuple(raw["openings"])), obj, geometry)
     except PoseError as exc:
         raise PoseError(f"{path}: {exc}") from None
     except (OSError, ValueError, KeyError, TypeError) as exc:

@@ -16,6 +16,11 @@ one ``mujoco.rollout`` call). Per drive and density it reports:
 ticks), the object density, and the disturbance (none, the default impulse in N·s, and the same Δv for
 every object).
 
+``regime="real"`` runs the landscape of the real regime instead
+(:func:`mjcodesign.bench.landscape_real.bench_landscape_real`: the suite's in-domain objects at their
+published masses under :data:`~mjcodesign.scenarios.grasp.REAL_REGIME`, with intervals and a
+sensitivity table).
+
 A density ``real`` places every object at its published mass (:func:`mjcodesign.objects.published_mass`,
 uniform density mass / volume); an object without one is listed under ``skipped``.
 """
@@ -37,7 +42,7 @@ from mjcodesign.scenarios import DEFAULT_IMPULSE, GraspScenario, parse_tendon
 from mjcodesign.scenarios.outcome import Failure
 from mjcodesign.sim import MujocoBackend
 
-__all__ = ["bench_landscape", "OBJECTS", "DESIGNS", "SWEEP_DESIGNS", "FAR", "CI", "REAL"]
+__all__ = ["bench_landscape", "OBJECTS", "DESIGNS", "SWEEP_DESIGNS", "FAR", "CI", "REAL", "REGIMES"]
 
 OBJECTS = (
     "012_strawberry",
@@ -65,6 +70,8 @@ _SWEEP_DENSITIES = (10.0, 400.0)
 """10 kg/m³: the authors' density 2 at real size for equal grip-to-weight."""
 REAL = "real"
 """The density entry that places every object at its published mass."""
+REGIMES = ("paper", REAL)
+"""``paper``: the blocks and sweep over densities and tendon drives; ``real``: the real regime's landscape."""
 
 
 def _rho(obj, density: str | float) -> float:
@@ -80,8 +87,9 @@ def _group(name: str) -> str:
 
 def bench_landscape(
     *,
-    objects: tuple[str, ...] = OBJECTS,
-    poses: int = 4,
+    regime: str = "paper",
+    objects: tuple[str, ...] | None = None,
+    poses: int | None = None,
     designs: tuple[str, ...] = DESIGNS,
     densities: tuple[str, ...] = ("light", "heavy"),
     tendons: tuple[str, ...] = ("force:10", "position:1000"),
@@ -92,15 +100,40 @@ def bench_landscape(
     seed: int = 0,
     model: str = "chain",
     nthread: int | None = None,
+    sensitivity_designs: tuple[str, ...] | None = None,
     on_progress=None,
 ) -> dict:
     """Run the landscape (see the module docstring); returns a JSON-ready dict.
+
+    ``regime="real"`` hands ``objects`` (default: the suite's in-domain objects), ``poses`` (default:
+    all of the suite's), ``designs``, ``sweep`` (the sensitivity table), ``sensitivity_designs``,
+    ``model``, ``nthread``, ``seed`` and ``on_progress`` to
+    :func:`~mjcodesign.bench.landscape_real.bench_landscape_real`; the other arguments are the paper
+    regime's. Otherwise ``objects`` defaults to :data:`OBJECTS` and ``poses`` to 4.
 
     ``poses``: sampler poses per object (:func:`mjcodesign.poses.sample_poses`, ``seed``); an object
     without any is listed under ``skipped`` with the reason. The sweep runs ``sweep_designs`` on the
     first ``sweep_poses`` poses of every object (each setting is a full block otherwise: 352 rollouts);
     ``blocks=False`` runs the sweep alone. ``on_progress(text)`` hears one line per block of rollouts.
     """
+    if regime not in REGIMES:
+        raise DesignError(f"unknown regime {regime!r}: choose from {', '.join(REGIMES)}")
+    if regime == REAL:
+        from mjcodesign.bench.landscape_real import bench_landscape_real
+
+        return bench_landscape_real(
+            objects=objects,
+            poses=poses,
+            designs=tuple(designs),
+            sensitivity=sweep,
+            sensitivity_designs=sensitivity_designs,
+            model=model,
+            nthread=nthread,
+            seed=seed,
+            on_progress=on_progress,
+        )
+    objects = OBJECTS if objects is None else objects
+    poses = 4 if poses is None else poses
     if poses < 1 or not designs or not objects:
         raise DesignError("the landscape needs at least one object, pose and design")
     backend = MujocoBackend(nthread)
@@ -124,7 +157,15 @@ def bench_landscape(
         for density in densities:
             out_blocks.append(
                 _block(
-                    loaded, stiffness, backend, scenes, model, tendon, density, base, label=f"{tendon} {density}"
+                    loaded,
+                    stiffness,
+                    backend,
+                    scenes,
+                    model,
+                    tendon,
+                    density,
+                    base,
+                    label=f"{tendon} {density}",
                 )
             )
             if on_progress:

@@ -10,8 +10,12 @@ import json
 import sys
 
 from mjcodesign.cli.common import add_mass_mode, emit, int_at_least, path_text
+from mjcodesign.errors import DesignError
 
 __all__ = ["add_bench_parser"]
+
+_TENDONS = "force:10,position:1000"
+_DENSITIES = "light,heavy"
 
 
 def _names(text: str) -> tuple[str, ...]:
@@ -24,31 +28,64 @@ def _note(line: str) -> None:
 
 def _cmd_landscape(args) -> int:
     from mjcodesign.bench import run_benchmark
-    from mjcodesign.bench.landscape import CI, DESIGNS, OBJECTS
+    from mjcodesign.bench.landscape import CI, DESIGNS, REAL
+    from mjcodesign.bench.landscape_real import CI_REAL
 
-    kw = dict(objects=OBJECTS, poses=args.poses, designs=DESIGNS, sweep=not args.no_sweep)
+    real = args.regime == REAL
+    kw = dict(regime=args.regime, poses=args.poses, designs=DESIGNS, sweep=not args.no_sweep)
     if args.ci:
-        kw.update(objects=CI["objects"], poses=CI["poses"], designs=CI["designs"], sweep=CI["sweep"])
+        ci = CI_REAL if real else CI
+        kw.update(objects=ci["objects"], poses=ci["poses"], designs=ci["designs"], sweep=real)
     if args.objects:
         kw["objects"] = _names(args.objects)
     if args.designs:
         kw["designs"] = _names(args.designs)
+    if args.sensitivity_designs:
+        kw["sensitivity_designs"] = _names(args.sensitivity_designs)
+    if real and (args.tendons is not None or args.densities is not None):
+        raise DesignError(
+            "--tendons and --densities are the paper regime's: the real regime runs the XL330 servo on every "
+            "object at its published mass"
+        )
+    if not real:
+        kw.update(
+            tendons=_names(args.tendons or _TENDONS),
+            densities=("real",) if args.mass == "real" else _names(args.densities or _DENSITIES),
+        )
     res = run_benchmark(
         "landscape",
         command=args.command_line,
         out=args.out,
         **kw,
-        tendons=_names(args.tendons),
-        densities=("real",) if args.mass == "real" else _names(args.densities),
         model=args.model,
         seed=args.seed,
         on_progress=_note,
     )
     if args.json:
         print(json.dumps(res))
+    elif real:
+        emit(_real_rows(res), False)
     else:
         emit([_flat(b) for b in res["blocks"] + res.get("sweep", [])], False)
     return 0
+
+
+def _real_rows(res: dict) -> list[dict]:
+    """One row per design group: success over objects with its interval, and the disagreeing pairs."""
+    rows = []
+    for label, block in [("real", res)] + [(f"{r['setting']}={r['value']:g}", r) for r in res["sensitivity"]]:
+        for g, st in block["success"].items():
+            o = st.get("objects", st["rollouts"])
+            rows.append(
+                {
+                    "setting": label,
+                    "group": g,
+                    "success": round(o["value"], 3),
+                    "interval": f"[{o['low']:.3f}, {o['high']:.3f}]",
+                    "mixed pairs": round(block["pairs"]["mixed_share"]["value"], 3),
+                }
+            )
+    return rows
 
 
 def _flat(block: dict) -> dict:
@@ -92,22 +129,46 @@ def add_bench_parser(bench_subparsers) -> None:
     p.add_argument(
         "--objects", default=None, help="comma-separated objects (default: 8 in-domain YCB objects)"
     )
-    p.add_argument("--poses", type=int_at_least(1), default=4, help="sampler poses per object")
+    p.add_argument(
+        "--regime",
+        choices=("paper", "real"),
+        default="paper",
+        help="paper: blocks over densities and tendon drives (the paper's relative scale); real: the suite's "
+        "in-domain objects at their real masses under the hardware's grasp, with intervals and sensitivity",
+    )
+    p.add_argument(
+        "--poses",
+        type=int_at_least(1),
+        default=None,
+        help="poses per object (paper: sampler poses, default 4; real: the suite's first, default all 10)",
+    )
     p.add_argument(
         "--designs", default=None, help="comma-separated designs (default: 3 presets and random:0-7)"
     )
-    p.add_argument("--tendons", default="force:10,position:1000", help="comma-separated tendon drives")
+    p.add_argument("--tendons", default=None, help=f"comma-separated tendon drives (default {_TENDONS})")
     p.add_argument(
         "--densities",
-        default="light,heavy",
-        help="comma-separated densities: presets of the paper's relative scale, kg/m³, or real",
+        default=None,
+        help=f"comma-separated densities: presets of the paper's relative scale, kg/m³, or real (default {_DENSITIES})",
     )
     add_mass_mode(p, "in place of --densities (objects without one are skipped)")
     p.add_argument("--model", choices=("chain", "flex"), default="chain")
     p.add_argument("--seed", type=int, default=0, help="pose sampler and CoACD seed")
-    p.add_argument("--no-sweep", action="store_true", help="skip the tendon / density / impulse sweep")
     p.add_argument(
-        "--ci", action="store_true", help="the short version the tests run (1 object, 2 poses, 3 designs)"
+        "--no-sweep",
+        action="store_true",
+        help="skip the tendon / density / impulse sweep (real: the sensitivity table)",
+    )
+    p.add_argument(
+        "--sensitivity-designs",
+        default=None,
+        help="real: comma-separated designs of the sensitivity table (default: the --designs)",
+    )
+    p.add_argument(
+        "--ci",
+        action="store_true",
+        help="the short version the tests run (paper: 1 object, 2 poses, 3 designs; real: 1 object, 2 poses, "
+        "soft and semi-rigid, with the sensitivity table)",
     )
     p.add_argument("--out", type=path_text, default=None, help="also write the JSON to this file")
     p.add_argument("--json", action="store_true")
