@@ -90,6 +90,13 @@ FAMILIES: dict[str, list[Case]] = {
         grasp --object box.stl --pose empty.npz                 | empty.npz | box.stl empty.npz
         grasp --object box.stl --pose random.npz                | random.npz | box.stl random.npz
         grasp --model fem --object box.stl --tendon position:-5 | ticks | box.stl
+        # Numbers that would be wrong: empty design fields, an open sheet closed into a solid, a palm
+        # no finger reaches, another object's candidates.
+        grasp --object box.stl --design 14.0,,15.0,14,14,14,14,14,14,14,14,14 | empty field | box.stl
+        grasp --object box.stl --design 14,14,14,14,14,14,14,14,14,14,14, | empty field | box.stl
+        grasp --object tent.stl                                 | area --allow-open | tent.stl
+        grasp --object box.stl --pose far.json                  | reach | box.stl far.json
+        grasp --object box.stl --pose ball.npz                  | 'ball' 'box' | box.stl ball.npz
     """),
     "view": _cases("""
         view {long}                                             | too long
@@ -170,6 +177,19 @@ def make(name, cwd):
         import trimesh
         v = np.array([[0, 0, 0], [0.05, 0, 0], [0.05, 0.05, 0], [0, 0.05, 0]], float)
         trimesh.Trimesh(v, [[0, 1, 2], [0, 2, 3]], process=False).export(path)
+    elif base == "tent.stl":  # two triangles at an angle: an open sheet a hole fill would close
+        import trimesh
+        v = np.array([[0, 0, 0], [0.05, 0, 0], [0.05, 0.05, 0.02], [0, 0.05, 0]], float)
+        trimesh.Trimesh(v, [[0, 1, 2], [0, 2, 3]], process=False).export(path)
+    elif base == "far.json":  # a palm 1,000 km from the object
+        T = np.eye(4)
+        T[:3, 3] = (1e6, 0.0, 0.2)
+        path.write_text(json.dumps({"pose": T.tolist(), "openings": [0.04, 0.04]}))
+    elif base == "ball.npz":  # a candidate file made for another object
+        T = np.eye(4)[None]
+        T[0, :3, 3] = (0.0, 0.0, 0.2)
+        np.savez(path, matrices=T, openings=np.full((1, 2), 0.04), scores=np.ones(1),
+                 min_signed_distance=np.full(1, 0.01), object=np.array("ball"))
     elif base == "nan.stl":  # a box with one vertex at NaN, as ASCII STL
         import trimesh
         box = trimesh.creation.box(extents=(0.05, 0.05, 0.05))

@@ -115,8 +115,13 @@ class Stiffness:
             return cls.random(int(seed), n_blocks)
         if "," not in text and not _is_number(text):
             return cls.preset(text, n_blocks)
+        fields = text.split(",")
+        if not all(v.strip() for v in fields):
+            raise StiffnessError(
+                f"stiffness {text!r} has an empty field (field {[v.strip() for v in fields].index('') + 1})"
+            )
         try:
-            values = [float(v) for v in text.split(",") if v.strip()]
+            values = [float(v) for v in fields]
         except ValueError as exc:
             raise StiffnessError(f"cannot parse stiffness {text!r}") from exc
         return cls(values, n_blocks=n_blocks)

@@ -16,6 +16,10 @@ work is their potential energy, so both are left out. A rollout that breaks the 
 deep inside a body pushes it out with no work to pay for it, or the solver blew up. Such a rollout is
 :attr:`~mjcodesign.scenarios.outcome.Failure.IMPLAUSIBLE`, never a sample.
 
+The bound cannot see a rollout whose impulse could pay for anything: ``J`` can give a mass ``m`` up to
+``J²/2m`` (1.6 kJ on a 0.1 mg cube), so a tiny object driven through the ground and thrown back out
+keeps it. :mod:`mjcodesign.scenarios.motion` bounds the object's speed and position for that.
+
 The terms are sensors of the grasp scene (:func:`add_energy_sensors`; ``mujoco.rollout`` returns them
 per step), so the check costs no replay.
 """

@@ -15,6 +15,7 @@ import numpy as np
 
 from mjcodesign.scenarios.energy import energy_balance
 from mjcodesign.scenarios.grasp import STATE_SPEC, GraspScenario, GraspScene, control_spec
+from mjcodesign.scenarios.motion import motion_bound
 
 __all__ = ["Failure", "Outcome", "failed_outcome", "finger_wrench", "outcome_from_states", "outcome_steps"]
 
@@ -34,7 +35,8 @@ class Failure(enum.Enum):
     DIVERGED = "diverged"
     """The solver warned or the state became non-finite (the reason names the step and warning)."""
     IMPLAUSIBLE = "implausible"
-    """The rollout broke a physical bound (e.g. the object gained more energy than could be put in)."""
+    """The rollout broke a physical bound: the object gained more energy than could be put in, or moved
+    in a way no grasp can (:mod:`mjcodesign.scenarios.motion`)."""
     BAD_POSE = "bad_pose"
     """The pose cannot be simulated: gripper below the ground, object too wide for the stroke."""
     NOT_LIFTED = "not_lifted"
@@ -256,9 +258,10 @@ def outcome_from_states(
     """The outcome of a rollout from its initial state ``x0`` and per-step states (nstep, nstate).
 
     ``sensordata`` (nstep, nsensordata), each step's sensors as ``mujoco.rollout`` returns them: the
-    rollout is checked against the energy bound (:mod:`mjcodesign.scenarios.energy`), and one that
-    breaks it is :attr:`Failure.IMPLAUSIBLE` (listed first, with its numbers) whatever else it did.
-    Every backend passes it; without it the bound is not checked.
+    rollout is checked against the energy bound (:mod:`mjcodesign.scenarios.energy`). Every backend
+    passes it; without it the energy bound is not checked. The motion bounds
+    (:mod:`mjcodesign.scenarios.motion`) are always checked. A rollout that breaks a bound is
+    :attr:`Failure.IMPLAUSIBLE` (listed first, with its numbers) whatever else it did.
 
     ``states[t]`` is the state after step t, ``ctrl`` the controls of :func:`phase_controls`. Contact
     forces are recomputed with ``mj_forward`` at the sampled states under the control of the step that
@@ -291,10 +294,24 @@ def outcome_from_states(
         (not force_ok, Failure.ZERO_FORCE, "zero finger force"),
     ]
     reasons = [(kind, text) for hit, kind, text in found if hit]
+    # Every step's object velocity is in the states (both backends keep them); positions only at the
+    # steps the outcome read.
+    qv = 1 + m.nq + int(m.jnt_dofadr[m.body_jntadr[ob]])
+    motion = motion_bound(
+        np.linalg.norm(states[:, qv : qv + 3], axis=1),
+        np.array([p[2] for p in path.values()] + [float(d.xipos[ob][2])]),
+        z0,
+        dt=m.opt.timestep,
+        extents=scene.obj.extents,
+        lift=scenario.lift,
+    )
+    broken = [] if motion.plausible else [motion.reason]
     if sensordata is not None:
         balance = energy_balance(m, ob, x0, states, ctrl, sensordata)
         if not balance.plausible:
-            reasons.insert(0, (Failure.IMPLAUSIBLE, balance.reason(m.opt.timestep)))
+            broken.insert(0, balance.reason(m.opt.timestep))
+    if broken:
+        reasons.insert(0, (Failure.IMPLAUSIBLE, "; ".join(broken)))
     return Outcome(
         success=not reasons,
         body_force=tuple(body_force),
