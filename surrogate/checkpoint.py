@@ -7,7 +7,10 @@ Layout::
                             scenario's success constants, the dataset's manifest hash, the split, the
                             training settings and the metrics
 
-:func:`load_surrogate` needs only the model and these two files (no training code runs). Saving
+:func:`load_surrogate` needs only the model and these two files (no training code runs). The record
+holds each input's training range (``input_range``), outside which predictions are refused; a record
+without one gets the rule of :meth:`InputRange.recorded`. A normalisation with NaN, a zero spread or a
+vector of the wrong length is refused at load. Saving
 removes the JSON record first and writes it last (by a rename), so a folder whose weights were
 being replaced reads as no checkpoint rather than as a record with the wrong weights.
 """
@@ -17,11 +20,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
+
 from mjcodesign.data.config import DatagenConfig
+from mjcodesign.design.stiffness import N_LOG_E
 from mjcodesign.errors import MjcodesignError, OutputError
 from mjcodesign.outputs import write_atomic
-from mjcodesign.surrogate.data import OUTPUT_NAMES, Normalizer
-from mjcodesign.surrogate.inference import Surrogate
+from mjcodesign.surrogate.data import N_REGRESSION, OUTPUT_NAMES, Normalizer
+from mjcodesign.surrogate.inference import InputRange, Surrogate
 from mjcodesign.surrogate.model import GraspNet, ModelConfig
 
 __all__ = [
@@ -59,6 +65,7 @@ def save_checkpoint(out: str | Path, surrogate: Surrogate) -> Path:
         "normalizer": surrogate.normalizer.as_dict(),
         "outputs": list(OUTPUT_NAMES),
         "scenario": {"lift": surrogate.lift, "lifted_fraction": surrogate.lifted_fraction},
+        **({"input_range": r.as_dict()} if (r := surrogate.trained_range) is not None else {}),
         **surrogate.meta,
     }
     try:
@@ -124,7 +131,9 @@ def load_surrogate(path: str | Path) -> Surrogate:
         model = GraspNet(ModelConfig.from_dict(record["model"]))
         model.load_state_dict(load_file(str(weights)), strict=True)
         norm = Normalizer.from_dict(record["normalizer"])
+        _check_normalizer(norm)
         scenario = record["scenario"]
+        input_range = InputRange.from_dict(record["input_range"]) if "input_range" in record else None
     except (KeyError, TypeError, ValueError, RuntimeError, SafetensorError, MjcodesignError) as exc:
         raise OutputError(
             f"{root}: broken checkpoint ({type(exc).__name__}: {str(exc).splitlines()[0]})"
@@ -132,8 +141,30 @@ def load_surrogate(path: str | Path) -> Surrogate:
     meta = {
         k: v
         for k, v in record.items()
-        if k not in ("format", "version", "model", "normalizer", "outputs", "scenario")
+        if k not in ("format", "version", "model", "normalizer", "outputs", "scenario", "input_range")
     }
     return Surrogate(
-        model, norm, lift=scenario["lift"], lifted_fraction=scenario["lifted_fraction"], meta=meta
+        model,
+        norm,
+        lift=scenario["lift"],
+        lifted_fraction=scenario["lifted_fraction"],
+        meta=meta,
+        input_range=input_range,
     )
+
+
+# Lengths of the normalisation's vectors: 22 ln E, 9 regressed outputs, 7 frame inputs.
+_NORM_SHAPES = {"log_e": N_LOG_E, "out": N_REGRESSION, "frame": 7}  # frame: frame_inputs' columns
+
+
+def _check_normalizer(norm: Normalizer) -> None:
+    """Raise :class:`OutputError` unless every statistic is finite, every spread > 0, every length right."""
+    for name, n in _NORM_SHAPES.items():
+        for kind in ("mean", "std"):
+            v = np.asarray(getattr(norm, f"{name}_{kind}"), dtype=float)
+            if v.shape != (n,):
+                raise OutputError(f"normalizer {name}_{kind} has {v.size} values, not {n}")
+            if not np.all(np.isfinite(v)) or (kind == "std" and np.any(v <= 0)):
+                raise OutputError(f"normalizer {name}_{kind} holds NaN, inf or a spread <= 0")
+    if not (np.isfinite(norm.density_mean) and np.isfinite(norm.density_std) and norm.density_std > 0):
+        raise OutputError("normalizer density holds NaN, inf or a spread <= 0")

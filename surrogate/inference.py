@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from mjcodesign.data import PoseRows
-from mjcodesign.design.stiffness import N_LOG_E
+from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, N_LOG_E
 from mjcodesign.errors import DesignError, StiffnessError
 from mjcodesign.surrogate.data import (
     N_REGRESSION,
@@ -40,11 +40,23 @@ from mjcodesign.surrogate.data import (
 )
 from mjcodesign.surrogate.model import GraspNet
 
-__all__ = ["DesignLoss", "DesignGradient", "GraspBatch", "Poses", "Prediction", "Surrogate", "success_score"]
+__all__ = [
+    "DesignLoss",
+    "DesignGradient",
+    "GraspBatch",
+    "InputRange",
+    "Poses",
+    "Prediction",
+    "Surrogate",
+    "success_score",
+]
 
 G = 9.81  # [m/s²]
 _CONTACT_THRESHOLD = 0.5  # predicted ground-contact probability above which the grasp fails
 _FORCE_FRACTION = 0.5  # of the weight: a held object's hold force equals its weight (NOTES)
+_RANGE_TOL = 1e-9
+"""Each side of a training range is widened by this fraction of its width plus this much: round-off
+of the recorded ends, never extrapolation."""
 _ENCODE_CHUNK = 256  # poses per PointNet call when preparing (memory: ~1.3 MB of activations per pose)
 
 
@@ -64,6 +76,101 @@ def success_score(
         np.linalg.norm(np.asarray(body_force, dtype=float)[:, 3:], axis=1) / weight - _FORCE_FRACTION
     ) / _FORCE_FRACTION
     return np.minimum(np.minimum(lifted, free), force)
+
+
+@dataclass(frozen=True, eq=False)
+class InputRange:
+    """The range of each input the surrogate was trained on: ln E per block and the object density.
+
+    Outside it the network extrapolates (a checkpoint trained at one density put a 2.2 MN force on a
+    denser object), so :meth:`Surrogate.predict` and :meth:`Surrogate.loss_and_grad` refuse such
+    inputs (:meth:`check`), and every command built on them (``predict``, ``optimize``, ``evaluate``,
+    ``hw grasp``) with them.
+    """
+
+    log_e_low: np.ndarray
+    """ln(E / Pa) [-], shape (22,)."""
+    log_e_high: np.ndarray
+    density_low: float
+    """[kg/m³]."""
+    density_high: float
+
+    def __post_init__(self) -> None:
+        for name in ("log_e_low", "log_e_high"):
+            v = np.asarray(getattr(self, name), dtype=float).ravel()
+            if v.shape != (N_LOG_E,) or not np.all(np.isfinite(v)):
+                raise DesignError(f"input range {name} must be {N_LOG_E} finite values, got shape {v.shape}")
+            object.__setattr__(self, name, v)
+        for name in ("density_low", "density_high"):
+            object.__setattr__(self, name, float(getattr(self, name)))
+        if not (np.isfinite(self.density_low) and np.isfinite(self.density_high)):
+            raise DesignError("input range of the density must be finite")
+        if np.any(self.log_e_low > self.log_e_high) or self.density_low > self.density_high:
+            raise DesignError("input range: a low end above its high end")
+
+    @classmethod
+    def of_samples(cls, log_e: np.ndarray, density: np.ndarray) -> InputRange:
+        """The smallest and largest value of each input over training rows ``log_e`` (S, 22), ``density`` (S,)."""
+        log_e, density = np.asarray(log_e, dtype=float), np.asarray(density, dtype=float)
+        return cls(log_e.min(axis=0), log_e.max(axis=0), float(density.min()), float(density.max()))
+
+    @classmethod
+    def recorded(cls, meta: dict) -> InputRange | None:
+        """The range of a checkpoint that measured none, from its record ``meta``; None without one.
+
+        A checkpoint of a datagen dataset (``meta["dataset"]``): ln E over the printable range (datagen
+        draws every block uniformly over it) and the density over the dataset's configured range (the
+        low and high of ``--density``; one value when it was trained at one density).
+        """
+        density = (meta.get("dataset") or {}).get("density")
+        if not isinstance(density, dict) or "low_kg_m3" not in density:
+            return None
+        low, high = float(density["low_kg_m3"]), float(density["high_kg_m3"])
+        return cls(np.full(N_LOG_E, LOG_E_MIN), np.full(N_LOG_E, LOG_E_MAX), low, high)
+
+    def as_dict(self) -> dict:
+        """JSON-ready."""
+        return {
+            "log_e_low": self.log_e_low.tolist(),
+            "log_e_high": self.log_e_high.tolist(),
+            "density_low_kg_m3": self.density_low,
+            "density_high_kg_m3": self.density_high,
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> InputRange:
+        """Inverse of :meth:`as_dict`."""
+        return cls(d["log_e_low"], d["log_e_high"], d["density_low_kg_m3"], d["density_high_kg_m3"])
+
+    def check(self, log_e: np.ndarray | None, density: np.ndarray) -> None:
+        """Raise :class:`DesignError` naming the first input outside its range (widened by :data:`_RANGE_TOL`).
+
+        ``log_e`` (B, 22) or None (not checked), ``density`` (B,) [kg/m³].
+        """
+        density = np.asarray(density, dtype=float).ravel()
+        lo, hi = _widened(self.density_low, self.density_high)
+        bad = ~((density >= lo) & (density <= hi))
+        if np.any(bad):
+            raise DesignError(
+                f"density {density[bad][0]:g} kg/m³ is outside the surrogate's training range "
+                f"[{self.density_low:g}, {self.density_high:g}] kg/m³"
+            )
+        if log_e is None:
+            return
+        log_e = np.asarray(log_e, dtype=float).reshape(-1, N_LOG_E)
+        lo, hi = _widened(self.log_e_low, self.log_e_high)
+        bad = ~((log_e >= lo) & (log_e <= hi))
+        if np.any(bad):
+            row, block = np.argwhere(bad)[0]
+            raise DesignError(
+                f"ln E[{block}] = {log_e[row, block]:g} is outside the surrogate's training range "
+                f"[{self.log_e_low[block]:.4g}, {self.log_e_high[block]:.4g}]"
+            )
+
+
+def _widened(low, high):
+    slack = _RANGE_TOL * (1.0 + np.abs(np.asarray(high)) + np.abs(np.asarray(low)))
+    return low - slack, high + slack
 
 
 @dataclass(frozen=True, eq=False)
@@ -216,15 +323,32 @@ class Surrogate:
         lift: float,
         lifted_fraction: float,
         meta: dict | None = None,
+        input_range: InputRange | None = None,
     ):
         self.model = model.eval()
         self.normalizer = normalizer
+        self.trained_range = input_range
+        """The inputs' range measured on the training split (:meth:`InputRange.of_samples`), or None."""
         self.lift = float(lift)
         self.lifted_fraction = float(lifted_fraction)
         self.meta = dict(meta or {})
         """The checkpoint's record: dataset hash, split, training settings, metrics."""
         self._stats: tuple = ()
         self._stats_dtype = None
+
+    @property
+    def input_range(self) -> InputRange | None:
+        """The inputs' training range, or None (nothing checked).
+
+        :attr:`trained_range`, else :meth:`InputRange.recorded` of the record; None for a surrogate
+        with neither (one still being trained).
+        """
+        return self.trained_range or InputRange.recorded(self.meta)
+
+    def check_inputs(self, log_e: np.ndarray | None, density: np.ndarray) -> None:
+        """Raise :class:`DesignError` for an input outside :attr:`input_range` (:meth:`InputRange.check`)."""
+        if (r := self.input_range) is not None:
+            r.check(log_e, density)
 
     @property
     def dtype(self) -> torch.dtype:
@@ -284,9 +408,13 @@ class Surrogate:
         return y[:, :6], y[:, 6:N_REGRESSION], torch.sigmoid(raw[:, N_REGRESSION]), up
 
     def predict(self, batch: GraspBatch) -> Prediction:
-        """The outputs of every row of ``batch`` (which needs ``log_e``)."""
+        """The outputs of every row of ``batch`` (which needs ``log_e``).
+
+        Raises :class:`DesignError` for a design or density outside :attr:`input_range`.
+        """
         if batch.log_e is None:
             raise DesignError("predict needs a design per row (GraspBatch.log_e)")
+        self.check_inputs(batch.log_e, batch.density)
         batch = self.prepare(batch)
         with torch.inference_mode():
             force, disp, p, _ = self._outputs(batch, torch.tensor(batch.log_e, dtype=self.dtype))
@@ -296,10 +424,15 @@ class Surrogate:
         return Prediction(force, disp, p, score)
 
     def loss_and_grad(self, design, batch: GraspBatch, loss: DesignLoss | None = None) -> DesignGradient:
-        """L_opt (:class:`DesignLoss`) of one design (22 ln E) over every row, and d L / d ln E."""
+        """L_opt (:class:`DesignLoss`) of one design (22 ln E) over every row, and d L / d ln E.
+
+        Raises :class:`DesignError` for a density outside :attr:`input_range` (the design moves within
+        the printable range, which the optimiser keeps).
+        """
         d = np.asarray(design, dtype=float).ravel()
         if d.shape != (N_LOG_E,) or not np.all(np.isfinite(d)):
             raise StiffnessError(f"a design is {N_LOG_E} finite values of ln E, got shape {d.shape}")
+        self.check_inputs(None, batch.density)
         batch = self.prepare(batch)
         x = torch.tensor(d, dtype=self.dtype, requires_grad=True)
         with torch.enable_grad():

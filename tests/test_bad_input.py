@@ -94,7 +94,7 @@ FAMILIES: dict[str, list[Case]] = {
         # no finger reaches, another object's candidates.
         grasp --object box.stl --design 14.0,,15.0,14,14,14,14,14,14,14,14,14 | empty field | box.stl
         grasp --object box.stl --design 14,14,14,14,14,14,14,14,14,14,14, | empty field | box.stl
-        grasp --object tent.stl                                 | area --allow-open | tent.stl
+        grasp --object tent.stl                                 | sheet --allow-open | tent.stl
         grasp --object box.stl --pose far.json                  | reach | box.stl far.json
         grasp --object box.stl --pose ball.npz                  | 'ball' 'box' | box.stl ball.npz
     """),
