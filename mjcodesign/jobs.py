@@ -32,7 +32,7 @@ import numpy as np
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError, MeshError, PoseError
-from mjcodesign.models.types import FingerModel, GripperPose, SimOptions
+from mjcodesign.models.types import FingerModel, GripperPose, SimOptions, grasp_model
 from mjcodesign.objects import (
     CoacdSettings,
     GraspObject,
@@ -80,6 +80,7 @@ class GraspJob:
     design: Stiffness
     """ln E of the 22 blocks (finger A base to tip, then finger B)."""
     finger_model: FingerModel = FingerModel.CHAIN
+    """The chain: the flex models cannot grasp (:func:`~mjcodesign.models.types.grasp_model` refuses them)."""
     scenario: GraspScenario = field(default_factory=GraspScenario)
     density: float | None = None
     """Object density [kg/m³]; None keeps the one ``obj`` was loaded with. Mass and inertia scale with
@@ -103,7 +104,7 @@ class GraspJob:
             raise DesignError(f"object {self.obj.name} has no convex pieces: use load_grasp_object")
         if not isinstance(self.design, Stiffness):
             raise DesignError(f"a grasp job's design is a Stiffness, got {type(self.design).__name__}")
-        object.__setattr__(self, "finger_model", FingerModel(self.finger_model))
+        object.__setattr__(self, "finger_model", grasp_model(self.finger_model))
         if self.density is not None and not (np.isfinite(self.density) and self.density > 0):
             raise DesignError(f"density must be a finite value > 0 kg/m³, got {self.density}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int | np.integer) or self.seed < 0:

@@ -118,3 +118,33 @@ def test_under_converged_flex_raises_not_ignored():
         for _ in range(20):
             mujoco.mj_step(built.model, d)
             check_state(d)
+
+
+# -- the flex models are not offered for grasping ---------------------------------------------------
+
+
+@pytest.mark.parametrize("model", ["flex", "flex-quadratic"])
+def test_a_flex_grasp_job_is_refused(model):
+    from mjcodesign.errors import UnsupportedError
+    from mjcodesign.jobs import GraspJob
+    from mjcodesign.models.types import GripperPose
+    from mjcodesign.objects import box_object
+
+    obj = box_object((0.05,) * 3, 400.0)
+    with pytest.raises(UnsupportedError, match="cannot grasp"):
+        GraspJob(obj=obj, pose=GripperPose(), design=Stiffness.preset("semi-rigid"), finger_model=model)
+    job = GraspJob(obj=obj, pose=GripperPose(), design=Stiffness.preset("semi-rigid"), finger_model="chain")
+    assert job.finger_model.value == "chain"
+
+
+@pytest.mark.parametrize("command", [["grasp"], ["bench", "grasp"]])
+def test_grasp_commands_refuse_flex_before_any_work(command, tmp_path, capsys):
+    # The object does not exist: the refusal comes first, from the parser, with the reason.
+    from mjcodesign.cli.main import main
+
+    with pytest.raises(SystemExit) as exc:
+        main([*command, "--object", str(tmp_path / "missing.stl"), "--model", "flex"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exc.value.code == 2 and len(err) == 1, err
+    assert "--model" in err[0] and "cannot grasp" in err[0] and "missing" not in err[0]
+    assert list(tmp_path.iterdir()) == []

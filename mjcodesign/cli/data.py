@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from mjcodesign.cli.common import Parser, add_mass_mode, emit, int_at_least, quiet_warp, user_cache_dir
+from mjcodesign.cli.finger_flags import grasp_model_name
 from mjcodesign.optional import WARP_DEVICES
 
 __all__ = [
@@ -61,7 +62,7 @@ def add_parser(subparsers) -> None:
         default="force:10",
         help="force:N (tension per finger [N]) or position:TICKS (the XL330 servo's goal, ticks of 4096)",
     )
-    p.add_argument("--model", choices=_MODELS, default="chain")
+    p.add_argument("--model", choices=_MODELS, default="chain", type=grasp_model_name)
     p.add_argument("--backend", choices=("mujoco", "mjwarp"), default="mujoco")
     p.add_argument(
         "--device",

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from mjcodesign.cli.common import int_at_least, path_text, user_cache_dir
+from mjcodesign.cli.finger_flags import add_routing, grasp_model_name, routing_options
 from mjcodesign.optional import WARP_DEVICES
 
 __all__ = [
@@ -46,7 +47,8 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         default="paper-optimized",
         help="stiffness preset, 11/22 comma-separated ln(E/Pa), or several comma-separated presets",
     )
-    p.add_argument("--model", choices=_MODELS, default="chain")
+    p.add_argument("--model", choices=_MODELS, default="chain", type=grasp_model_name)
+    add_routing(p)
     p.add_argument(
         "--density",
         default="light",
@@ -137,7 +139,7 @@ def add_bench_parser(bench_subparsers) -> argparse.ArgumentParser:
     p = bench_subparsers.add_parser(
         "grasp", help="grasp rollouts/s: raw mujoco.rollout and the full pipeline"
     )
-    p.add_argument("--model", choices=_MODELS[:2], default="chain")
+    p.add_argument("--model", choices=_MODELS[:2], default="chain", type=grasp_model_name)
     p.add_argument(
         "--object",
         type=path_text,
@@ -178,6 +180,7 @@ def grasp(
     observer=None,
     label: str | None = None,
     prepared: tuple | None = None,
+    options=None,
 ) -> dict:
     """One grasp rollout (a :class:`~mjcodesign.jobs.GraspJob`); the JSON-ready outcome plus the object's facts.
 
@@ -185,7 +188,8 @@ def grasp(
     (:func:`mjcodesign.jobs.load_grasp_object`). ``observer`` (:mod:`mjcodesign.sim.observe`) receives
     the rollout as ``label``. ``prepared``: the result of :func:`prepare_object` for these ``source``,
     ``density``, ``pose`` and ``mass`` arguments, so that several designs or backends on one object
-    load, decompose and pose it once.
+    load, decompose and pose it once. ``options``: the chain's :class:`~mjcodesign.models.types.SimOptions`
+    (None: the defaults).
     """
     from mjcodesign.design.stiffness import Stiffness
     from mjcodesign.errors import DesignError
@@ -198,6 +202,8 @@ def grasp(
     if backend not in _BACKENDS:
         raise DesignError(f"unknown backend {backend!r}: choose from {', '.join(_BACKENDS)}")
     if model == "fem":
+        if options is not None:
+            raise DesignError("--model fem routes its tendon itself: leave --routing at guided")
         if backend != "mujoco":
             raise DesignError("--model fem is a simulator of its own: leave --backend at mujoco")
         from dataclasses import replace
@@ -233,6 +239,7 @@ def grasp(
         scenario=scenario,
         seed=seed,
         label=label or design,
+        options=options,
     )
     out = run_jobs([job], sim, observer, strict=True)[0].as_dict()
     out.update(
@@ -474,6 +481,7 @@ class _Runner:
             observer=self.recorder,
             label=prefix + label,
             prepared=prepared,
+            options=routing_options(a),
         )
         return {**keys, **out}
 

@@ -20,6 +20,7 @@ from mjcodesign.models.types import (
     GripperPose,
     SimOptions,
     TendonMode,
+    grasp_model,
 )
 
 __all__ = [
@@ -46,4 +47,5 @@ __all__ = [
     "GripperPose",
     "SimOptions",
     "TendonMode",
+    "grasp_model",
 ]

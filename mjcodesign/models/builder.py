@@ -10,7 +10,7 @@ import mujoco
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
-from mjcodesign.errors import DesignError
+from mjcodesign.errors import DesignError, UnsupportedError
 from mjcodesign.models.chain import add_chain_finger
 from mjcodesign.models.flex import add_flex_finger, apply_cell_young
 from mjcodesign.models.spec import compile_spec, finger_frame_quat, new_spec
@@ -35,10 +35,15 @@ __all__ = ["build_finger", "build_gripper", "set_openings", "make_data", "apply_
 def _add_tendon(spec: mujoco.MjSpec, handle: FingerHandle, exit_site: str, options: SimOptions) -> None:
     """Native tendon(s) pulled by force motors.
 
-    Spatial from the base exit through every waypoint, or, for a chain with ``tendon_lever="constant"``,
-    fixed on its hinges with the straight finger's levers.
+    Spatial from the base exit through every site of the finger's chain (its waypoints, or the printed
+    routing's channel sites), or, for a guided chain with ``tendon_lever="constant"``, fixed on its hinges
+    with the straight finger's levers.
     """
-    fixed = handle.model is FingerModel.CHAIN and options.tendon_lever == "constant"
+    fixed = (
+        handle.model is FingerModel.CHAIN
+        and options.routing == "guided"
+        and options.tendon_lever == "constant"
+    )
     chains = handle.site_chains or [handle.waypoint_sites]
     for j, chain in enumerate(chains):
         suffix = "" if len(chains) == 1 else f"_{j}"
@@ -61,6 +66,10 @@ def _add_tendon(spec: mujoco.MjSpec, handle: FingerHandle, exit_site: str, optio
 
 
 def _add_finger(spec, parent, design, young, model, prefix, tendon_mode, options) -> FingerHandle:
+    if options.routing == "printed" and (model.is_flex or tendon_mode is not TendonMode.NATIVE):
+        raise UnsupportedError(
+            f"the printed routing is the chain's native tendon; not {model.value} with {tendon_mode.value}"
+        )
     if model is FingerModel.CHAIN:
         handle = add_chain_finger(spec, parent, design, young, prefix, options)
     else:

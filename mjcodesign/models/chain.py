@@ -415,10 +415,41 @@ class _ChainBuilder:
         )
 
 
+def _add_channels(builder: _ChainBuilder, bodies: list) -> None:
+    """The printed routing's sites: each segment's channel entry, middle and exit, in the handle's chain.
+
+    ``bodies[i]`` carries block i's proximal half (the finger's parent for block 0, frame at x = 0) and
+    ``bodies[i + 1]`` its middle and distal half (frame at its hinge, the block's middle): the entry rides
+    on the body before the segment's hinge, the middle (just past the hinge, as the channel guides the
+    tendon through the segment) and the exit on the one after it. Between one segment's exit and the
+    next one's entry the tendon crosses its flexure's hinge alone, with nothing on the flexure.
+    """
+    from mjcodesign.models.channels import channel_points
+
+    segments = [b.index for b in builder.blocks if b.kind is BlockKind.SEGMENT]
+    origins = [0.0] + [b.mid for b in builder.blocks]
+    sites = []
+    for i, points in zip(segments, channel_points(builder.design), strict=True):
+        for end, point, k in zip(("in", "mid", "out"), points, (i, i + 1, i + 1), strict=True):
+            site = bodies[k].add_site(
+                name=f"{builder.prefix}ch{i}_{end}",
+                pos=point - [origins[k], 0.0, 0.0],
+                size=[0.0006, 0, 0],
+                rgba=[0.9, 0.6, 0.1, 1],
+                group=3,
+            )
+            sites.append(site.name)
+    builder.handle.site_chains = [sites]
+
+
 def add_chain_finger(
     spec: mujoco.MjSpec, parent, design: FingerDesign, young: np.ndarray, prefix: str, options: SimOptions
 ) -> FingerHandle:
-    """Add a chain finger under ``parent`` (whose frame is the finger frame) and return its handle."""
+    """Add a chain finger under ``parent`` (whose frame is the finger frame) and return its handle.
+
+    With :attr:`SimOptions.routing` ``printed`` the handle's ``site_chains`` hold the channel sites the
+    native tendon runs through; its ``waypoint_sites`` stay the design's waypoints.
+    """
     axes = hinge_axes(design, options.stiffness_model)
     handle = FingerHandle(
         prefix=prefix,
@@ -431,9 +462,13 @@ def add_chain_finger(
     blocks = builder.blocks
     builder.piece(parent, 0, 0.0, builder.hinge_points(0)[0], 0.0, "p")
     body = parent
+    bodies = [parent]
     origin_prev = 0.0
     for i in range(len(blocks)):
         body, origin_prev = builder.link(body, i, origin_prev, axes[i], builder.waypoints[i])
+        bodies.append(body)
+    if options.routing == "printed":
+        _add_channels(builder, bodies)
     builder.gap_stops()
     builder.tip(body)
     return handle

@@ -14,7 +14,7 @@ import numpy as np
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
-from mjcodesign.errors import DesignError, PoseError
+from mjcodesign.errors import DesignError, PoseError, UnsupportedError
 
 __all__ = [
     "CONTYPE_FINGER",
@@ -24,6 +24,9 @@ __all__ = [
     "STIFFNESS_MODELS",
     "PALM_HALF",
     "TENDON_LEVERS",
+    "ROUTINGS",
+    "FLEX_GRASP_REFUSAL",
+    "grasp_model",
     "tendon_exit_site",
     "FingerModel",
     "TendonMode",
@@ -43,6 +46,9 @@ CONTYPE_FINGER = 2
 
 TENDON_LEVERS = ("constant", "path")
 """How the chain's tendon acts on its hinges (:attr:`SimOptions.tendon_lever`)."""
+
+ROUTINGS = ("guided", "printed")
+"""Where the chain's tendon runs (:attr:`SimOptions.routing`)."""
 
 
 def tendon_exit_site(design: FingerDesign) -> np.ndarray:
@@ -86,6 +92,26 @@ class FingerModel(enum.Enum):
     def is_flex(self) -> bool:
         """True for the flex models."""
         return self is not FingerModel.CHAIN
+
+
+FLEX_GRASP_REFUSAL = (
+    "the flex models cannot grasp: their tendon curl is 37-49% short of the FEM's on a 22-block design "
+    "and no flex grasp holds the tests' 50 g box (the native tendon rides on the wrong interpolation "
+    "nodes); grasp with the chain (flex stays for curl, validate beam, crosscheck curl and finger export)"
+)
+"""Why :func:`grasp_model` refuses the flex models (docs/benchmarks.md, flex grasp)."""
+
+
+def grasp_model(model: FingerModel | str) -> FingerModel:
+    """``model`` as a :class:`FingerModel` that may grasp; :class:`UnsupportedError` for the flex models.
+
+    The one rule for every grasp: a job (:class:`mjcodesign.jobs.GraspJob`), and a command's
+    ``--model`` before any work.
+    """
+    model = FingerModel(model)
+    if model.is_flex:
+        raise UnsupportedError(f"{model.value}: {FLEX_GRASP_REFUSAL}")
+    return model
 
 
 class TendonMode(enum.Enum):
@@ -143,7 +169,7 @@ class SimOptions:
     (within 7.0% on 30 random designs to 1.6 rad) and has the stops, which the split chain lacks: its
     grasps fold a flexure's middle link and lose the tests' box (docs/benchmarks.md, large-bend curl)."""
     tendon_lever: str = "constant"
-    """How the chain's native tendon acts on its hinges. ``constant`` (default): a fixed tendon,
+    """How the chain's guided native tendon (:attr:`routing`) acts on its hinges. ``constant`` (default): a fixed tendon,
     ``ℓ = Σ_j (dℓ/dθ_j)₀ θ_j``, every hinge's lever frozen at the straight finger's
     (:attr:`FingerHandle.joint_levers`): the same force on the straight finger as ``path``, and the FEM's
     behaviour at large bends, where each waypoint rides on its block's middle section and its lever stays
@@ -151,6 +177,15 @@ class SimOptions:
     the waypoints; on one hinge per block a waypoint sits on the distal body above its hinge and swings
     back over it, the lever falls (5.41 to 3.35 mm at 0.63 rad) and the curl misses the FEM's by up to 31%
     at 1.1-1.6 rad (the default: 7.0%). The point-force mode and the flex models always act at their waypoints."""
+    routing: str = "guided"
+    """Where the chain's native tendon runs. ``guided`` (default): through a waypoint on every block, the
+    flexures included, acting as :attr:`tendon_lever` says. ``printed``: as in the printed finger, through
+    each segment's channel (sites at its entry, middle and exit at the heights measured on the authors'
+    STL, :mod:`mjcodesign.models.channels`) and straight across each flexure gap in air: a spatial tendon
+    whose lever and geometric stiffness come from its path. A span from a distance a before a flexure's
+    hinge to b after it adds −T·ab/(a+b) to that hinge's stiffness, so a flexure of stiffness k buckles
+    past T = k (a+b)/(ab), 2k/d for a = b = d. The segments' stops are the same. One hinge per block,
+    the chain's native tendon only (:class:`UnsupportedError` for a flex model or the point-force mode)."""
     stiffness_model: str = "fem"
     """How block moduli become finger stiffness: ``fem``, calibrated to the converged Warp FEM
     (:mod:`mjcodesign.design.calibration`; the default finger geometry only), or ``beam``,
@@ -173,6 +208,10 @@ class SimOptions:
             raise DesignError(f"tendon_lever must be one of {TENDON_LEVERS}, got {self.tendon_lever!r}")
         if self.hinges_per_block not in (1, 2) or isinstance(self.hinges_per_block, bool):
             raise DesignError(f"hinges_per_block must be 1 or 2, got {self.hinges_per_block!r}")
+        if self.routing not in ROUTINGS:
+            raise DesignError(f"routing must be one of {ROUTINGS}, got {self.routing!r}")
+        if self.routing == "printed" and self.hinges_per_block != 1:
+            raise DesignError("the printed routing runs on one hinge per block (hinges_per_block=1)")
 
 
 @dataclass

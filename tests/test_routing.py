@@ -1,0 +1,164 @@
+"""The chain's printed tendon routing: channel sites, lever and buckling tension from the tendon's path."""
+
+import argparse
+
+import mujoco
+import numpy as np
+import pytest
+
+from mjcodesign.design.finger import BlockKind, FingerDesign
+from mjcodesign.design.stiffness import Stiffness
+from mjcodesign.errors import DesignError, UnsupportedError
+from mjcodesign.models import TendonMode, build_finger, make_data
+from mjcodesign.models.channels import PRINTED_CHANNELS, channel_points
+from mjcodesign.models.types import FingerModel, SimOptions
+
+_PRINTED = SimOptions(routing="printed", gravity=False)
+_TOL_BUCKLE = 0.15  # buckling tension of the straight finger vs the closed form k (a+b)/(ab) (issue's target)
+_TOL_LEVER = 1e-6  # tendon lever [m/rad] vs the chord's distance from the hinge: finite differences only
+_TOL_HOLE = 0.1e-3  # channel height vs the STL's hole centre [m]: the line fit's residual is 0.08 mm
+_FD = 1e-6  # central-difference step of a hinge angle [rad]
+# ln E of uniform fingers across the printable range; nothing in the routing is fitted to any of them.
+_LOG_E = (13.5, 14.2, 14.9, 15.6, 16.3, 17.0)
+
+
+def _finger(log_e: float, options: SimOptions = _PRINTED):
+    built = build_finger(FingerDesign(), Stiffness([log_e] * 11), FingerModel.CHAIN, options=options)
+    return built, make_data(built)
+
+
+def _forces(built, d, q: np.ndarray, tension: float) -> np.ndarray:
+    """Generalised hinge forces [N m] of the springs and the tendon at angles ``q``, straight velocity 0."""
+    d.qpos[:] = q
+    d.qvel[:] = 0.0
+    d.ctrl[:] = tension
+    mujoco.mj_forward(built.model, d)
+    return d.qfrc_passive + d.qfrc_actuator
+
+
+def _tangent_stiffness(built, d, tension: float) -> np.ndarray:
+    """−∂(spring + tendon force)/∂θ at the straight finger [N m / rad], MuJoCo's own forces differenced."""
+    n = built.model.nv
+    K = np.zeros((n, n))
+    for j in range(n):
+        step = np.zeros(n)
+        step[j] = _FD
+        K[:, j] = -(_forces(built, d, step, tension) - _forces(built, d, -step, tension)) / (2 * _FD)
+    return 0.5 * (K + K.T)
+
+
+def _spans() -> list[tuple[float, float]]:
+    """(a, b) [m]: each flexure hinge's distance to the channel exit before it and the entry after it."""
+    pts = channel_points(FingerDesign())
+    flex = [b for b in FingerDesign().blocks() if b.kind is BlockKind.FLEXURE]
+    return [(f.mid - pts[k, 2, 0], pts[k + 1, 0, 0] - f.mid) for k, f in enumerate(flex)]
+
+
+@pytest.mark.parametrize("log_e", _LOG_E)
+def test_buckling_tension_of_uniform_fingers_matches_the_closed_form(log_e):
+    # A string pulled at tension T straight across a hinge, from a before it to b after it, has
+    # d²ℓ/dθ² = −ab/(a+b): the hinge's stiffness k becomes k − T ab/(a+b), zero at
+    #     T_crit = k (a+b) / (ab)   (= 2k/d for a = b = d).
+    # The straight finger's tangent stiffness K_t(T) = K + T H is MuJoCo's (springs and the spatial
+    # tendon's actuator force differenced), so T_crit is the smallest T with K + T H singular.
+    built, d = _finger(log_e)
+    K0 = _tangent_stiffness(built, d, 0.0)
+    H = _tangent_stiffness(built, d, 1.0) - K0
+    L = np.linalg.cholesky(K0)
+    Li = np.linalg.inv(L)
+    mu, modes = np.linalg.eigh(-Li @ H @ Li.T)
+    t_crit = 1.0 / mu[-1]
+    k = built.model.jnt_stiffness
+    closed = [k[2 * i + 1] * (a + b) / (a * b) for i, (a, b) in enumerate(_spans())]
+    assert t_crit == pytest.approx(min(closed), rel=_TOL_BUCKLE)
+    mode = Li.T @ modes[:, -1]
+    assert np.argmax(np.abs(mode)) == 1 + 2 * int(np.argmin(closed))  # the flexure that buckles first
+
+
+def test_guided_tendon_adds_no_geometric_stiffness():
+    # The default fixed tendon acts with constant levers: its force does not change with the angles,
+    # so no tension can buckle it (the contrast with the printed routing above).
+    built, d = _finger(13.5, SimOptions(gravity=False))
+    K0 = _tangent_stiffness(built, d, 0.0)
+    np.testing.assert_allclose(_tangent_stiffness(built, d, 10.0), K0, rtol=1e-6, atol=1e-9)
+
+
+def test_printed_lever_is_the_chords_distance_from_each_flexure_hinge():
+    # A straight span shortens at dℓ/dθ = −(distance from the hinge axis to the span's line).
+    built, d = _finger(15.0)
+    m = built.model
+    ten = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_TENDON, built.fingers[0].tendons[0])
+
+    def length(q):
+        d.qpos[:] = q
+        mujoco.mj_fwdPosition(m, d)
+        return d.ten_length[ten]
+
+    lever = [(length(e * _FD) - length(-e * _FD)) / (2 * _FD) for e in np.eye(m.nq)]
+    pts = channel_points(FingerDesign())
+    axes = m.jnt_pos[:, 2]  # hinge heights above the back [m]
+    flex = [b for b in FingerDesign().blocks() if b.kind is BlockKind.FLEXURE]
+    for k, f in enumerate(flex):
+        (x0, _, z0), (x1, _, z1) = pts[k, 2], pts[k + 1, 0]
+        z_line = z0 + (z1 - z0) * (f.mid - x0) / (x1 - x0)
+        dist = (z_line - axes[f.index]) * (x1 - x0) / np.hypot(x1 - x0, z1 - z0)
+        assert lever[f.index] == pytest.approx(-dist, abs=_TOL_LEVER)
+
+
+def test_printed_tendon_runs_through_every_channel_and_nothing_else():
+    built, _ = _finger(15.0)
+    m = built.model
+    (chain,) = built.fingers[0].site_chains
+    assert len(chain) == 3 * len(PRINTED_CHANNELS)
+    ten = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_TENDON, built.fingers[0].tendons[0])
+    adr, num = m.tendon_adr[ten], m.tendon_num[ten]
+    names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_SITE, m.wrap_objid[w]) for w in range(adr, adr + num)]
+    assert names == ["A_tendon_exit", *chain]
+    assert not any(n.startswith("A_wp") for n in names)  # no guide on a flexure
+
+
+def test_channels_lie_in_the_printed_fingers_holes(reference_dir):
+    trimesh = pytest.importorskip("trimesh")
+    stl = trimesh.load(reference_dir / "hardware" / "sim_finger.stl")  # mm; x across, y up, z along
+    for entry, _, exit_ in channel_points(FingerDesign()):
+        # 1 mm inside each mouth (the STL's segment ends are rounded) and at the middle
+        for x in (entry[0] + 1e-3, 0.5 * (entry[0] + exit_[0]), exit_[0] - 1e-3):
+            z = entry[2] + (exit_[2] - entry[2]) * (x - entry[0]) / (exit_[0] - entry[0])
+            sec = stl.section(plane_origin=[0, 0, x * 1e3], plane_normal=[0, 0, 1])
+            flat, _ = sec.to_2D(to_2D=np.eye(4))
+            holes = [np.array(h.coords)[:, 1].mean() * 1e-3 for p in flat.polygons_full for h in p.interiors]
+            assert holes, f"no channel at {x * 1e3:.2f} mm"
+            assert min(abs(h - z) for h in holes) < _TOL_HOLE
+
+
+def test_printed_routing_is_refused_where_it_does_not_apply():
+    with pytest.raises(DesignError, match="routing"):
+        SimOptions(routing="straight")
+    with pytest.raises(DesignError, match="one hinge per block"):
+        SimOptions(routing="printed", hinges_per_block=2)
+    with pytest.raises(DesignError, match="6-segment"):
+        options = SimOptions(routing="printed", stiffness_model="beam")
+        build_finger(
+            FingerDesign(n_segments=5), Stiffness([15.0] * 9, n_blocks=9), FingerModel.CHAIN, options=options
+        )
+    with pytest.raises(UnsupportedError, match="printed"):
+        build_finger(FingerDesign(), Stiffness([15.0] * 11), FingerModel.FLEX, options=_PRINTED)
+    with pytest.raises(UnsupportedError, match="printed"):
+        build_finger(
+            FingerDesign(),
+            Stiffness([15.0] * 11),
+            FingerModel.CHAIN,
+            options=_PRINTED,
+            tendon_mode=TendonMode.POINT_FORCE,
+        )
+
+
+def test_routing_flag_gives_the_options():
+    from mjcodesign.cli.common import Parser
+    from mjcodesign.cli.finger_flags import add_routing, routing_options
+
+    p = Parser()
+    add_routing(p)
+    assert routing_options(p.parse_args([])) is None
+    assert routing_options(p.parse_args(["--routing", "printed"])) == SimOptions(routing="printed")
+    assert routing_options(argparse.Namespace()) is None
