@@ -11,6 +11,7 @@ from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError, UnsupportedError
 from mjcodesign.models import TendonMode, build_finger, make_data
 from mjcodesign.models.channels import PRINTED_CHANNELS, channel_points
+from mjcodesign.models.stability import buckling_tension, tangent_stiffness
 from mjcodesign.models.types import FingerModel, SimOptions
 
 _PRINTED = SimOptions(routing="printed", gravity=False)
@@ -27,26 +28,6 @@ def _finger(log_e: float, options: SimOptions = _PRINTED):
     return built, make_data(built)
 
 
-def _forces(built, d, q: np.ndarray, tension: float) -> np.ndarray:
-    """Generalised hinge forces [N m] of the springs and the tendon at angles ``q``, straight velocity 0."""
-    d.qpos[:] = q
-    d.qvel[:] = 0.0
-    d.ctrl[:] = tension
-    mujoco.mj_forward(built.model, d)
-    return d.qfrc_passive + d.qfrc_actuator
-
-
-def _tangent_stiffness(built, d, tension: float) -> np.ndarray:
-    """−∂(spring + tendon force)/∂θ at the straight finger [N m / rad], MuJoCo's own forces differenced."""
-    n = built.model.nv
-    K = np.zeros((n, n))
-    for j in range(n):
-        step = np.zeros(n)
-        step[j] = _FD
-        K[:, j] = -(_forces(built, d, step, tension) - _forces(built, d, -step, tension)) / (2 * _FD)
-    return 0.5 * (K + K.T)
-
-
 def _spans() -> list[tuple[float, float]]:
     """(a, b) [m]: each flexure hinge's distance to the channel exit before it and the entry after it."""
     pts = channel_points(FingerDesign())
@@ -60,27 +41,23 @@ def test_buckling_tension_of_uniform_fingers_matches_the_closed_form(log_e):
     # d²ℓ/dθ² = −ab/(a+b): the hinge's stiffness k becomes k − T ab/(a+b), zero at
     #     T_crit = k (a+b) / (ab)   (= 2k/d for a = b = d).
     # The straight finger's tangent stiffness K_t(T) = K + T H is MuJoCo's (springs and the spatial
-    # tendon's actuator force differenced), so T_crit is the smallest T with K + T H singular.
-    built, d = _finger(log_e)
-    K0 = _tangent_stiffness(built, d, 0.0)
-    H = _tangent_stiffness(built, d, 1.0) - K0
-    L = np.linalg.cholesky(K0)
-    Li = np.linalg.inv(L)
-    mu, modes = np.linalg.eigh(-Li @ H @ Li.T)
-    t_crit = 1.0 / mu[-1]
+    # tendon's actuator force differenced: models.stability), so T_crit is the smallest T with K + T H
+    # singular.
+    built, _ = _finger(log_e)
+    t_crit, mode = buckling_tension(built)
     k = built.model.jnt_stiffness
     closed = [k[2 * i + 1] * (a + b) / (a * b) for i, (a, b) in enumerate(_spans())]
     assert t_crit == pytest.approx(min(closed), rel=_TOL_BUCKLE)
-    mode = Li.T @ modes[:, -1]
     assert np.argmax(np.abs(mode)) == 1 + 2 * int(np.argmin(closed))  # the flexure that buckles first
 
 
 def test_guided_tendon_adds_no_geometric_stiffness():
     # The default fixed tendon acts with constant levers: its force does not change with the angles,
     # so no tension can buckle it (the contrast with the printed routing above).
-    built, d = _finger(13.5, SimOptions(gravity=False))
-    K0 = _tangent_stiffness(built, d, 0.0)
-    np.testing.assert_allclose(_tangent_stiffness(built, d, 10.0), K0, rtol=1e-6, atol=1e-9)
+    built, _ = _finger(13.5, SimOptions(gravity=False))
+    K0 = tangent_stiffness(built, 0.0)
+    np.testing.assert_allclose(tangent_stiffness(built, 10.0), K0, rtol=1e-6, atol=1e-9)
+    assert buckling_tension(built)[0] == np.inf
 
 
 def test_printed_lever_is_the_chords_distance_from_each_flexure_hinge():
