@@ -97,6 +97,9 @@ FAMILIES: dict[str, list[Case]] = {
         grasp --object tent.stl                                 | sheet --allow-open | tent.stl
         grasp --object box.stl --pose far.json                  | reach | box.stl far.json
         grasp --object box.stl --pose ball.npz                  | 'ball' 'box' | box.stl ball.npz
+        # Output paths are checked before any work: a folder, a symbolic link written through.
+        grasp --object box.stl --rrd out/                       | folder | box.stl out/
+        grasp --object box.stl --rrd link.rrd                   | symbolic | box.stl link.rrd
     """),
     "view": _cases("""
         view {long}                                             | too long
@@ -117,6 +120,9 @@ FAMILIES: dict[str, list[Case]] = {
         bench grasp --rollouts -2                               | --rollouts
         bench grasp --rollouts 0                                | --rollouts
         bench viz --repeats 0                                   | --repeats
+        bench fem --steps 0                                     | --steps
+        bench fem --gripper-dt nan                              | --gripper-dt
+        bench fem --out out/                                    | folder | out/
         bench poses --objects no_such_object_1,no_such_object_2 | no_such_object_1
     """),
     "crosscheck": _cases("""
@@ -125,6 +131,10 @@ FAMILIES: dict[str, list[Case]] = {
         crosscheck --scenario grasp --authors-case --models chain --tensions 2 | authors
         crosscheck --scenario curl --models chain --fem-tendon-law paper  | --fem-tendon-law
         crosscheck --scenario grasp --models chain --fem-tendon-law taut  | --fem-tendon-law
+        crosscheck --scenario curl --models chain,chain                   | twice
+        crosscheck --scenario curl --models chain --design random:0..100000000 | 1000
+        crosscheck --scenario curl --models chain --design 14,,15         | empty field
+        crosscheck --scenario grasp --short --models chain --out out/     | folder | out/
     """),
     "files": _cases("""
         validate beam --force 1e12                              | acceleration
@@ -181,6 +191,9 @@ def make(name, cwd):
         import trimesh
         v = np.array([[0, 0, 0], [0.05, 0, 0], [0.05, 0.05, 0.02], [0, 0.05, 0]], float)
         trimesh.Trimesh(v, [[0, 1, 2], [0, 2, 3]], process=False).export(path)
+    elif base == "link.rrd":  # a symbolic link to a file of the user's
+        (path.parent / "precious.txt").write_text("mine")
+        path.symlink_to("precious.txt")
     elif base == "far.json":  # a palm 1,000 km from the object
         T = np.eye(4)
         T[:3, 3] = (1e6, 0.0, 0.2)

@@ -29,6 +29,11 @@ __all__ = [
     "int_at_least",
     "finite_float",
     "short",
+    "one_line",
+    "output_file",
+    "output_dir",
+    "check_output_link",
+    "choice_list",
 ]
 
 _NO_DRIVER = b"Could not find or load the NVIDIA CUDA driver"  # expected on CPU-only machines
@@ -73,6 +78,11 @@ def add_mass_mode(p: argparse.ArgumentParser, where: str) -> None:
 
 def path_text(text: str) -> str:
     """The argparse type of a path argument: not empty, and a name the file system can look up.
+
+def one_line(text: str) -> str:
+    r"""``text`` with its control characters escaped (a newline in a path reads ``\n``): one line."""
+    return "".join(c if c.isprintable() or c == " " else c.encode("unicode_escape").decode() for c in text)
+
 
     An empty path would mean the current directory (``Path("")`` is ``.``); a name past ``NAME_MAX`` or
     ``PATH_MAX`` would fail later with ``ENAMETOOLONG`` wherever it is first used. A path that does not
@@ -124,6 +134,72 @@ def finite_float(low: float, *, strict: bool = False) -> Callable[[str], float]:
 
     def parse(text: str) -> float:
         try:
+def output_file(text: str) -> str:
+    """The argparse type of an output file, checked before any work.
+
+    :func:`path_text`, and then: not a folder, in a folder that exists and can be written, and
+    writable if it exists already.
+    """
+    text = path_text(text)
+    path = Path(text)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{short(one_line(text))} is a folder, not a file")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise argparse.ArgumentTypeError(f"no folder {short(one_line(str(parent)))} to write {path.name} in")
+    if not os.access(parent, os.W_OK | os.X_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise argparse.ArgumentTypeError(f"{short(one_line(text))} cannot be written (permission denied)")
+    return text
+
+
+def output_dir(text: str) -> str:
+    """The argparse type of an output folder written as the command goes (event logs), checked first.
+
+    :func:`path_text`, not a file, and writable (or creatable in a writable folder).
+    """
+    text = path_text(text)
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{short(one_line(text))} is a file, not a folder")
+    existing = next((p for p in (path, *path.parents) if p.exists()), Path("."))
+    if not existing.is_dir() or not os.access(existing, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(
+            f"{short(one_line(str(existing)))} cannot be written (permission denied)"
+        )
+    return text
+
+
+def check_output_link(text: str, flag: str, *, overwrite: bool | None = None) -> None:
+    """Raise :class:`~mjcodesign.errors.OutputError` if output file ``text`` is a symbolic link.
+
+    Writing through it would replace whatever file it points at. ``overwrite``: the command's
+    ``--overwrite`` (True lets it write through), or None for a command without one.
+    """
+    from mjcodesign.errors import OutputError
+
+    if Path(text).is_symlink() and not overwrite:
+        target = os.readlink(text)
+        hint = "; --overwrite writes through it" if overwrite is not None else "; name the file itself"
+        raise OutputError(
+            f"{flag} {short(one_line(text))} is a symbolic link to {short(one_line(target))}: refused{hint}"
+        )
+
+
+def choice_list(choices: tuple[str, ...], what: str) -> Callable[[str], list[str]]:
+    """The argparse type of a comma-separated list drawn from ``choices``, each at most once."""
+
+    def parse(text: str) -> list[str]:
+        items = [v.strip() for v in text.split(",")]
+        unknown = [v for v in items if v not in choices]
+        if unknown:
+            raise argparse.ArgumentTypeError(f"unknown {what}(s) {unknown}: choose from {', '.join(choices)}")
+        if len(set(items)) != len(items):
+            raise argparse.ArgumentTypeError(f"a {what} is listed twice: {short(text)}")
+        return items
+
+    return parse
+
+
             value = float(text)
         except ValueError:
             value = math.nan

@@ -12,7 +12,14 @@ from __future__ import annotations
 import json
 import sys
 
-from mjcodesign.cli.common import emit, finite_float, finite_floats
+from mjcodesign.cli.common import (
+    choice_list,
+    emit,
+    finite_float,
+    finite_floats,
+    int_at_least,
+    output_file,
+)
 from mjcodesign.cli.viz import add_recording_flags, open_recorder
 from mjcodesign.crosscheck import (
     GRASP_CASES,
@@ -64,7 +71,7 @@ def _cmd_grasp(args) -> int:
         fem_mesh = _grasp_mesh(args)
         dyn = _fem_dynamics(args)
         rows = authors_case(
-            args.models.split(","),
+            args.models,
             row=args.authors_row,
             fem_options=fem_mesh,
             fem_dynamics=dyn,
@@ -94,7 +101,7 @@ def _cmd_grasp(args) -> int:
     done: list[dict] = []
 
     def follow(rec: dict) -> None:
-        models = [m for m in args.models.split(",") if m in rec]
+        models = [m for m in args.models if m in rec]
         parts = [f"{m} {'ok' if rec[m]['success'] else rec[m]['reason']}" for m in models] or [
             rec["bad_pose"]
         ]
@@ -104,9 +111,7 @@ def _cmd_grasp(args) -> int:
             Path(args.out).write_text(json.dumps({"partial": True, "cases": _plain(done)}))
 
     t0 = time.perf_counter()
-    records, summary = grasp_study(
-        models=args.models.split(","), cache_dir=user_cache_dir(), on_case=follow, **settings
-    )
+    records, summary = grasp_study(models=args.models, cache_dir=user_cache_dir(), on_case=follow, **settings)
     report = {"wall_time_s": time.perf_counter() - t0, "summary": summary, "cases": _plain(records)}
     if args.out:
         Path(args.out).write_text(json.dumps(report))
@@ -145,7 +150,32 @@ def _chain_options(args):
     return SimOptions(hinges_per_block=args.hinges_per_block, tendon_lever=args.tendon_lever)
 
 
+_MAX_SWEEP = 1000
+"""Designs in one ``random:A..B`` sweep: each runs every model (seconds to minutes with the FEM), so a
+thousand is already hours; a longer sweep is several runs."""
+
+
+def _check_designs(text: str) -> None:
+    """Parse ``--design`` (one design or a sweep) before any work: :class:`DesignError` if it is bad."""
+    import re
+
+    from mjcodesign.design.stiffness import Stiffness
+    from mjcodesign.errors import DesignError
+
+    span = re.fullmatch(r"\s*random:(\d+)\.\.(\d+)\s*", text)
+    if span is not None:
+        count = int(span.group(2)) - int(span.group(1)) + 1
+        if count > _MAX_SWEEP:
+            raise DesignError(f"--design {text}: a sweep of {count} designs; at most {_MAX_SWEEP} per run")
+        names = parse_sweep(text)
+    else:
+        names = [text]
+    for name in names:
+        Stiffness.parse(name)
+
+
 def _cmd_crosscheck(args) -> int:
+    _check_designs(args.design)
     for flag, value, default in (
         ("--hinges-per-block", args.hinges_per_block, 1),
         ("--tendon-lever", args.tendon_lever, "constant"),
@@ -173,7 +203,7 @@ def _cmd_crosscheck(args) -> int:
     try:
         rows, curves = crosscheck(
             args.scenario,
-            args.models.split(","),
+            args.models,
             args.design,
             fem_options=_fem_options(args),
             tensions=tensions,
@@ -187,7 +217,7 @@ def _cmd_crosscheck(args) -> int:
     if args.plot:
         plot_curves(curves, args.plot)
     emit(rows, args.json)
-    reference = "the FEM" if "fem" in args.models.split(",") else "its reference (no FEM run)"
+    reference = "the FEM" if "fem" in args.models else "its reference (no FEM run)"
     for r in rows:
         if r["model"] != "fem" and r["rel_diff"] is not None and r["rel_diff"] > TOL_CROSS:
             _note(
@@ -268,7 +298,12 @@ def add_parser(subparsers) -> None:
     """Register ``crosscheck`` on the top-level sub-parsers."""
     p = subparsers.add_parser("crosscheck", help="run one case in every backend (MuJoCo models, Warp FEM)")
     p.add_argument("--scenario", choices=(*SCENARIOS, "grasp"), required=True)
-    p.add_argument("--models", default="chain,flex,fem", help=f"comma-separated, from {MODELS}")
+    p.add_argument(
+        "--models",
+        type=choice_list(MODELS, "model"),
+        default=["chain", "flex", "fem"],
+        help=f"comma-separated, from {', '.join(MODELS)}; default chain,flex,fem",
+    )
     p.add_argument(
         "--design",
         default="paper-optimized",
@@ -290,7 +325,9 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--short", action="store_true", help="grasp: the CI version (two cases, short horizon, coarse mesh)"
     )
-    p.add_argument("--out", default=None, help="grasp: also write the JSON report to this file")
+    p.add_argument(
+        "--out", type=output_file, default=None, help="grasp: also write the JSON report to this file"
+    )
     p.add_argument(
         "--fem-h-flexure", type=float, default=None, help="grasp: FEM cell size in flexures and cuts [m]"
     )
@@ -361,8 +398,13 @@ def add_bench_parser(bench_subparsers) -> None:
         "fem", help="Warp FEM steps/s on the CPU and static solve + gradient time"
     )
     _fem_flags(p, h=3e-3, layers=4, order=1)
-    p.add_argument("--steps", type=int, default=2000, help="explicit substeps to time")
-    p.add_argument("--grasp-horizon", type=float, default=0.2, help="dynamic grasp to time [s]")
+    p.add_argument("--steps", type=int_at_least(1), default=2000, help="explicit substeps to time")
+    p.add_argument(
+        "--grasp-horizon",
+        type=finite_float(0.0, strict=True),
+        default=0.2,
+        help="dynamic grasp to time [s]",
+    )
     p.add_argument(
         "--gripper",
         choices=("none", "coarse", "default", "fine", "corrected"),
@@ -372,8 +414,11 @@ def add_bench_parser(bench_subparsers) -> None:
     p.add_argument("--no-gradient", action="store_true", help="time the two-finger grasp forward only")
     p.add_argument("--gripper-only", action="store_true", help="time only the two-finger grasp")
     p.add_argument(
-        "--gripper-dt", type=float, default=None, help="two-finger grasp substep [s] (default 2.5e-6)"
+        "--gripper-dt",
+        type=finite_float(0.0, strict=True),
+        default=None,
+        help="two-finger grasp substep [s] (default 2.5e-6)",
     )
-    p.add_argument("--out", default=None, help="also write the JSON to this file")
+    p.add_argument("--out", type=output_file, default=None, help="also write the JSON to this file")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_bench_fem)

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
 import importlib.util
 import json
+import os
 import shlex
 import sys
 import warnings
@@ -16,6 +18,7 @@ from mjcodesign.cli.common import (
     emit,
     finite_float,
     int_at_least,
+    one_line,
     parse_design,
     path_text,
     quiet_warp,
@@ -237,6 +240,7 @@ def main(argv: list[str] | None = None) -> int:
     """
     parser = build_parser()
     args = parser.parse_args(argv)
+    _check_mujoco_gl(sys.argv[1:] if argv is None else argv)
     # The command line as run, for the records the command writes (the library never reads argv).
     args.command_line = shlex.join(["mjcodesign", *(sys.argv[1:] if argv is None else argv)])
     if _reaches_warp(args) and importlib.util.find_spec("warp") is not None:
@@ -251,7 +255,16 @@ def main(argv: list[str] | None = None) -> int:
         with warnings.catch_warnings(record=True) as held, mujoco:
             code = int(args.func(args) or 0)
     except MjcodesignError as exc:
-        sys.stderr.write(f"error: {exc}\n")
+        sys.stderr.write(f"error: {one_line(str(exc))}\n")
+        return 2
+    except OSError as exc:
+        if exc.errno not in _WRITE_ERRNOS:
+            _show_warnings(held, mujoco_texts)
+            raise
+        _drop_stdout()
+        where = f": {one_line(str(exc.filename))}" if exc.filename else " (standard output)"
+        sys.stderr.write(f"error: cannot write{where}: {exc.strerror}\n")
+            sys.stdout.flush()  # a full or closed stdout fails here, as a write error, not at exit
         return 2
     except KeyboardInterrupt:
         _show_warnings(held, mujoco_texts)
@@ -266,6 +279,42 @@ def main(argv: list[str] | None = None) -> int:
 
 def _show_warnings(held: list[warnings.WarningMessage], mujoco_texts: list[str]) -> None:
     """Show the held Python warnings as Python would have, then MuJoCo's distinct warning texts."""
+# The environment's write failures (a full disk or quota, a read-only file system, a closed pipe): one
+# line, not a traceback. Any other OSError escaping a command is a bug.
+_WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG, errno.EPIPE})
+# Commands that render with MuJoCo's OpenGL (the design report's images); the rest never do.
+_RENDERING_COMMANDS = frozenset({"design"})
+
+
+def _drop_stdout() -> None:
+    """Point stdout at /dev/null, so that the interpreter's last flush does not fail again."""
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, sys.stdout.fileno())
+    os.close(null)
+
+
+def _check_mujoco_gl(argv: list[str]) -> None:
+    """Make a ``MUJOCO_GL`` that MuJoCo refuses at import harmless, or refuse it.
+
+    MuJoCo raises at ``import mujoco`` for a value it does not know, and building the parser imports
+    it. A command that renders nothing does not use the value, so it is turned off for this process
+    (``disable``); a command that renders exits 2 with one line.
+    """
+    gl = os.environ.get("MUJOCO_GL")
+    if gl is None or "mujoco" in sys.modules:
+        return
+    try:
+        import mujoco  # noqa: F401
+    except RuntimeError as exc:
+        if "MUJOCO_GL" not in str(exc):
+            raise
+        command = next((a for a in argv if not a.startswith("-")), None)
+        if command in _RENDERING_COMMANDS:
+            sys.stderr.write(f"error: {one_line(str(exc))} (egl or osmesa render without a display)\n")
+            raise SystemExit(2) from None
+        os.environ["MUJOCO_GL"] = "disable"  # this command renders nothing
+
+
     for w in held:
         warnings.showwarning(w.message, w.category, w.filename, w.lineno, w.file, w.line)
     for text in list(dict.fromkeys(mujoco_texts))[:_MUJOCO_WARNINGS_SHOWN]:

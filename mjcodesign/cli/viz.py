@@ -17,7 +17,16 @@ import tempfile
 import time
 from pathlib import Path
 
-from mjcodesign.cli.common import emit, int_at_least, path_text, port_number, short, user_cache_dir
+from mjcodesign.cli.common import (
+    check_output_link,
+    emit,
+    int_at_least,
+    output_file,
+    path_text,
+    port_number,
+    short,
+    user_cache_dir,
+)
 
 __all__ = [
     "add_parser",
@@ -40,7 +49,7 @@ def add_recording_flags(p: argparse.ArgumentParser, *, decimation: bool = True) 
     ``--rrd FILE`` writes an offline recording (no viewer); ``--spawn`` streams to a desktop viewer.
     """
     p.add_argument(
-        "--rrd", type=path_text, default=None, help="write a Rerun recording to this .rrd file (no viewer)"
+        "--rrd", type=output_file, default=None, help="write a Rerun recording to this .rrd file (no viewer)"
     )
     p.add_argument("--spawn", action="store_true", help="also stream to a desktop Rerun viewer")
     p.add_argument(
@@ -63,11 +72,14 @@ def open_recorder(args: argparse.Namespace):
 
     ``--spawn`` streams to the viewer already listening on 127.0.0.1 at ``--viewer-port``, or starts a
     desktop viewer there, bound to 127.0.0.1 (Rerun's own spawn binds 0.0.0.0), before the recorder
-    looks for one. Raises :class:`ObserverError` when there is no display to show a new viewer on.
+    looks for one. Raises :class:`ObserverError` when there is no display to show a new viewer on, and
+    :class:`OutputError` for an ``--rrd`` that is a symbolic link (unless the command's ``--overwrite``).
     """
     spawn = getattr(args, "spawn", False)
     if not args.rrd and not spawn:
         return None
+    if args.rrd:
+        check_output_link(args.rrd, "--rrd", overwrite=getattr(args, "overwrite", None))
     from mjcodesign.sim import load_observer
 
     port = getattr(args, "viewer_port", DEFAULT_VIEWER_PORT)

@@ -144,7 +144,10 @@ def _read_file(path: Path):
     if path.suffix.lower() == ".stl":
         _check_stl(path)
     try:
-        return trimesh.load(path, force="mesh", process=False)
+        # From an open file, not its name: trimesh encodes a name as UTF-8, which a name that is not
+        # UTF-8 (held by Python as surrogate escapes) cannot be.
+        with open(path, "rb") as f:
+            return trimesh.load(f, file_type=path.suffix.lower()[1:], force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types on malformed files
         raise MeshError(f"{path}: cannot read mesh ({type(exc).__name__}: {exc})") from exc
 

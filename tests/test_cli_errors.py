@@ -1,0 +1,63 @@
+"""The command line's error handler: one line whatever the name, the environment or the output stream."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+_TIMEOUT_S = 120
+
+
+def _run(args, cwd, *, env=None, stdout=subprocess.PIPE):
+    paths = [str(ROOT), os.environ.get("PYTHONPATH", "")]
+    full = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in paths if p), **(env or {})}
+    cmd = [sys.executable, "-m", "mjcodesign.cli", *args]
+    return subprocess.run(cmd, cwd=cwd, env=full, stdout=stdout, stderr=subprocess.PIPE, timeout=_TIMEOUT_S)
+
+
+def _one_error_line(r) -> str:
+    err = r.stderr.decode(errors="replace")
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert r.returncode == 2, err[-1500:]
+    assert "Traceback" not in err and len(lines) == 1, err[-1500:]
+    assert lines[0].startswith("error: "), lines[0]
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def box(tmp_path_factory):
+    import trimesh
+
+    path = tmp_path_factory.mktemp("errors") / "box.stl"
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(path)
+    return path
+
+
+def test_a_newline_in_a_path_stays_on_the_error_line(tmp_path):
+    line = _one_error_line(_run(["grasp", "--object", "a\nb\tc.stl"], tmp_path))
+    assert "a\\nb\\tc.stl" in line
+
+
+def test_a_full_stdout_is_one_error_line(box, tmp_path):
+    with open("/dev/full", "wb") as full:
+        r = _run(["grasp", "--object", str(box), "--json"], tmp_path, stdout=full)
+    assert "no space left" in _one_error_line(r).lower()
+
+
+def test_an_unknown_mujoco_gl_does_not_stop_a_command_that_renders_nothing(box, tmp_path):
+    r = _run(["grasp", "--object", str(box), "--json"], tmp_path, env={"MUJOCO_GL": "bogus"})
+    assert r.returncode == 0, r.stderr.decode()[-1500:]
+    assert b'"success"' in r.stdout
+
+
+def test_a_file_name_that_is_not_utf8_is_read(box, tmp_path):
+    name = os.fsdecode(b"\xff\xfebox.stl")  # not UTF-8: held as surrogate escapes
+    (tmp_path / name).write_bytes(box.read_bytes())
+    r = _run(["grasp", "--object", name, "--json"], tmp_path, env={"LC_ALL": "C"})
+    assert r.returncode == 0, r.stderr.decode(errors="replace")[-1500:]
+    (tmp_path / "bôx.stl").write_bytes(box.read_bytes())
+    r = _run(["grasp", "--object", "bôx.stl", "--json"], tmp_path, env={"LC_ALL": "C"})
+    assert r.returncode == 0, r.stderr.decode(errors="replace")[-1500:]
