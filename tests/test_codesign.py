@@ -327,3 +327,61 @@ def test_ground_truth_runs_under_the_dataset_s_scenario(tmp_path):
         )
         (out,) = run_jobs([job], MujocoBackend(nthread=1))
         assert (row["simulated_success"], row["reason"]) == (bool(out.success), out.reason)
+
+
+@pytest.fixture(scope="module")
+def own_mesh(tmp_path_factory):
+    """A generated mesh and its candidate file, which names the object by its stem (as `poses --out` does)."""
+    import trimesh
+
+    from mjcodesign.objects import load_object
+    from mjcodesign.poses import Candidates
+    from mjcodesign.scenarios.grasp import auto_pose
+    from mjcodesign.surrogate.grasp import pose_matrix
+
+    d = tmp_path_factory.mktemp("own_mesh")
+    (d / "meshes").mkdir()
+    mesh = d / "meshes" / "mine.stl"
+    trimesh.creation.box(extents=(0.045, 0.04, 0.055)).export(mesh)
+    gp = auto_pose(load_object(str(mesh), 300.0))
+    Candidates(
+        np.stack([pose_matrix(gp)] * 2), np.array([gp.openings] * 2), np.ones(2), np.zeros(2), np.zeros(2)
+    ).save(d / "mine.npz", "mine")
+    return d
+
+
+def test_objects_take_mesh_files_and_folders(own_mesh):
+    from mjcodesign.cli.optimize import _objects
+    from mjcodesign.data import resolve_objects
+    from mjcodesign.errors import MeshError
+
+    mesh = own_mesh / "meshes" / "mine.stl"
+    for text in (str(mesh), str(own_mesh / "meshes")):
+        names, meshes = _objects(text, resolve_objects)
+        assert names == ("mine",) and meshes == {"mine": str(mesh.resolve())}
+    assert _objects("box", resolve_objects) == (("box",), {})
+    with pytest.raises(MeshError, match="not found"):
+        _objects(str(own_mesh / "nothing.stl"), resolve_objects)
+
+
+def test_optimize_re_simulates_a_generated_mesh(own_mesh, tiny_checkpoint, tmp_path):
+    """The candidates name the object "mine" (no such YCB object): the re-simulation loads --objects' mesh."""
+    args = ["--ckpt", str(tiny_checkpoint), "--objects", str(own_mesh / "meshes" / "mine.stl"),
+            "--poses", str(own_mesh / "mine.npz"), "--density", "300", "--max-iterations", "20",
+            "--out", str(tmp_path / "out"), "--json"]  # fmt: skip
+    r = _run(*args, tmp_path=tmp_path)
+    assert r.returncode == 0, r.stderr[-3000:]
+    truth = json.loads(r.stdout.splitlines()[-1])["ground_truth"]
+    assert {(row["object"], row["design"]) for row in truth["rows"]} == {
+        ("mine", "optimised"),
+        ("mine", "soft"),
+        ("mine", "semi-rigid"),
+    }
+    assert all(row["reason"] for row in truth["rows"]) and truth["rollouts"] == 3
+    # Without the mesh the candidates' name alone cannot be loaded: one line says to give the file.
+    args[3] = "mine"
+    r = _run(*args[:-3], "--out", str(tmp_path / "out2"), "--json", tmp_path=tmp_path)
+    assert (
+        r.returncode == 2 and "give its mesh file in --objects" in r.stderr and r.stderr.count("\n") == 1
+    ), r.stderr
+    assert not (tmp_path / "out2").exists()

@@ -27,7 +27,10 @@ def add_parser(subparsers) -> None:
         "--ckpt", type=path_text, required=True, help="surrogate checkpoint folder (`train --out`)"
     )
     p.add_argument(
-        "--objects", required=True, help="a named set (ycb-in-domain, …) or comma-separated object names"
+        "--objects",
+        required=True,
+        help="a named set (ycb-in-domain, …), or comma-separated object names, mesh files (STL/OBJ/PLY) "
+        "and folders of meshes; a file's mesh is what its poses and the re-simulation load",
     )
     p.add_argument(
         "--poses",
@@ -76,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     from mjcodesign.objects import parse_density
 
     density = parse_density(args.density)
-    objects = _objects(args.objects, resolve_objects)
+    objects, meshes = _objects(args.objects, resolve_objects)
     if args.threads:
         import torch
 
@@ -111,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             ground_truth=not args.no_ground_truth,
             cache_dir=user_cache_dir(),
+            sources=meshes,
             on_step=on_step,
             progress=say,
         )
@@ -126,19 +130,32 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _objects(text: str, resolve) -> tuple[str, ...]:
-    """``--objects``: a named set through ``resolve_objects``, else names as given (not files here)."""
+def _objects(text: str, resolve) -> tuple[tuple[str, ...], dict[str, str]]:
+    """``--objects``: names, mesh files and folders of meshes, or a named set; (names, mesh of a name).
+
+    A named set or a folder goes through ``resolve_objects``; a mesh file must exist; any other entry
+    is a name the poses hold. The mesh of a file entry is what its poses and re-simulation load.
+    """
+    from mjcodesign.codesign import object_key
     from mjcodesign.errors import MeshError
-    from mjcodesign.objects import OBJECT_SETS
+    from mjcodesign.objects import MESH_SUFFIXES, OBJECT_SETS
 
     if text.strip() in OBJECT_SETS:
-        return tuple(resolve(text))
-    names = tuple(n.strip() for n in text.split(",") if n.strip())
-    if not names:
+        return tuple(resolve(text)), {}
+    items = [n.strip() for n in text.split(",") if n.strip()]
+    if not items:
         raise MeshError("--objects is empty")
+    entries: list[str] = []
+    for item in items:
+        if Path(item).is_dir() or Path(item).suffix.lower() in MESH_SUFFIXES:
+            entries += [str(Path(f).resolve()) for f in resolve(item)]  # refuses a missing file
+        else:
+            entries.append(item)
+    names = tuple(object_key(e) for e in entries)
     if len(set(names)) != len(names):
         raise MeshError(f"--objects lists an object twice: {text}")
-    return names
+    meshes = {object_key(e): e for e in entries if Path(e).suffix.lower() in MESH_SUFFIXES}
+    return names, meshes
 
 
 def _log_rerun(path: Path, result) -> None:

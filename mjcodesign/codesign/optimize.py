@@ -223,8 +223,10 @@ def optimize(
     loss=None,
     on_step: Callable[[Step], None] | None = None,
 ) -> OptimizeResult:
-    """Algorithm 1 over the candidate ``poses`` of their objects at ``density`` [kg/m³] (one for all, or
-    one per object name: :func:`~mjcodesign.codesign.problem.row_densities`).
+    """Algorithm 1 over the candidate ``poses`` of their objects at ``density`` [kg/m³].
+
+    ``density``: one for all objects, or one per object name
+    (:func:`~mjcodesign.codesign.problem.row_densities`).
 
     ``surrogate``: a :class:`~mjcodesign.surrogate.Surrogate` (or anything with its ``prepare`` and
     ``loss_and_grad``); ``loss``: a :class:`~mjcodesign.surrogate.DesignLoss` (default: the paper's).

@@ -21,7 +21,7 @@ import numpy as np
 
 from mjcodesign.data import CLOUD_POINTS, PoseRows, open_dataset, partial_cloud, read_poses
 from mjcodesign.data.cloud import to_gripper
-from mjcodesign.errors import DesignError, PoseError
+from mjcodesign.errors import DesignError, MeshError, PoseError
 from mjcodesign.objects import load_object, published_mass
 from mjcodesign.poses import read_candidates, scene_offset
 
@@ -44,6 +44,15 @@ class PoseSet(PoseRows):
     """Where the poses came from."""
     dataset_rollouts: int | None = None
     """Rollouts the source dataset ran (samples and rejected), None for candidate files."""
+    sources: tuple[str, ...] = ()
+    """What loads each object, shape (K,): a YCB name, ``egad-like:N`` or a mesh file's path (the
+    command's or the dataset's); empty: every object loads by its name."""
+
+    def source_of(self, name: str) -> str:
+        """What loads object ``name``: its recorded source, else the name itself."""
+        if self.sources:
+            return self.sources[self.objects.index(name)]
+        return name
 
     def select(self, names, per_object: int) -> PoseSet:
         """The first ``per_object`` poses of each of ``names`` (in that order).
@@ -65,6 +74,7 @@ class PoseSet(PoseRows):
         return dataclasses.replace(
             self,
             objects=tuple(keys),
+            sources=tuple(self.source_of(n) for n in keys),
             object_of=object_of,
             clouds=self.clouds[take],
             com=self.com[take],
@@ -107,14 +117,27 @@ def real_densities(poses: PoseRows) -> dict[str, float]:
     return out
 
 
-def load_pose_set(source: str | Path, *, seed: int = 0, cache_dir: str | Path | None = None) -> PoseSet:
+def load_pose_set(
+    source: str | Path,
+    *,
+    seed: int = 0,
+    cache_dir: str | Path | None = None,
+    sources: dict[str, str] | None = None,
+) -> PoseSet:
     """Poses of a dataset folder, a candidate file (``.npz``) or a folder of candidate files.
 
-    ``seed`` draws a candidate's cloud points. Raises :class:`PoseError` or :class:`OutputError`.
+    ``seed`` draws a candidate's cloud points. ``sources`` maps an object's name (:func:`object_key`)
+    to what loads it (a mesh file the command was given); it replaces the source the poses recorded (a
+    dataset's object list, a candidate file's object name). Raises :class:`PoseError` or
+    :class:`OutputError`.
     """
     path = Path(source)
+    given = dict(sources or {})
     if path.is_dir() and (path / "manifest.json").is_file():
-        return _from_dataset(path)
+        ds = _from_dataset(path)
+        return dataclasses.replace(
+            ds, sources=tuple(given.get(n, s) for n, s in zip(ds.objects, ds.sources, strict=True))
+        )
     if path.is_dir():
         files = sorted(path.glob("*.npz"))
         if not files:
@@ -123,7 +146,7 @@ def load_pose_set(source: str | Path, *, seed: int = 0, cache_dir: str | Path | 
         files = [path]
     else:
         raise PoseError(f"{path}: not a candidate .npz, a folder of them or a dataset folder")
-    parts = [_from_candidates(f, seed=seed, cache_dir=cache_dir) for f in files]
+    parts = [_from_candidates(f, seed=seed, cache_dir=cache_dir, sources=given) for f in files]
     names = [p.objects[0] for p in parts]
     if len(set(names)) != len(names):
         raise PoseError(f"{path}: two candidate files for one object")
@@ -132,7 +155,8 @@ def load_pose_set(source: str | Path, *, seed: int = 0, cache_dir: str | Path | 
         for k in ("clouds", "com", "palms", "openings", "volume")
     }
     object_of = np.repeat(np.arange(len(parts)), [len(p) for p in parts])
-    return PoseSet(tuple(names), object_of, source=str(path), **cat)
+    loads = tuple(p.sources[0] for p in parts)
+    return PoseSet(tuple(names), object_of, source=str(path), sources=loads, **cat)
 
 
 def _from_dataset(root: Path) -> PoseSet:
@@ -151,6 +175,8 @@ def _from_dataset(root: Path) -> PoseSet:
     objects = tuple(dict.fromkeys(names))
     k_of = {n: k for k, n in enumerate(objects)}
     counts = ds.manifest.get("counts", {})
+    # A dataset's object goes by its name (a mesh file's stem); its config lists what loaded it.
+    recorded = {object_key(s): str(s) for s in (ds.manifest.get("config") or {}).get("objects") or []}
     return PoseSet(
         objects,
         np.array([k_of[n] for n in names], dtype=np.int64),
@@ -161,17 +187,24 @@ def _from_dataset(root: Path) -> PoseSet:
         rows.volume[keep],
         source=str(root),
         dataset_rollouts=int(counts.get("samples", 0)) + int(counts.get("rejected", 0)),
+        sources=tuple(recorded.get(n, n) for n in objects),
     )
 
 
-def _from_candidates(path: Path, *, seed: int, cache_dir) -> PoseSet:
+def _from_candidates(path: Path, *, seed: int, cache_dir, sources: dict[str, str]) -> PoseSet:
     cands = read_candidates(path)
     try:
         with np.load(path, allow_pickle=False) as z:
             name = str(z["object"])
     except (KeyError, ValueError, OSError) as exc:
         raise PoseError(f"{path}: a candidate file without its object's name ({type(exc).__name__})") from exc
-    obj = load_object(name, _LOAD_DENSITY, seed=0, cache_dir=cache_dir)
+    loads = sources.get(object_key(name), name)
+    try:
+        obj = load_object(loads, _LOAD_DENSITY, seed=0, cache_dir=cache_dir)
+    except MeshError as exc:
+        raise MeshError(
+            f"{path}: object {name!r} of the candidates cannot be loaded ({exc}); give its mesh file in --objects"
+        ) from exc
     rng = np.random.default_rng(seed)
     com_world = scene_offset(obj)[None]
     clouds, com = [], []
@@ -188,4 +221,5 @@ def _from_candidates(path: Path, *, seed: int, cache_dir) -> PoseSet:
         np.asarray(cands.openings, dtype=float),
         np.full(n, obj.mass / obj.density),
         source=str(path),
+        sources=(str(loads),),
     )

@@ -51,6 +51,7 @@ def run_codesign(
     seed: int = 0,
     ground_truth: bool = True,
     cache_dir: str | Path | None = None,
+    sources: dict[str, str] | None = None,
     on_step: Callable[[Step], None] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> tuple[dict, OptimizeResult]:
@@ -60,7 +61,9 @@ def run_codesign(
     (``overwrite``: write beside another writer's files, keeping them); the files land there at once.
     ``mass="real"`` puts every object at its published mass instead of ``density``
     (:func:`~mjcodesign.codesign.problem.real_densities`): an optimised object without one is refused,
-    a held-out one left out and named in ``held_out_without_mass``.
+    a held-out one left out and named in ``held_out_without_mass``. ``sources`` maps an object's name
+    to the mesh file that loads it (the command's ``--objects`` files): the candidates' clouds and the
+    re-simulation use that mesh (:func:`~mjcodesign.codesign.problem.load_pose_set`).
     """
     from mjcodesign.surrogate import load_surrogate
 
@@ -70,7 +73,7 @@ def run_codesign(
     say = progress or (lambda _msg: None)
     surrogate = load_surrogate(checkpoint)  # first: a checkpoint of another schema is refused in ~1 s
     say("reading poses")
-    everything = load_pose_set(poses, seed=seed, cache_dir=cache_dir)
+    everything = load_pose_set(poses, seed=seed, cache_dir=cache_dir, sources=sources)
     chosen_set = everything.select([object_key(o) for o in objects], per_object)
     held = held_out_objects(surrogate.meta, everything.objects, chosen_set.objects)
     no_mass: list[str] = []
@@ -129,7 +132,9 @@ def _record(result, poses: PoseSet, held, truth, checkpoint, source, density, se
         "wall_s": result.wall_s,
         "s_per_iteration": result.wall_s / max(1, result.iterations),
         "ground_truth": truth,
-        "density_kg_m3": {n: float(v) for n, v in density.items()} if isinstance(density, dict) else float(density),
+        "density_kg_m3": {n: float(v) for n, v in density.items()}
+        if isinstance(density, dict)
+        else float(density),
         "seed": int(seed),
         "checkpoint": str(checkpoint),
         "poses": str(source),

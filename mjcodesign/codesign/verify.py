@@ -92,7 +92,8 @@ def verify(
     if scenario is not None:
         source, dataset_scenario = "given", scenario
     scenario = dataset_scenario
-    # A dataset's object goes by its name (a mesh file's stem); it is loaded from its source.
+    # An object goes by its name (a mesh file's stem); it is loaded from the source its poses recorded
+    # (the command's mesh file, the dataset's), else from the checkpoint's dataset, else by its name.
     sources = {object_key(s): s for s in config.objects} if config is not None else {}
     jobs, meta = [], []
     for set_name, (poses, designs, chosen) in sets.items():
@@ -110,9 +111,8 @@ def verify(
             for k, name in enumerate(poses.objects):
                 rho_k = float(rho[poses.rows(k)[0]])
                 if name not in objs:
-                    objs[name] = load_grasp_object(
-                        sources.get(name, name), rho_k, seed=object_seed, cache_dir=cache_dir
-                    )
+                    loads = poses.source_of(name) if poses.sources else sources.get(name, name)
+                    objs[name] = load_grasp_object(loads, rho_k, seed=object_seed, cache_dir=cache_dir)
                 design = Stiffness(per_object[k])
                 jobs.append(
                     GraspJob(obj=objs[name], pose=poses.gripper_pose(int(rows[k])), design=design,
