@@ -9,7 +9,8 @@ segments' channels at the printed finger's heights, straight across each flexure
 * the tests' 50 g box (50 mm, 400 kg/m³, auto pose) grasped by the three presets and by uniform fingers,
   under force 4 N (the FEM grasp study's), force 10 N (the default) and position 1000 ticks (the
   hardware servo): the outcome, and the most outward turn of finger A's flexures during the rollout
-  (negative: a flexure folded outward, opening its gap).
+  (negative: a flexure folded outward, opening its gap);
+* the printed routing's position-mode grasps of soft and semi-rigid at 1 ms and 0.25 ms steps.
 
     python3 scripts/routing_compare.py --out benchmarks/records/2026-12-03_routing_compare.json
 
@@ -50,6 +51,7 @@ from mjcodesign.sim.mujoco_c import STATE_SPEC, initial_state
 _LOG_E = (13.5, 14.0, 14.5, 15.0, 15.5, 16.0, 16.5, 17.0)
 _DRIVES = ("force:4", "force:10", "position:1000")
 _PRESETS = ("soft", "semi-rigid", "paper-optimized")
+_STEPS = (1e-3, 2.5e-4)  # [s]: the printed routing's position-mode grasps at finer steps than 2 ms
 
 
 def _buckling() -> list[dict]:
@@ -136,13 +138,36 @@ def _grasps() -> list[dict]:
     return rows
 
 
+def _timesteps() -> list[dict]:
+    """The printed routing in position mode at finer steps than the default 2 ms."""
+    obj = box_object((0.05,) * 3, 400.0)
+    scenario = GraspScenario(tendon=parse_tendon("position:1000"))
+    rows = []
+    for dt in _STEPS:
+        for name in ("soft", "semi-rigid"):
+            options = SimOptions(routing="printed", timestep=dt)
+            scene = build_scene(
+                obj,
+                FingerDesign(),
+                Stiffness.preset(name),
+                FingerModel.CHAIN,
+                auto_pose(obj),
+                options=options,
+            )
+            out = MujocoBackend(nthread=1).run(scene, scenario).as_dict()
+            rows.append(
+                {"timestep_s": dt, "design": name, "success": bool(out["success"]), "reason": out["reason"]}
+            )
+    return rows
+
+
 def main() -> None:
     """Run both comparisons and write the record."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", required=True, help="record file (JSON)")
     args = p.parse_args()
     command = shlex.join(["python3", "scripts/routing_compare.py", *sys.argv[1:]])
-    record = {"buckling": _buckling(), "grasps": _grasps()}
+    record = {"buckling": _buckling(), "grasps": _grasps(), "printed_position_timesteps": _timesteps()}
     ok = {r: sum(g["success"] for g in record["grasps"] if g["routing"] == r) for r in ROUTINGS}
     record["successes"] = {r: f"{ok[r]} of {len(record['grasps']) // len(ROUTINGS)}" for r in ROUTINGS}
     with open(args.out, "w", encoding="utf-8") as f:
