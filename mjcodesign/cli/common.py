@@ -47,6 +47,11 @@ class Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
+def one_line(text: str) -> str:
+    r"""``text`` with its control characters escaped (a newline in a path reads ``\n``): one line."""
+    return "".join(c if c.isprintable() or c == " " else c.encode("unicode_escape").decode() for c in text)
+
+
 def short(text: str, keep: int = 60) -> str:
     """``text`` quoted, cut to ``keep`` characters with an ellipsis: a 5,000-character path stays one line."""
     return repr(text if len(text) <= keep else text[:keep] + "…")
@@ -79,11 +84,6 @@ def add_mass_mode(p: argparse.ArgumentParser, where: str) -> None:
 def path_text(text: str) -> str:
     """The argparse type of a path argument: not empty, and a name the file system can look up.
 
-def one_line(text: str) -> str:
-    r"""``text`` with its control characters escaped (a newline in a path reads ``\n``): one line."""
-    return "".join(c if c.isprintable() or c == " " else c.encode("unicode_escape").decode() for c in text)
-
-
     An empty path would mean the current directory (``Path("")`` is ``.``); a name past ``NAME_MAX`` or
     ``PATH_MAX`` would fail later with ``ENAMETOOLONG`` wherever it is first used. A path that does not
     exist passes: the command says what it expected there (names such as ``025_mug`` are not files).
@@ -102,38 +102,6 @@ def one_line(text: str) -> str:
     return text
 
 
-def port_number(text: str) -> int:
-    """The argparse type of a TCP port: an integer in 1..65535."""
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if not 1 <= value <= 65535:
-        raise argparse.ArgumentTypeError(f"must be a port number in 1..65535, got {short(text)}")
-    return value
-
-
-def int_at_least(low: int) -> Callable[[str], int]:
-    """The argparse type of an integer >= ``low``."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {short(text)}") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value}")
-        return value
-
-    return parse
-
-
-def finite_float(low: float, *, strict: bool = False) -> Callable[[str], float]:
-    """The argparse type of a finite number >= ``low`` (> ``low`` when ``strict``): never NaN or inf."""
-    bound = f"> {low:g}" if strict else f">= {low:g}"
-
-    def parse(text: str) -> float:
-        try:
 def output_file(text: str) -> str:
     """The argparse type of an output file, checked before any work.
 
@@ -200,6 +168,38 @@ def choice_list(choices: tuple[str, ...], what: str) -> Callable[[str], list[str
     return parse
 
 
+def port_number(text: str) -> int:
+    """The argparse type of a TCP port: an integer in 1..65535."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if not 1 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"must be a port number in 1..65535, got {short(text)}")
+    return value
+
+
+def int_at_least(low: int) -> Callable[[str], int]:
+    """The argparse type of an integer >= ``low``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {short(text)}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}, got {value}")
+        return value
+
+    return parse
+
+
+def finite_float(low: float, *, strict: bool = False) -> Callable[[str], float]:
+    """The argparse type of a finite number >= ``low`` (> ``low`` when ``strict``): never NaN or inf."""
+    bound = f"> {low:g}" if strict else f">= {low:g}"
+
+    def parse(text: str) -> float:
+        try:
             value = float(text)
         except ValueError:
             value = math.nan

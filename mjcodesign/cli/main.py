@@ -238,9 +238,9 @@ def main(argv: list[str] | None = None) -> int:
     Python's and MuJoCo's warnings are held while the command runs: a refused command prints its one
     error line, which says what went wrong; otherwise they are shown after the command (on stderr).
     """
+    _check_mujoco_gl(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
     args = parser.parse_args(argv)
-    _check_mujoco_gl(sys.argv[1:] if argv is None else argv)
     # The command line as run, for the records the command writes (the library never reads argv).
     args.command_line = shlex.join(["mjcodesign", *(sys.argv[1:] if argv is None else argv)])
     if _reaches_warp(args) and importlib.util.find_spec("warp") is not None:
@@ -254,6 +254,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with warnings.catch_warnings(record=True) as held, mujoco:
             code = int(args.func(args) or 0)
+            sys.stdout.flush()  # a full or closed stdout fails here, as a write error, not at exit
     except MjcodesignError as exc:
         sys.stderr.write(f"error: {one_line(str(exc))}\n")
         return 2
@@ -264,7 +265,6 @@ def main(argv: list[str] | None = None) -> int:
         _drop_stdout()
         where = f": {one_line(str(exc.filename))}" if exc.filename else " (standard output)"
         sys.stderr.write(f"error: cannot write{where}: {exc.strerror}\n")
-            sys.stdout.flush()  # a full or closed stdout fails here, as a write error, not at exit
         return 2
     except KeyboardInterrupt:
         _show_warnings(held, mujoco_texts)
@@ -277,8 +277,6 @@ def main(argv: list[str] | None = None) -> int:
     return code
 
 
-def _show_warnings(held: list[warnings.WarningMessage], mujoco_texts: list[str]) -> None:
-    """Show the held Python warnings as Python would have, then MuJoCo's distinct warning texts."""
 # The environment's write failures (a full disk or quota, a read-only file system, a closed pipe): one
 # line, not a traceback. Any other OSError escaping a command is a bug.
 _WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EFBIG, errno.EPIPE})
@@ -315,6 +313,8 @@ def _check_mujoco_gl(argv: list[str]) -> None:
         os.environ["MUJOCO_GL"] = "disable"  # this command renders nothing
 
 
+def _show_warnings(held: list[warnings.WarningMessage], mujoco_texts: list[str]) -> None:
+    """Show the held Python warnings as Python would have, then MuJoCo's distinct warning texts."""
     for w in held:
         warnings.showwarning(w.message, w.category, w.filename, w.lineno, w.file, w.line)
     for text in list(dict.fromkeys(mujoco_texts))[:_MUJOCO_WARNINGS_SHOWN]:
