@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from mjcodesign.cli.common import finite_float, parse_design, path_text
+from mjcodesign.design.servo import PAPER_TICKS
 from mjcodesign.errors import HardwareError
 
 __all__ = ["add_parser", "run"]
@@ -80,7 +81,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         type=_paths,
         help="camera-to-base calibration (.json/.npz/.npy), or one per --cloud, comma-separated",
     )
-    g.add_argument("--ticks", type=int, default=1000, help="tendon pull [ticks of 4096]")
+    g.add_argument("--ticks", type=int, default=PAPER_TICKS, help="tendon pull [ticks of 4096]")
     g.add_argument("--lift", type=float, default=0.10, help="lift height [m]")
     g.add_argument("--speed", type=float, default=0.1, help="franky speed factor (0, 1]")
     g.add_argument("--force", type=float, default=20.0, help="hand grasp force [N]")
