@@ -76,6 +76,7 @@ class OutputKind(enum.Enum):
     EVALUATION = "evaluation"
     FINGER = "finger"
     PRINT = "print"
+    DESIGN = "design"
 
     @property
     def command(self) -> str:
@@ -90,6 +91,7 @@ _COMMANDS = {
     OutputKind.EVALUATION: "evaluate",
     OutputKind.FINGER: "finger export",
     OutputKind.PRINT: "export-print",
+    OutputKind.DESIGN: "design",
 }
 _NO_OVERWRITE = frozenset({OutputKind.DATASET})  # datagen continues its own dataset, never writes beside
 

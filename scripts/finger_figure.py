@@ -16,25 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from mjcodesign.design import LOG_E_MAX, LOG_E_MIN, FingerDesign, Stiffness
+from mjcodesign.pipeline import block_outline
 
 DESIGNS = ("soft", "semi-rigid", "paper-optimized")
 _MM = 1e3  # the figure's unit: millimetres
-
-
-def _block_outline(b) -> np.ndarray:
-    """Side outline of one block [mm]: spine underside at z = 0, the cuts as chamfers of the top."""
-    if b.kind.value == "flexure":
-        pts = [(b.x0, 0.0), (b.x1, 0.0), (b.x1, b.spine), (b.x0, b.spine)]
-    else:
-        pts = [
-            (b.x0, 0.0),
-            (b.x1, 0.0),
-            (b.x1, b.spine),
-            (b.x1 - b.cut1, b.height1),
-            (b.x0 + b.cut0, b.height0),
-            (b.x0, b.spine),
-        ]
-    return np.asarray(pts) * _MM
 
 
 def main() -> None:
@@ -57,7 +42,7 @@ def main() -> None:
         log_e = np.asarray(Stiffness.preset(name).log_e)[0]
         for b in design.blocks():
             c = cmap((log_e[b.index] - LOG_E_MIN) / (LOG_E_MAX - LOG_E_MIN))
-            ax.add_patch(Polygon(_block_outline(b), closed=True, facecolor=c, edgecolor="0.25", lw=0.6))
+            ax.add_patch(Polygon(block_outline(b), closed=True, facecolor=c, edgecolor="0.25", lw=0.6))
         ax.plot(way[:, 0], way[:, 2], "-o", color="0.1", ms=2.0, lw=0.8)
         ax.set_ylim(-1.0, 16.0)
         ax.set_aspect("equal")

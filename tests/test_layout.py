@@ -59,6 +59,7 @@ LAYERS = {
     "codesign": 10,
     "evaluation": 11,
     "bench": 12,
+    "pipeline": 12,
     "hardware": 13,
     "cli": 14,
     "viz": 15,

@@ -152,6 +152,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     from mjcodesign.cli import crosscheck as cli_crosscheck
     from mjcodesign.cli import data as cli_data
+    from mjcodesign.cli import design as cli_design
     from mjcodesign.cli import evaluate as cli_evaluate
     from mjcodesign.cli import fabrication as cli_fabrication
     from mjcodesign.cli import grasp as cli_grasp
@@ -178,6 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_poses.add_parser(sub)
     cli_data.add_parser(sub)
     cli_optimize.add_parser(sub)
+    cli_design.add_parser(sub)
     cli_surrogate.add_parser(sub)
     cli_evaluate.add_parser(sub)
     cli_hardware.add_parser(sub)
@@ -200,7 +202,7 @@ def _reaches_warp(args: argparse.Namespace) -> bool:
             or "mjwarp" in getattr(args, "backend", "")
             or getattr(args, "pose", None) == "best"
         )
-    return command in ("crosscheck", "poses", "datagen", "evaluate", "optimize", "predict")
+    return command in ("crosscheck", "poses", "datagen", "evaluate", "optimize", "predict", "design")
 
 
 def _reaches_mujoco(args: argparse.Namespace) -> bool:

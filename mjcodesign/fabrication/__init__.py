@@ -1,6 +1,6 @@
 """Fabrication: a stiffness design mapped to print settings (calibration tables) and slicer-ready files."""
 
-from mjcodesign.fabrication.export import export_print
+from mjcodesign.fabrication.export import export_print, write_print_files
 from mjcodesign.fabrication.plan import (
     FINGER_NAMES,
     INFILL_PATTERNS,
@@ -38,4 +38,5 @@ __all__ = [
     "write_bambu_3mf",
     "write_stls",
     "export_print",
+    "write_print_files",
 ]

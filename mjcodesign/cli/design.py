@@ -1,0 +1,196 @@
+"""``mjcodesign design OBJECT... --out DIR``: a verified, printable gripper for the user's objects.
+
+Wire it in with ``cli_design.add_parser(subparsers)``. The pipeline is :func:`mjcodesign.pipeline.run_design`;
+this module reads the flags, the environment (the OpenGL backend of the report's images) and prints.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import sys
+import time
+
+from mjcodesign.cli.common import add_out_folder, emit, int_at_least, path_text, user_cache_dir
+
+__all__ = ["add_parser", "headless_gl", "run"]
+
+_MODES = ("joint", "individual")
+
+
+def headless_gl(environ=os.environ) -> None:
+    """Select MuJoCo's EGL backend when Linux has no display and ``MUJOCO_GL`` is unset.
+
+    MuJoCo reads ``MUJOCO_GL`` once, when it is imported, and building the parser imports it (other
+    commands' flags read the models), so this runs when the CLI imports this module, before any parser
+    is built. EGL renders with no display (``MUJOCO_GL=osmesa`` also does).
+    """
+    if sys.platform.startswith("linux") and not environ.get("DISPLAY") and not environ.get("WAYLAND_DISPLAY"):
+        environ.setdefault("MUJOCO_GL", "egl")
+
+
+headless_gl()
+
+
+def add_parser(subparsers) -> None:
+    """Register ``design`` on the main subparsers object."""
+    p = subparsers.add_parser(
+        "design",
+        help="objects to a verified, printable gripper: poses, co-design, re-simulation, print files, report",
+        description=(
+            "Sample grasp poses of each object, co-design the 22 block stiffnesses through the surrogate, "
+            "verify the design against soft, semi-rigid and paper-optimized by perturbed re-simulation, and "
+            "write the design, poses, print files, report.md, report.html and run.rrd into --out."
+        ),
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    p.add_argument(
+        "objects",
+        nargs="+",
+        metavar="OBJECT",
+        help="YCB name, egad-like:N, mesh file (STL/OBJ/PLY) or folder of meshes, with an optional mass: "
+        "box.stl@120g, 013_apple@0.197kg (default: the light density, 100 kg/m³)",
+    )
+    add_out_folder(p, "design")
+    p.add_argument(
+        "--ckpt",
+        type=path_text,
+        default=None,
+        help="surrogate checkpoint folder (default: the shipped weights)",
+    )
+    p.add_argument("--masses", type=path_text, default=None, help="CSV of object,mass (120g, 0.12kg)")
+    p.add_argument("--mode", choices=_MODES, default="joint", help="one design for all objects, or one each")
+    p.add_argument(
+        "--tendon", default=None, help="force:N or position:TICKS (default: the checkpoint dataset's drive)"
+    )
+    p.add_argument("--poses-per-object", type=int_at_least(1), default=10, help="grasp candidates per object")
+    p.add_argument(
+        "--budget",
+        type=int_at_least(1),
+        default=720,
+        help="re-simulation rollouts of the verification (objects × 4 designs × 3 disturbances × draws)",
+    )
+    p.add_argument("--max-iterations", type=int_at_least(1), default=2000, help="N of Algorithm 1")
+    p.add_argument("--seed", type=int_at_least(0), default=0, help="poses, clouds and perturbation draws")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``design``; library errors propagate to the main CLI (exit 2, one line)."""
+    from mjcodesign.codesign import Mode
+    from mjcodesign.errors import DesignError
+    from mjcodesign.pipeline import DesignOptions, parse_objects, read_masses, run_design
+
+    masses = read_masses(args.masses) if args.masses else None
+    specs = parse_objects(args.objects, masses)
+    tendon = None
+    if args.tendon is not None:
+        from mjcodesign.data import parse_tendon
+
+        tendon = parse_tendon(args.tendon)
+    options = DesignOptions(
+        mode=Mode(args.mode),
+        tendon=tendon,
+        poses_per_object=args.poses_per_object,
+        budget=args.budget,
+        seed=args.seed,
+        max_iterations=args.max_iterations,
+    )
+    ckpt = args.ckpt
+    if ckpt is None:
+        from mjcodesign.surrogate.shipped import TRAIN_HINT, shipped_checkpoint
+
+        ckpt = shipped_checkpoint()
+        if ckpt is None:
+            raise DesignError(
+                f"no pretrained surrogate ships with this mjcodesign yet: train one ({TRAIN_HINT}) and pass --ckpt ckpt"
+            )
+    recorder = None
+    if importlib.util.find_spec("rerun") is not None:
+        from mjcodesign.sim import load_observer
+
+        def recorder(path):
+            return load_observer("rerun", path=str(path))
+    else:
+        _warn("rerun-sdk is not installed: no run.rrd (pip install 'mjcodesign[viz]')")
+    with _Progress() as progress:
+        record = run_design(
+            specs,
+            checkpoint=ckpt,
+            out=args.out,
+            options=options,
+            overwrite=args.overwrite,
+            cache_dir=user_cache_dir(),
+            command=args.command_line,
+            recorder=recorder,
+            progress=progress,
+            warn=_warn,
+        )
+    if args.json:
+        print(json.dumps(record))
+    else:
+        emit(_table(record), False)
+        print(
+            f"wrote {args.out}: design, poses, print files, report.md, report.html ({record['wall_s']:.0f} s)"
+        )
+    return 0
+
+
+def _table(record: dict) -> list[dict]:
+    """One row per object: success [%] with its interval per design at the table's disturbance."""
+    v = record["verification"]
+    rows = []
+    for o in record["objects"]:
+        row = {"object": o["name"]}
+        for c in v["cells"]:
+            if c["object"] == o["name"] and c["impulse_paper_ns"] == v["table_impulse_paper_ns"]:
+                p = c["p"]
+                row[c["design"]] = f"{100 * p['value']:.0f}% [{100 * p['low']:.0f}, {100 * p['high']:.0f}]"
+        rows.append(row)
+    return rows
+
+
+def _warn(message: str) -> None:
+    print(f"warning: {message}", file=sys.stderr, flush=True)
+
+
+class _Progress:
+    """A rich bar with an ETA in a terminal; one plain line per finished unit when stderr is not one."""
+
+    def __enter__(self):
+        from rich.console import Console
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+        console = Console(stderr=True)
+        self.tty = console.is_terminal
+        columns = (TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"))
+        self.bar = Progress(
+            *columns,
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+            console=console,
+            transient=True,
+            disable=not self.tty,
+        )
+        self.bar.__enter__()
+        self.tasks: dict[str, int] = {}
+        self.t0 = time.perf_counter()
+        return self.update
+
+    def update(self, stage: str, done: int, total: int) -> None:
+        if stage not in self.tasks:
+            self.tasks[stage] = self.bar.add_task(stage, total=total)
+        self.bar.update(self.tasks[stage], completed=done)
+        # iterations are many and short: plain lines only for objects
+        if not self.tty and "iterations" not in stage:
+            print(
+                f"design: {stage} {done}/{total} ({time.perf_counter() - self.t0:.0f} s)",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    def __exit__(self, *exc):
+        return self.bar.__exit__(*exc)

@@ -1,0 +1,257 @@
+"""``mjcodesign design``: objects and masses, bad input, and a whole run on generated meshes.
+
+The whole run uses the tiny checkpoint of ``conftest.py`` on two generated meshes (two candidates each,
+one perturbed draw per object, design and disturbance), headless: no display and no ``MUJOCO_GL``, so
+the command must choose an offscreen OpenGL backend itself. Its report is parsed (one table row per
+object, one inline image per grasp, no external address) and, where a Chromium binary exists,
+screenshotted headless; PrusaSlicer slices its 3MF where it is installed.
+"""
+
+import base64
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mjcodesign.errors import MeshError
+from mjcodesign.pipeline import parse_mass_text, parse_objects, png_bytes, read_masses
+
+pytest.importorskip("torch")
+
+_BUDGET = 24  # 2 objects × 4 designs × 3 disturbances: one draw each
+_CHROMIUM = next(
+    (shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None
+)
+_PRUSA = shutil.which("prusa-slicer")
+
+
+def _cli(*args, cwd, env=None):
+    return subprocess.run(
+        [sys.executable, "-m", "mjcodesign.cli", "design", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env=env,
+        timeout=600,
+    )
+
+
+@pytest.fixture(scope="module")
+def meshes(tmp_path_factory):
+    import trimesh
+
+    d = tmp_path_factory.mktemp("design_meshes")
+    trimesh.creation.box(extents=(0.05, 0.04, 0.06)).export(d / "box.stl")
+    trimesh.creation.icosphere(radius=0.03).export(d / "ball.stl")
+    (d / "broken.stl").write_bytes(b"not a mesh at all")
+    return d
+
+
+def test_masses_and_objects_parse(meshes, tmp_path):
+    specs = parse_objects([f"{meshes / 'box.stl'}@120g", str(meshes / "ball.stl")], {"ball": 0.05})
+    assert [(s.name, s.mass_kg) for s in specs] == [("box", pytest.approx(0.12)), ("ball", 0.05)]
+    assert Path(specs[0].source).is_absolute()
+    assert parse_mass_text("0.197kg", "x") == pytest.approx(0.197)
+    csv = tmp_path / "m.csv"
+    csv.write_text("object,mass\nbox,120g\nball , 0.2kg\n")
+    assert read_masses(csv) == {"box": pytest.approx(0.12), "ball": pytest.approx(0.2)}
+    for bad in ("120", "-3g", "0g", "30kg", "lots"):
+        with pytest.raises(MeshError):
+            parse_mass_text(bad, "x")
+    with pytest.raises(MeshError, match="twice"):
+        parse_objects([str(meshes / "box.stl"), str(meshes / "box.stl")])
+    with pytest.raises(MeshError, match="not one of the objects"):
+        parse_objects([str(meshes / "box.stl")], {"mug": 0.3})
+
+
+def test_png_bytes_decode_to_the_image():
+    import io
+
+    from matplotlib.image import imread
+
+    rgb = np.random.default_rng(0).integers(0, 256, size=(7, 5, 3), dtype=np.uint8)
+    back = imread(io.BytesIO(png_bytes(rgb)), format="png")
+    np.testing.assert_array_equal(np.round(back[..., :3] * 255).astype(np.uint8), rgb)
+
+
+@pytest.mark.parametrize(
+    "case, expect",
+    [
+        ("unknown object", "unknown object"),
+        ("bad mass", "bad mass"),
+        ("mass out of range", "must be in"),
+        ("missing mesh", "not found"),
+        ("unreadable mesh", "broken"),
+        ("unwritable out", "not a writable folder"),
+        ("no weights", "no pretrained surrogate ships"),
+        ("budget below one draw", "--budget"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line_and_no_folder(case, expect, meshes, tiny_checkpoint, tmp_path):
+    out = tmp_path / "out"
+    box = str(meshes / "box.stl")
+    args = {
+        "unknown object": ["no_such_object_xyz", "--ckpt", tiny_checkpoint],
+        "bad mass": [f"{box}@12apples", "--ckpt", tiny_checkpoint],
+        "mass out of range": [f"{box}@25kg", "--ckpt", tiny_checkpoint],
+        "missing mesh": [str(meshes / "nothing.stl"), "--ckpt", tiny_checkpoint],
+        "unreadable mesh": [str(meshes / "broken.stl"), "--ckpt", tiny_checkpoint],
+        "unwritable out": [box, "--ckpt", tiny_checkpoint],
+        "no weights": [box],
+        "budget below one draw": [box, "--ckpt", tiny_checkpoint, "--budget", "5"],
+    }[case]
+    if case == "unwritable out":
+        (tmp_path / "file").write_text("x")
+        out = tmp_path / "file" / "out"
+    r = _cli(*args, "--out", out, cwd=tmp_path)
+    assert r.returncode == 2, r.stderr[-3000:]
+    assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1 and expect in r.stderr, r.stderr
+    assert r.stdout == ""
+    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) in ([], ["file"])
+
+
+class _Page(HTMLParser):
+    def __init__(self):
+        super().__init__()
+        self.rows, self.imgs, self.urls = 0, [], []
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag == "tr" and a.get("class") == "object":
+            self.rows += 1
+        if tag == "img":
+            self.imgs.append(a)
+        for key in ("src", "href"):
+            if key in a and not str(a[key]).startswith("data:image/png;base64,"):
+                self.urls.append(a[key])
+
+
+@pytest.fixture(scope="module")
+def design_run(meshes, tiny_checkpoint, tmp_path_factory):
+    """One whole run, headless, on the two generated meshes at 300 kg/m³ (inside the tiny surrogate's range)."""
+    work = tmp_path_factory.mktemp("design_run")
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "MUJOCO_GL")}
+    env["XDG_CACHE_HOME"] = str(work / "cache")
+    args = [
+        f"{meshes / 'box.stl'}@36g",
+        f"{meshes / 'ball.stl'}@34g",
+        "--ckpt",
+        tiny_checkpoint,
+        "--out",
+        work / "g",
+    ]
+    args += ["--poses-per-object", "2", "--budget", str(_BUDGET), "--max-iterations", "30", "--json"]
+    r = _cli(*args, cwd=work, env=env)
+    assert r.returncode == 0, r.stderr[-4000:]
+    return work / "g", json.loads(r.stdout)
+
+
+def test_design_writes_every_file(design_run):
+    from mjcodesign.design.stiffness import Stiffness
+
+    out, record = design_run
+    design = Stiffness.parse((out / "design.txt").read_text().strip())
+    np.testing.assert_allclose(design.log_e.ravel(), record["designs"]["box"], atol=1e-6)
+    for name in ("box", "ball"):
+        pose = json.loads((out / "poses" / f"{name}.json").read_text())
+        assert np.shape(pose["pose"]) == (4, 4) and len(pose["openings"]) == 2
+    for rel in ("print/gripper_prusaslicer.3mf", "print/gripper_bambu_orca.3mf", "print/print_sheet.md",
+                "report.md", "report.html", "result.json", "figures/sweep.png", "figures/fingers.png",
+                "figures/grasp_box.png", "figures/grasp_ball.png"):  # fmt: skip
+        assert (out / rel).is_file() and (out / rel).stat().st_size > 0, rel
+    assert list((out / "print" / "stl").glob("*.stl"))
+    if record["rrd"] is not None:
+        assert (out / "run.rrd").stat().st_size > 0
+    box = next(o for o in record["objects"] if o["name"] == "box")
+    assert box["mass_kg"] == pytest.approx(0.036) and box["mass_given"]
+
+
+def test_verification_counts_every_rollout(design_run):
+    _, record = design_run
+    v = record["verification"]
+    assert v["designs"] == ["optimised", "soft", "semi-rigid", "paper-optimized"]
+    assert v["draws"] == 1 and v["rollouts"] == _BUDGET
+    assert len(v["cells"]) == 2 * 4 * 3
+    for c in v["cells"]:
+        assert c["successes"] <= c["valid"] <= 1 and c["valid"] + c["sample_errors"] == 1
+        assert 0.0 <= c["p"]["low"] <= c["p"]["value"] <= c["p"]["high"] <= 1.0
+    # the sweep pools the objects: its counts are the cells' sums
+    for s in v["sweep"]:
+        cells = [
+            c
+            for c in v["cells"]
+            if (c["design"], c["impulse_paper_ns"]) == (s["design"], s["impulse_paper_ns"])
+        ]
+        assert (s["successes"], s["valid"]) == (
+            sum(c["successes"] for c in cells),
+            sum(c["valid"] for c in cells),
+        )
+
+
+def test_report_html_is_self_contained_with_a_row_and_an_image_per_object(design_run):
+    out, record = design_run
+    page = _Page()
+    page.feed((out / "report.html").read_text(encoding="utf-8"))
+    assert page.rows == len(record["objects"]) == 2
+    grasps = [a for a in page.imgs if a.get("class") == "grasp"]
+    assert len(grasps) == 2 and page.urls == []
+    for a in grasps:  # a real rendering: a PNG of the stated size, not one flat colour
+        import io
+
+        from matplotlib.image import imread
+
+        img = imread(io.BytesIO(base64.b64decode(a["src"].split(",", 1)[1])), format="png")
+        assert img.shape[:2] == (480, 640) and img[..., :3].std() > 0.02
+    assert not re.search(r"https?://", (out / "report.html").read_text(encoding="utf-8"))
+
+
+@pytest.mark.skipif(
+    _CHROMIUM is None, reason="no chromium binary (setup.sh installs it: apt-get install -y chromium)"
+)
+def test_report_html_opens_in_headless_chromium(design_run, tmp_path):
+    out, record = design_run
+    shot = tmp_path / "shot.png"
+    cmd = [
+        _CHROMIUM,
+        "--headless",
+        "--no-sandbox",
+        "--disable-gpu",
+        f"--screenshot={shot}",
+        "--window-size=1200,2400",
+    ]
+    r = subprocess.run(
+        [*cmd, (out / "report.html").resolve().as_uri()], capture_output=True, text=True, timeout=120
+    )
+    assert r.returncode == 0 and shot.stat().st_size > 10_000, r.stderr[-2000:]
+    dump = subprocess.run([_CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--dump-dom",
+                           (out / "report.html").resolve().as_uri()], capture_output=True, text=True, timeout=120)  # fmt: skip
+    page = _Page()
+    page.feed(dump.stdout)
+    assert page.rows == len(record["objects"]) and sum(a.get("class") == "grasp" for a in page.imgs) == 2
+
+
+@pytest.mark.skipif(_PRUSA is None, reason="prusa-slicer is not on PATH")
+def test_prusaslicer_slices_the_design_s_3mf(design_run, tmp_path):
+    out, _ = design_run
+    sheet = json.loads((out / "print" / "print_sheet.json").read_text())
+    first = sheet["calibration"]["first_layer_height_mm"]
+    cmd = [
+        _PRUSA,
+        "--export-gcode",
+        "--dont-arrange",
+        "--loglevel",
+        "1",
+        "--first-layer-height",
+        f"{first:g}",
+    ]
+    r = subprocess.run([*cmd, "--output", str(tmp_path / "g.gcode"), str(out / "print" / "gripper_prusaslicer.3mf")],
+                       capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    assert re.search(r"^; filament used \[mm\] = [\d.]+", (tmp_path / "g.gcode").read_text(), re.M)
