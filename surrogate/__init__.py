@@ -10,7 +10,8 @@ does. Import from here (``from mjcodesign.surrogate import Surrogate``): each na
 - :mod:`~mjcodesign.surrogate.checkpoint`: :func:`save_checkpoint`, :func:`load_surrogate`;
 - :mod:`~mjcodesign.surrogate.metrics`, :mod:`~mjcodesign.surrogate.smoothness`: held-out metrics,
   baselines, lines in design space;
-- :mod:`~mjcodesign.surrogate.report`: :func:`train_and_report` (``mjcodesign train``);
+- :mod:`~mjcodesign.surrogate.report`: :func:`train_and_report` and :func:`train_folds` (``mjcodesign train``);
+- :mod:`~mjcodesign.surrogate.folds`: :class:`FoldSurrogates`, the networks of ``train --folds``;
 - :mod:`~mjcodesign.surrogate.grasp`: :func:`predict_grasp` (``mjcodesign predict``).
 """
 
@@ -28,10 +29,12 @@ from mjcodesign.surrogate.data import (
     GraspDataset,
     Normalizer,
     Split,
+    fold_splits,
     load_grasp_data,
     normalize_clouds,
     split,
 )
+from mjcodesign.surrogate.folds import FoldSurrogates, load_any, load_folds
 from mjcodesign.surrogate.grasp import predict_grasp
 from mjcodesign.surrogate.inference import (
     DesignGradient,
@@ -43,7 +46,13 @@ from mjcodesign.surrogate.inference import (
     success_score,
 )
 from mjcodesign.surrogate.model import GraspNet, ModelConfig
-from mjcodesign.surrogate.report import TensorBoardLog, checkpoint_smoothness, train_and_report
+from mjcodesign.surrogate.report import (
+    TensorBoardLog,
+    checkpoint_smoothness,
+    dataset_warnings,
+    train_and_report,
+    train_folds,
+)
 from mjcodesign.surrogate.train import EpochLog, OptimizerConfig, TrainConfig, TrainResult, train
 
 __all__ = [
@@ -54,6 +63,7 @@ __all__ = [
     "DesignGradient",
     "DesignLoss",
     "EpochLog",
+    "FoldSurrogates",
     "GraspBatch",
     "GraspData",
     "GraspDataset",
@@ -70,6 +80,10 @@ __all__ = [
     "TrainResult",
     "checkpoint_smoothness",
     "dataset_config",
+    "dataset_warnings",
+    "fold_splits",
+    "load_any",
+    "load_folds",
     "load_grasp_data",
     "load_surrogate",
     "normalize_clouds",
@@ -79,4 +93,5 @@ __all__ = [
     "success_score",
     "train",
     "train_and_report",
+    "train_folds",
 ]

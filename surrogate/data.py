@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,6 +52,7 @@ __all__ = [
     "TrainBatch",
     "cloud_frame",
     "design_inputs",
+    "fold_splits",
     "frame_inputs",
     "load_grasp_data",
     "normalize_clouds",
@@ -273,34 +275,71 @@ def split(
     if not (0 < test_fraction < 1 and 0 < val_fraction < 1):
         raise DesignError("test and validation fractions must be in (0, 1)")
     rng = np.random.default_rng(seed)
-    n = len(data)
-    held: tuple[str, ...] = ()
-    if mode == "random":
-        perm = rng.permutation(n)
-        n_test = int(round(test_fraction * n))
-        test, rest = perm[:n_test], perm[n_test:]
-        n_val = int(round(val_fraction * len(rest)))
-        val, train = rest[:n_val], rest[n_val:]
-    else:
+    if mode == "object":
         names = np.array(sorted(set(data.objects[data.pose])), dtype=object)
         if len(names) < 2:
             raise DesignError(f"an object split needs two objects or more, the dataset has {len(names)}")
         n_test = min(len(names) - 1, max(1, math.ceil(test_fraction * len(names))))
-        held = tuple(sorted(rng.permutation(names)[:n_test]))
-        test_pose = np.isin(data.objects, held)
-        train_poses = np.flatnonzero(~test_pose & np.isin(np.arange(len(data.objects)), data.pose))
-        n_val = max(1, int(round(val_fraction * len(train_poses))))
-        val_pose = np.zeros(len(data.objects), dtype=bool)
-        val_pose[rng.permutation(train_poses)[:n_val]] = True
-        s_test, s_val = test_pose[data.pose], val_pose[data.pose]
-        test = np.flatnonzero(s_test)
-        val = np.flatnonzero(s_val)
-        train = np.flatnonzero(~s_test & ~s_val)
-    if min(len(train), len(val), len(test)) == 0:
+        return _hold_out(data, mode, tuple(rng.permutation(names)[:n_test]), rng, val_fraction)
+    perm = rng.permutation(len(data))
+    n_test = int(round(test_fraction * len(data)))
+    test, rest = perm[:n_test], perm[n_test:]
+    n_val = int(round(val_fraction * len(rest)))
+    return _checked(Split(mode, np.sort(rest[n_val:]), np.sort(rest[:n_val]), np.sort(test)))
+
+
+def _checked(parts: Split) -> Split:
+    if min(len(parts.train), len(parts.val), len(parts.test)) == 0:
         raise DesignError(
-            f"the {mode} split leaves a part empty (train {len(train)}, val {len(val)}, test {len(test)})"
+            f"the {parts.mode} split leaves a part empty "
+            f"(train {len(parts.train)}, val {len(parts.val)}, test {len(parts.test)})"
         )
-    return Split(mode, np.sort(train), np.sort(val), np.sort(test), held)
+    return parts
+
+
+def _hold_out(data: GraspData, mode: str, held, rng: np.random.Generator, val_fraction: float) -> Split:
+    """The samples of objects ``held`` as the test; ``val_fraction`` of the other poses (seeded) as validation."""
+    test_pose = np.isin(data.objects, held)
+    train_poses = np.flatnonzero(~test_pose & np.isin(np.arange(len(data.objects)), data.pose))
+    n_val = max(1, int(round(val_fraction * len(train_poses))))
+    val_pose = np.zeros(len(data.objects), dtype=bool)
+    val_pose[rng.permutation(train_poses)[:n_val]] = True
+    s_test, s_val = test_pose[data.pose], val_pose[data.pose]
+    train = np.flatnonzero(~s_test & ~s_val)
+    return _checked(Split(mode, train, np.flatnonzero(s_val), np.flatnonzero(s_test), tuple(sorted(held))))
+
+
+def fold_splits(
+    data: GraspData, fold_of: Mapping[str, int], *, val_fraction: float = 0.1, seed: int = 0
+) -> list[Split]:
+    """One object-level split per fold: fold k's objects are its test, so each object is held out once.
+
+    ``fold_of`` maps every object of ``data`` to its fold (0..K-1; objects it names that the dataset
+    lacks are ignored); a fold holding none of the dataset's objects is left out. Each fold's
+    validation rows are ``val_fraction`` of its training objects' poses (seeded by ``seed`` and the
+    fold). Raises :class:`DesignError` for an object without a fold or fewer than two non-empty folds.
+    """
+    if not 0 < val_fraction < 1:
+        raise DesignError("the validation fraction must be in (0, 1)")
+    names = sorted(set(data.objects[data.pose]))
+    missing = [n for n in names if n not in fold_of]
+    if missing:
+        raise DesignError(f"no fold for the dataset's object(s) {', '.join(missing[:5])}")
+    folds = sorted({int(fold_of[n]) for n in names})
+    if len(folds) < 2:
+        raise DesignError(
+            f"K-fold training needs objects in two folds or more, the dataset fills {len(folds)}"
+        )
+    return [
+        _hold_out(
+            data,
+            f"fold{k}",
+            tuple(n for n in names if int(fold_of[n]) == k),
+            np.random.default_rng([seed, k]),
+            val_fraction,
+        )
+        for k in folds
+    ]
 
 
 def subsample(parts: Split, fraction: float, *, seed: int = 0) -> Split:

@@ -18,17 +18,24 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+
+from mjcodesign.errors import OutputError, UnsupportedError
+from mjcodesign.objects import MESH_SUFFIXES
+from mjcodesign.outputs import OutputKind, check_output, staged, write_atomic
 from mjcodesign.surrogate.checkpoint import load_surrogate, save_checkpoint
 from mjcodesign.surrogate.data import (
+    N_OUTPUTS,
     N_REGRESSION,
     GraspData,
     GraspDataset,
     Normalizer,
     Split,
+    fold_splits,
     load_grasp_data,
     split,
     subsample,
 )
+from mjcodesign.surrogate.folds import FOLDS_FILE, FOLDS_FORMAT, FOLDS_VERSION
 from mjcodesign.surrogate.inference import GraspBatch, Poses, Surrogate
 from mjcodesign.surrogate.metrics import mean_baseline, score_outputs, success_scores, tree_baseline
 from mjcodesign.surrogate.model import ModelConfig
@@ -36,13 +43,23 @@ from mjcodesign.surrogate.plots import plot_calibration, plot_curves, plot_lines
 from mjcodesign.surrogate.smoothness import smoothness
 from mjcodesign.surrogate.train import EpochLog, TrainConfig, evaluate_loss, train
 
-from mjcodesign.errors import OutputError, UnsupportedError
-from mjcodesign.outputs import OutputKind, check_output, staged, write_atomic
-
-__all__ = ["TensorBoardLog", "checkpoint_smoothness", "predict_rows", "standard_loss", "train_and_report"]
+__all__ = [
+    "SUCCESS_RATE_WARN",
+    "TensorBoardLog",
+    "checkpoint_smoothness",
+    "dataset_warnings",
+    "predict_rows",
+    "standard_loss",
+    "train_and_report",
+    "train_folds",
+    "user_objects",
+]
 
 _PREDICT_CHUNK = 8192  # rows per predict call
 _EPS = 1e-6  # probability clip of the cross-entropy
+SUCCESS_RATE_WARN = (0.05, 0.95)
+"""A dataset whose success rate is outside this range is one outcome with a few exceptions: the
+success the surrogate learns rests on those few samples (a user's 96/96 at the light density)."""
 
 
 def predict_rows(surrogate: Surrogate, data: GraspData, rows: np.ndarray) -> np.ndarray:
@@ -191,8 +208,14 @@ def train_and_report(
     smoothness_lines: int = 4,
     cache_dir=None,
     on_epoch: Callable[[str, EpochLog], None] | None = None,
+    init: str | Path | None = None,
+    warn: Callable[[str], None] | None = None,
 ) -> dict:
     """Train on the dataset in ``data_dir``, write the checkpoint and report into ``out``; the metrics.
+
+    ``init``: a checkpoint folder to continue from (fine-tuning, :func:`~.train.train`'s ``init``):
+    its architecture and its normaliser are kept (``model_config`` must be None), and the record names
+    it. ``warn`` receives one line per :func:`dataset_warnings` finding.
 
     ``efficiency``: the share of training data of the second run (0: none). ``smoothness_poses``: test
     poses re-simulated along ``smoothness_lines`` design lines each (0: none). ``on_epoch(run, log)``
@@ -200,17 +223,20 @@ def train_and_report(
     :mod:`mjcodesign.outputs` (checked before any work; ``overwrite`` keeps another writer's files beside
     the checkpoint); every file lands there at once when the report is complete.
     """
-    cfg, mcfg = config or TrainConfig(), model_config or ModelConfig()
-    folder = check_output(out, OutputKind.CHECKPOINT, overwrite=overwrite, inputs={"--data": data_dir})
+    cfg = config or TrainConfig()
+    folder = check_output(
+        out, OutputKind.CHECKPOINT, overwrite=overwrite, inputs={"--data": data_dir, "--init": init}
+    )
+    start, mcfg = _initial(init, model_config)
     data = load_grasp_data(data_dir)
     parts = split(data, split_mode, seed=cfg.seed)
-    runs = {"full": train(data, parts, cfg, mcfg, on_epoch=on_epoch and (lambda log: on_epoch("full", log)))}
+    for line in dataset_warnings(data, parts):
+        if warn:
+            warn(line)
+    runs = {"full": train(data, parts, cfg, None if start else mcfg, init=start,
+                          on_epoch=on_epoch and (lambda log: on_epoch("full", log)))}  # fmt: skip
     res = runs["full"]
-    dataset = {"path": str(data.root), "manifest_sha256": data.manifest_sha256,
-               "fingerprint": data.manifest.get("fingerprint"), "schema_version": data.manifest.get("schema_version"),
-               "object_seed": data.manifest["config"]["object_seed"], "density": data.manifest["config"]["density"],
-               "cloud_points": int(data.clouds.shape[1]), "samples": len(data), "poses": len(data.clouds),
-               "config": data.manifest["config"]}  # fmt: skip
+    dataset = _dataset_record(data)
     sur = Surrogate(res.model, res.normalizer, lift=data.lift, lifted_fraction=data.lifted_fraction)
     test_set = GraspDataset(data, parts.test, res.normalizer, frame=mcfg.frame_inputs)
     net = _measure(
@@ -229,7 +255,7 @@ def train_and_report(
     metrics = {"dataset": dataset, "split": parts.as_dict(), "train_config": cfg.as_dict(), "model": mcfg.as_dict(),
                "training": res.summary(), "test": models, "success_rule_on_simulator_outputs": _rule_ceiling(data, parts.test)}  # fmt: skip
     if efficiency:
-        small = train(data, subsample(parts, efficiency, seed=cfg.seed), cfg, mcfg,
+        small = train(data, subsample(parts, efficiency, seed=cfg.seed), cfg, None if start else mcfg, init=start,
                       on_epoch=on_epoch and (lambda log: on_epoch("efficiency", log)))  # fmt: skip
         runs["efficiency"] = small
         s_sur = Surrogate(small.model, small.normalizer, lift=data.lift, lifted_fraction=data.lifted_fraction)
@@ -248,15 +274,147 @@ def train_and_report(
         "train": cfg.as_dict(),
         "metrics": _brief(metrics),
     }
+    if start is not None:
+        metrics["init"] = sur.meta["init"] = _init_record(init)
     with staged(folder) as root:
         if smoothness_poses:
             plot_lines(metrics["smoothness"], root / "smoothness.png")
         save_checkpoint(root, sur)
         plot_curves({k: r.summary() for k, r in runs.items()}, root / "curves.png")
-        plot_calibration({k: m["success"]["calibration"] for k, m in models.items()}, root / "calibration.png")
+        plot_calibration(
+            {k: m["success"]["calibration"] for k, m in models.items()}, root / "calibration.png"
+        )
         write_atomic(root / "metrics.json", json.dumps(metrics, indent=1, allow_nan=False))
         write_atomic(root / "summary.md", summary_markdown(metrics))
     return metrics
+
+
+def _dataset_record(data: GraspData) -> dict:
+    """What a checkpoint records of its dataset."""
+    return {"path": str(data.root), "manifest_sha256": data.manifest_sha256,
+            "fingerprint": data.manifest.get("fingerprint"), "schema_version": data.manifest.get("schema_version"),
+            "object_seed": data.manifest["config"]["object_seed"], "density": data.manifest["config"]["density"],
+            "cloud_points": int(data.clouds.shape[1]), "samples": len(data), "poses": len(data.clouds),
+            "config": data.manifest["config"]}  # fmt: skip
+
+
+def _initial(init, model_config: ModelConfig | None) -> tuple[tuple | None, ModelConfig]:
+    """(network, normaliser) of checkpoint ``init`` (None without one) and the architecture to train."""
+    if init is None:
+        return None, model_config or ModelConfig()
+    base = load_surrogate(init)
+    if model_config is not None and model_config != base.config:
+        raise OutputError(
+            f"--init {init}: fine-tuning keeps the checkpoint's architecture; give no model options"
+        )
+    return (base.model, base.normalizer), base.config
+
+
+def _init_record(init) -> dict:
+    """The checkpoint fine-tuning started from: its path and the dataset it was trained on."""
+    from mjcodesign.surrogate.checkpoint import read_record
+
+    ds = read_record(init).get("dataset") or {}
+    return {"path": str(init), "dataset_manifest_sha256": ds.get("manifest_sha256"),
+            "normalizer": "kept from the initial checkpoint (not refitted on this dataset)"}  # fmt: skip
+
+
+def user_objects(data: GraspData) -> set[str]:
+    """Objects of ``data`` made from a mesh file (the user's own), not a YCB name or ``egad-like:N``."""
+    return {str(o["name"]) for o in data.manifest.get("objects", ())
+            if Path(str(o.get("source", ""))).suffix.lower() in MESH_SUFFIXES}  # fmt: skip
+
+
+def dataset_warnings(data: GraspData, parts: Split | None = None) -> list[str]:
+    """One line per finding about a dataset and its split.
+
+    A success rate outside :data:`SUCCESS_RATE_WARN`, and a user's own object (:func:`user_objects`)
+    among ``parts``' held-out test objects.
+    """
+    lines = []
+    rate, low, high = float(np.mean(data.success)), *SUCCESS_RATE_WARN
+    if not low <= rate <= high:
+        lines.append(
+            f"the dataset's success rate is {rate:.1%} of {len(data)} samples ({'above' if rate > high else 'below'} "
+            f"{high if rate > high else low:.0%}): the surrogate has few {'failures' if rate > high else 'successes'} "
+            "to learn from (a heavier or lighter --density, or another --tendon, gives both outcomes)"
+        )
+    mine = sorted(user_objects(data) & set(parts.test_objects)) if parts is not None else []
+    if mine:
+        lines.append(
+            f"your own object{'s' if len(mine) > 1 else ''} {', '.join(mine)} {'are' if len(mine) > 1 else 'is'} "
+            "held out as the test: the network never trains on it (--split random, or train on it with --init)"
+        )
+    return lines
+
+
+def train_folds(
+    data_dir: str | Path,
+    out: str | Path,
+    fold_of: dict[str, int],
+    *,
+    overwrite: bool = False,
+    config: TrainConfig | None = None,
+    model_config: ModelConfig | None = None,
+    init: str | Path | None = None,
+    on_epoch: Callable[[str, EpochLog], None] | None = None,
+    warn: Callable[[str], None] | None = None,
+) -> dict:
+    """Train one surrogate per object-level fold (:func:`~.data.fold_splits` of ``fold_of``) into ``out``.
+
+    ``out`` receives ``foldK/`` (a checkpoint each) and ``folds.json`` (:mod:`.folds`): per fold its
+    held-out and training objects, its training summary and held-out metrics, and over all folds the
+    held-out success accuracy and ROC AUC, each sample scored by the fold that never saw its object.
+    ``on_epoch(run, log)`` sees each fold's epochs as run ``foldK``. Returns the manifest.
+    """
+    from sklearn.metrics import roc_auc_score
+
+    cfg = config or TrainConfig()
+    folder = check_output(
+        out, OutputKind.CHECKPOINT, overwrite=overwrite, inputs={"--data": data_dir, "--init": init}
+    )
+    start, mcfg = _initial(init, model_config)
+    data = load_grasp_data(data_dir)
+    folds = fold_splits(data, fold_of, seed=cfg.seed)
+    for line in dataset_warnings(data):
+        if warn:
+            warn(line)
+    dataset = _dataset_record(data)
+    pooled = np.zeros((len(data), N_OUTPUTS))
+    entries, surrogates = [], []
+    for parts in folds:
+        name = parts.mode
+        res = train(data, parts, cfg, None if start else mcfg, init=start,
+                    on_epoch=on_epoch and (lambda log, name=name: on_epoch(name, log)))  # fmt: skip
+        sur = Surrogate(res.model, res.normalizer, lift=data.lift, lifted_fraction=data.lifted_fraction)
+        pooled[parts.test] = predict_rows(sur, data, parts.test)
+        m = _measure(
+            "surrogate", pooled[parts.test], predict_rows(sur, data, parts.val), data, parts, res.normalizer
+        )
+        seen = sorted(set(data.objects[data.pose[np.concatenate([parts.train, parts.val])]]))
+        entry = {"path": name, "held_out": list(parts.test_objects), "train_objects": seen, "split": parts.as_dict(),
+                 "training": {k: v for k, v in res.summary().items() if not isinstance(v, list)},
+                 "test": {"loss": m["loss"], "success": {k: m["success"][k] for k in ("accuracy", "roc_auc", "rate")}}}  # fmt: skip
+        sur.meta = {"dataset": dataset, "split": parts.as_dict(), "train": cfg.as_dict(), "fold": entry}
+        if start is not None:
+            sur.meta["init"] = _init_record(init)
+        entries.append(entry)
+        surrogates.append(sur)
+    rows = np.concatenate([p.test for p in folds])
+    score, truth = success_scores(pooled[rows], data, rows), data.success[rows]
+    both = 0 < truth.sum() < len(truth)
+    manifest = {"format": FOLDS_FORMAT, "version": FOLDS_VERSION, "dataset": dataset, "train": cfg.as_dict(),
+                "model": mcfg.as_dict(), "folds": entries,
+                "held_out": {"objects": sum(len(p.test_objects) for p in folds), "samples": int(len(rows)),
+                             "success_accuracy": float(np.mean((score > 0) == truth)),
+                             "success_roc_auc": float(roc_auc_score(truth, score)) if both else None}}  # fmt: skip
+    if start is not None:
+        manifest["init"] = _init_record(init)
+    with staged(folder) as root:
+        for parts, sur in zip(folds, surrogates, strict=True):
+            save_checkpoint(root / parts.mode, sur)
+        write_atomic(root / FOLDS_FILE, json.dumps(manifest, indent=1, allow_nan=False))
+    return manifest
 
 
 def _brief(metrics: dict) -> dict:

@@ -181,22 +181,34 @@ def train(
     model_config: ModelConfig | None = None,
     *,
     on_epoch: Callable[[EpochLog], None] | None = None,
+    init: tuple[GraspNet, Normalizer] | None = None,
 ) -> TrainResult:
     """Train a :class:`GraspNet` on ``parts.train``, early-stopping on ``parts.val``.
 
     Normalisation statistics come from the training rows only. Returns the best validation weights.
+
+    ``init`` (a network and its normaliser, e.g. a loaded checkpoint's ``model`` and ``normalizer``)
+    continues training from those weights instead of new ones (fine-tuning): the architecture is the
+    network's (``model_config`` must be None or equal to it) and its normaliser is kept, not refitted,
+    since the weights read their inputs and outputs in its units. The network passed in is not changed.
     """
     cfg = config or TrainConfig()
+    if init is not None:
+        if model_config is not None and model_config != init[0].config:
+            raise DesignError(
+                "fine-tuning keeps the initial network's architecture: give no other model config"
+            )
+        model_config = init[0].config
     mcfg = model_config or ModelConfig()
     rng = np.random.default_rng(cfg.seed)
     rows = parts.train
-    norm = Normalizer.fit(data, rows)
+    norm = Normalizer.fit(data, rows) if init is None else init[1]
     train_set = GraspDataset(data, rows, norm, frame=mcfg.frame_inputs)
     val_set = GraspDataset(data, parts.val, norm, frame=mcfg.frame_inputs)
     t0 = time.perf_counter()
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(cfg.seed)
-        model = GraspNet(mcfg)
+        model = GraspNet(mcfg) if init is None else copy.deepcopy(init[0]).float()
         result = TrainResult(model, norm, train_rows=len(rows))
         _fit(model, train_set, val_set, cfg, rng, result, on_epoch)
     result.wall_s = time.perf_counter() - t0

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 
 from mjcodesign.design.stiffness import Stiffness, read_design_file, write_design_file
 from mjcodesign.errors import DesignError, StiffnessError
@@ -33,6 +34,7 @@ from mjcodesign.sim.protocol import get_backend
 
 _OBJECTS = ("012_strawberry", "egad-like:1")
 _SHORT = GraspScenario(tighten_s=0.1, lift_s=0.2, hold_s=0.1, post_hold_s=0.05)
+_DEFAULT_V1_SHA256 = "c9b61bd0f989bc323a09b153dc0af4bd3eaf5c04cfa21502bd914bdb2a86c73a"
 _FILES = {"results.json", "summary.json", "table.md", "paired.md", "per_object.csv", "forest.png", MARKER}
 
 
@@ -232,6 +234,10 @@ def test_cli_writes_the_report_and_reruns_bitwise(tmp_path, suite_file):
         ("--candidates", "0"),
         ("--anygrasp", "/nonexistent"),
         ("--rrd", "/nonexistent/x.rrd"),
+        ("--mass", "real"),  # the quick suite's egad-like shapes have no published mass
+        ("--objects", "012_strawberry", "--mass", "real", "--density", "heavy"),
+        ("--objects", "MESH", "--mass", "real"),
+        ("--egad-like", "-1"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(tmp_path, args, monkeypatch, capsys):
@@ -242,8 +248,11 @@ def test_bad_input_exits_2_with_one_line(tmp_path, args, monkeypatch, capsys):
     inputs.mkdir()
     (inputs / "short.txt").write_text("14.0,15.0,16.0")
     (inputs / "v99.json").write_text(json.dumps({"format": "mjcodesign-eval-suite", "version": 99}))
+    (inputs / "box.stl").write_bytes(trimesh.creation.box(extents=(0.05, 0.04, 0.06)).export(file_type="stl"))
     args = tuple(
-        a.replace("BADLEN", str(inputs / "short.txt")).replace("VERSION99", str(inputs / "v99.json"))
+        a.replace("BADLEN", str(inputs / "short.txt"))
+        .replace("VERSION99", str(inputs / "v99.json"))
+        .replace("MESH", str(inputs / "box.stl"))
         for a in args
     )
     out = tmp_path / "out"
@@ -353,6 +362,60 @@ def test_the_shipped_default_suite():
     assert all(o.fold is None for o in s.objects if o.domain == "out-of-domain")
     short = [o for o in s.objects if len(o.poses) < s.poses_per_object]
     assert s.poses_per_object == 10 and all(o.note for o in short)  # fewer poses only with the reason
+    assert s.digest == _DEFAULT_V1_SHA256  # frozen: its recorded results name this file
+
+
+def test_real_mass_runs_each_object_at_its_published_mass(suite):
+    from dataclasses import replace
+
+    from mjcodesign.errors import MeshError
+    from mjcodesign.jobs import load_grasp_object
+
+    ycb = replace(suite, objects=tuple(o for o in suite.objects if o.domain == "in-domain"))
+    run = SuiteRun(designs=parse_design_groups("soft"), perturbations=1, mass="real", scenario=_SHORT)
+    rows = run_suite(ycb, run)["rows"]
+    real = load_grasp_object(ycb.objects[0].source, mass="real")
+    assert rows and all(r["density"] == "real" for r in rows)
+    assert all(r["density_kg_m3"] == pytest.approx(real.density, rel=1e-9) for r in rows)
+    with pytest.raises(MeshError, match="egad-like"):
+        run_suite(suite, run)  # refused before any rollout: the egad-like shape has no published mass
+    with pytest.raises(DesignError):
+        SuiteRun(designs=parse_design_groups("soft"), mass="measured")
+
+
+def test_egad_like_objects_join_the_out_of_domain_split(suite):
+    from mjcodesign.evaluation.suite import add_objects, egad_sources
+
+    assert egad_sources(3, ["013_apple", "egad-like:9", "egad-like:2"]) == tuple(
+        f"egad-like:{i}" for i in (10, 11, 12)
+    )
+    assert egad_sources(2) == ("egad-like:0", "egad-like:1") and egad_sources(0) == ()
+    more = add_objects(suite, egad_sources(1, [o.source for o in suite.objects]), label="egad-like:1")
+    assert more.name == f"{suite.name}+egad-like:1" and more.objects[: len(suite.objects)] == suite.objects
+    new = more.objects[-1]
+    assert new.source == "egad-like:2" and new.domain == "out-of-domain" and new.fold is None and new.poses
+    assert more.digest and more.digest != suite.digest
+    with pytest.raises(SuiteError, match="already holds"):
+        add_objects(suite, [suite.objects[0].source], label="again")
+
+
+def test_objects_take_mesh_files_and_folders(tmp_path):
+    meshes = tmp_path / "meshes"
+    meshes.mkdir()
+    trimesh.creation.box(extents=(0.05, 0.04, 0.06)).export(meshes / "box.stl")
+    trimesh.creation.icosphere(radius=0.03).export(tmp_path / "ball.stl")
+    p = _cli("--objects", f"{meshes},{tmp_path / 'ball.stl'}", "--poses-per-object", "1", "--perturbations", "1",
+             "--designs", "soft", "--egad-like", "1", "--save-suite", str(tmp_path / "s.json"), "--out",
+             str(tmp_path / "out"), "--json", cwd=tmp_path)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    s = load_suite(tmp_path / "s.json")
+    assert [(o.name, o.source, o.domain) for o in s.objects] == [
+        ("box", str(meshes / "box.stl"), "out-of-domain"),
+        ("ball", str(tmp_path / "ball.stl"), "out-of-domain"),
+        ("egad-like-0-000", "egad-like:0", "out-of-domain"),
+    ]
+    rows = json.loads((tmp_path / "out" / "results.json").read_text())["rows"]
+    assert {r["object"] for r in rows} == {"box", "ball", "egad-like-0-000"}
 
 
 def test_bench_evaluate_times_the_same_rollouts():

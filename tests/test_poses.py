@@ -15,12 +15,14 @@ from mjcodesign.errors import PoseError
 from mjcodesign.objects import box_object
 from mjcodesign.poses import (
     ANYGRASP_DEPTH,
+    DEPTH_CLEARANCE,
     FILE_FORMAT,
     MAX_PENETRATION,
     NOISE_TRANSLATION,
     RigidGripper,
     SamplerOptions,
     anygrasp_to_world,
+    approach_depth,
     augment_poses,
     load_external,
     read_candidates,
@@ -42,6 +44,12 @@ _TOL_TOUCH = 1.5e-3
 # The authors' finger-body origins sit off the closing axis by their mesh offsets: measured |cos| of
 # 0.81-0.95 on 012_strawberry (0.97-0.99 on 006_mustard_bottle and 013_apple).
 _TOL_AXIS_COS = 0.75
+# The depth fit ends where the pull of L_depth (W_T on the mean over the finger points) balances
+# W_P's penetration of the clearance: a few µm; the iRprop− steps settle below 1e-5 m.
+_TOL_DEPTH = 1e-4
+# Without the depth term only each finger's nearest point pulls along the approach (on the curved inner
+# face): the offset moved up to 4.7 mm on the box poses of the depth test.
+_TOL_FIXED_DEPTH = 0.008
 _TOL_NOISE = 0.1  # relative error of a standard deviation estimated from 3000 samples (≈ 1.3% σ)
 
 
@@ -158,6 +166,37 @@ def test_refinement_pushes_out_and_closes_in(box, sdf_cache):
         assert np.all(np.abs(d[:, g.side == f].min(axis=1)) <= _TOL_TOUCH)
     # Closing along y onto the 50-mm faces: both openings end the same, fingers symmetric.
     np.testing.assert_allclose(r.openings[0], r.openings[1], atol=_TOL_TOUCH)
+
+
+@pytest.mark.parametrize("height", [0.06, 0.2])
+def test_approach_depth_stops_at_the_ground_or_the_palm(height, sdf_cache):
+    # Top-down poses over a 40 × 50 mm box standing on the ground, fingers open 30 mm each (outside its
+    # 25-mm half-width), 10, 30 and 50 mm above where they would stop. The depth fit moves the gripper down to the first stop along
+    # the approach, DEPTH_CLEARANCE (c) short of it: the fingertips c above the ground when the box is
+    # shorter than the fingers (z_tip = c, z_palm = c + L), else the palm's lower face c above the
+    # box's top (z_palm = top + c: the fingers hang from that face).
+    box = box_object((0.04, 0.05, height), 100.0)
+    top = scene_offset(box)[2] + 0.5 * height
+    L = FingerDesign().length
+    T = np.tile(np.eye(4), (3, 1, 1))
+    T[:, 2, 3] = max(top, L) + DEPTH_CLEARANCE + np.array([0.01, 0.03, 0.05])
+    sdf = ObjectSDF(box.mesh, cache_dir=sdf_cache)
+    deep = approach_depth(box, T, np.full((3, 2), 0.03), sdf=sdf)
+    np.testing.assert_array_equal(deep[:, :3, :3], T[:, :3, :3])  # moved along the approach only
+    np.testing.assert_allclose(deep[:, :2, 3], T[:, :2, 3], atol=1e-12)
+    g = RigidGripper.build(FingerDesign(), 0.002)
+    x = g.world(deep[:, :3, :3], deep[:, :3, 3], np.full((3, 2), 0.03))
+    if height < L:
+        np.testing.assert_allclose(x[:, g.side != 0, 2].min(axis=1), DEPTH_CLEARANCE, atol=_TOL_DEPTH)
+    else:
+        np.testing.assert_allclose(deep[:, 2, 3], top + DEPTH_CLEARANCE, atol=_TOL_DEPTH)
+    # Then the fingers close onto the box's 50-mm faces at that depth.
+    r = refine(box, deep, np.full((3, 2), 0.03), sdf=sdf, fixed_offset=True)
+    np.testing.assert_array_equal(r.matrices, deep)
+    assert np.all(np.abs(r.gap) <= _TOL_TOUCH) and np.all(r.min_signed_distance >= -MAX_PENETRATION)
+    # Without the depth fit, the depth stays near where it started (10-50 mm above those stops).
+    fixed = refine(box, T, np.full((3, 2), 0.03), sdf=sdf)
+    np.testing.assert_allclose(fixed.matrices[:, 2, 3], T[:, 2, 3], atol=_TOL_FIXED_DEPTH)
 
 
 def test_noise_augmentation_sigma():
@@ -304,6 +343,47 @@ def test_cli_poses_json_then_grasp(tmp_path):
     assert r.returncode == 0, r.stderr
     g = json.loads(r.stdout)
     np.testing.assert_allclose(g["openings"], res["poses"][0]["openings"])
+
+
+def _anygrasp_rows(n: int) -> np.ndarray:
+    """``n`` AnyGrasp grasps of a box centred at its vertex mean, straight down (authors' camera frame),
+    40 mm above the ground, closing across the box's sides (alternately along y and x), shifted 0-4 mm."""
+    rows = np.tile(np.eye(4), (n, 1, 1))
+    for k in range(n):
+        a = np.deg2rad(90.0 * (k % 2))
+        closing = [np.sin(a), np.cos(a), 0.0]
+        rows[k, :3, :3] = np.column_stack([[0, 0, 1.0], closing, np.cross([0, 0, 1.0], closing)])
+        rows[k, :3, 3] = [0.002 * (k % 3), 0.001 * (k % 4), 0.5 - 0.04]
+    return rows
+
+
+def test_cli_import_keeps_every_row_in_source_order(tmp_path):
+    # 12 rows (more than the sampler's default 10): all kept, in the file's order, each with its row.
+    box = tmp_path / "box.stl"
+    trimesh.creation.box(extents=_BOX).export(box)
+    grasps = tmp_path / "g.npz"
+    np.savez(grasps, T_pose=_anygrasp_rows(12))
+    r = _cli(tmp_path, "poses", "--object", str(box), "--import", str(grasps), "--json")
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    kept = [p["source_index"] for p in res["poses"]]
+    refused = [p["source_index"] for p in res["refused"]]
+    assert kept == sorted(kept) and sorted(kept + refused) == list(range(12))
+    assert len(kept) > 10, res["refused"]
+
+
+def test_import_order_and_head(box, sdf_cache):
+    from mjcodesign.poses import import_anygrasp
+
+    src = np.asarray(box.mesh.vertices) + box.com_offset
+    c = import_anygrasp(box, _anygrasp_rows(6), src, augment=1, cache_dir=sdf_cache)
+    ordered = c.in_source_order()
+    pairs = list(zip(ordered.source_index.tolist(), ordered.copy_index.tolist(), strict=True))
+    assert pairs == sorted(pairs) and len(ordered) == len(c)
+    # The same poses, rows moved whole: each matrix keeps its score.
+    for i, j in enumerate(np.lexsort((c.copy_index, c.source_index))):
+        np.testing.assert_array_equal(ordered.matrices[i], c.matrices[j])
+        assert ordered.scores[i] == c.scores[j]
 
 
 @pytest.mark.parametrize("case", ["nan", "big", "empty_cloud"])

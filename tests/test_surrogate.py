@@ -20,6 +20,12 @@ from numpy.testing import assert_array_equal
 
 from mjcodesign.cli import surrogate as cli_surrogate
 from mjcodesign.data import DatagenConfig, generate, parse_density_spec
+from mjcodesign.errors import DesignError
+from mjcodesign.evaluation import SuiteRun, build_suite, parse_design_groups, run_suite
+from mjcodesign.evaluation.candidates import ObjectCandidates, predict_candidates
+from mjcodesign.evaluation.suite import deal_folds, load_suite, suite_folds
+from mjcodesign.jobs import load_grasp_object
+from mjcodesign.objects import YCB_IN_DOMAIN
 from mjcodesign.scenarios.grasp import GraspScenario
 from mjcodesign.surrogate import (
     DesignLoss,
@@ -30,6 +36,10 @@ from mjcodesign.surrogate import (
     Poses,
     Surrogate,
     TrainConfig,
+    dataset_warnings,
+    fold_splits,
+    load_any,
+    load_folds,
     load_grasp_data,
     load_surrogate,
     normalize_clouds,
@@ -52,6 +62,8 @@ _TRAIN = TrainConfig(
     early_stop_patience=40,
     seed=0,
 )
+_TINY_ARGS = ("--epochs", "2", "--batch-size", "16", "--hidden", "16", "--depth", "1", "--penultimate", "8",
+              "--point-widths", "8,16", "--threads", "1")  # fmt: skip
 _TRAIN_FALL = 0.7  # training loss after / before training (mean over the training samples)
 _FD_STEP = 1e-6  # [ln E] central differences of a float64 network
 _TOL_FD = 1e-5  # relative: float64 central differences, O(h²) error and round-off ~1e-10 / h
@@ -440,3 +452,135 @@ def test_smoothness_slope_correlation_is_none_where_undefined():
     )
     assert _correlation(np.array([1.0, 2.0]), np.array([3.0, 3.0])) is None  # a flat simulator: no r, no NaN
     assert _correlation(np.array([1.0]), np.array([2.0])) is None
+
+
+# -- K-fold surrogates, fine-tuning and the dataset warnings -------------------------------------
+
+
+def test_the_default_suite_s_folds_are_the_dealing_rule_and_k_fold_keeps_them():
+    suite = load_suite("default")
+    dealt = deal_folds(list(YCB_IN_DOMAIN), suite.folds, seed=suite.seed)
+    assert {o.name: o.fold for o in suite.objects if o.fold is not None} == dealt
+    folds = suite_folds(suite, ["013_apple", "025_mug", "mine", "theirs"], 5)
+    assert folds["013_apple"] == dealt["013_apple"] and folds["025_mug"] == dealt["025_mug"]
+    assert {folds["mine"], folds["theirs"]} <= set(range(5))
+    other = suite_folds(suite, ["013_apple", "025_mug", "mine"], 3)  # another K: all dealt afresh
+    assert sorted(other.values()) == [0, 1, 2]
+
+
+def test_fold_splits_hold_each_object_out_once(dataset):
+    data = load_grasp_data(dataset)
+    names = sorted(set(data.objects))
+    parts = fold_splits(data, {n: i for i, n in enumerate(names)})
+    assert [p.test_objects for p in parts] == [(n,) for n in names]
+    for p in parts:
+        seen = set(data.objects[data.pose[np.concatenate([p.train, p.val])]])
+        assert not seen & set(p.test_objects) and seen | set(p.test_objects) == set(names)
+    assert_array_equal(np.sort(np.concatenate([p.test for p in parts])), np.arange(len(data)))
+    with pytest.raises(DesignError):
+        fold_splits(data, {names[0]: 0})  # objects without a fold
+    with pytest.raises(DesignError):
+        fold_splits(data, dict.fromkeys(names, 0))  # one fold only
+
+
+def test_train_folds_writes_one_checkpoint_per_fold_and_evaluate_uses_the_one_that_never_saw_it(
+    dataset, work, cli
+):
+    out = work / "folds"
+    code, stdout, err = cli(
+        "train", "--data", str(dataset), "--out", str(out), "--folds", "3", *_TINY_ARGS, "--json"
+    )
+    assert code == 0, err
+    res = json.loads(stdout)
+    manifest = json.loads((out / "folds.json").read_text())
+    names = sorted(set(load_grasp_data(dataset).objects))
+    assert res["folds"] == 3 and res["held_out"]["objects"] == 3
+    assert sorted(n for f in manifest["folds"] for n in f["held_out"]) == names
+    for f in manifest["folds"]:
+        assert not set(f["held_out"]) & set(f["train_objects"])
+        assert load_surrogate(out / f["path"]).meta["split"]["test_objects"] == f["held_out"]
+    folds = load_any(out)
+    assert len(folds.surrogates) == 3
+    for k, f in enumerate(manifest["folds"]):
+        assert all(folds.fold_for(n) == k and folds.held_out_for(n) for n in f["held_out"])
+    assert folds.fold_for("013_apple") == 0 and not folds.held_out_for("013_apple")  # no fold saw it
+
+    files = [str(dataset.parent / f"{n}.stl") for n in names[:2]]
+    suite = build_suite(files, poses_per_object=2, seed=0)
+    run = SuiteRun(designs=parse_design_groups("soft"), perturbations=1, pose_policies=("surrogate",),
+                   scenario=_SCENARIO)  # fmt: skip
+    result = run_suite(suite, run, surrogate=folds, n_points=1024)
+    for so in suite.objects:
+        picked = result["surrogate_choice"][so.name]["light"]["soft"]
+        k = folds.fold_for(so.name)
+        assert picked["fold"] == k and picked["held_out"]
+        cands = ObjectCandidates(
+            load_grasp_object(so.source, "light"),
+            so.poses,
+            np.stack([p.matrix() for p in so.poses]),
+            so.pose_source,
+            np.arange(len(so.poses)),
+        ).with_clouds(1024, 0)
+        mine, _ = predict_candidates(folds.surrogates[k], cands, parse_design_groups("soft")[0].design, 100.0)
+        assert picked["scores"] == {int(i): float(s) for i, s in zip(cands.source_index, mine, strict=True)}
+
+
+def test_bad_folds_input_exits_2_with_one_line(dataset, work, cli, tmp_path):
+    for extra in (("--folds", "1"), ("--folds", "3", "--split", "random"), ("--folds", "4")):
+        out = tmp_path / "o"
+        code, stdout, err = cli("train", "--data", str(dataset), "--out", str(out), *extra, *_TINY_ARGS)
+        assert code == 2 and len(err) == 1 and "Traceback" not in err[0] and not out.exists(), (extra, err)
+    with pytest.raises(Exception, match="K-fold"):
+        load_folds(tmp_path)
+
+
+def test_fine_tuning_starts_from_the_checkpoint_and_keeps_its_normaliser(dataset, work, cli):
+    data = load_grasp_data(dataset)
+    parts = split(data, "random", seed=0)
+    tiny = ModelConfig(point_widths=(8, 16), hidden=16, depth=1, penultimate=8, dropout=0.0)
+    base = train(data, parts, TrainConfig(epochs=2, batch_size=16, seed=0), tiny)
+    still = TrainConfig(
+        epochs=1, batch_size=16, seed=1, optimizer=OptimizerConfig(lr=1e-12, weight_decay=0.0)
+    )
+    tuned = train(data, parts, still, init=(base.model, base.normalizer))
+    fresh = train(data, parts, still, tiny)
+    for name, w in base.model.named_parameters():
+        np.testing.assert_allclose(dict(tuned.model.named_parameters())[name].detach(), w.detach(), atol=1e-9)
+    assert any(
+        not torch.equal(w, dict(fresh.model.named_parameters())[n]) for n, w in base.model.named_parameters()
+    )
+    assert tuned.normalizer is base.normalizer and tuned.model is not base.model
+    with pytest.raises(DesignError):
+        train(data, parts, still, dataclasses.replace(tiny, hidden=32), init=(base.model, base.normalizer))
+    # The command: a checkpoint continued on a dataset; its normaliser is the initial one, recorded as such.
+    first, again = work / "first", work / "again"
+    assert cli("train", "--data", str(dataset), "--out", str(first), *_TINY_ARGS, "--efficiency", "0",
+               "--smoothness-poses", "0")[0] == 0  # fmt: skip
+    code, stdout, err = cli("train", "--init", str(first), "--data", str(dataset), "--out", str(again), "--epochs",
+                            "2", "--batch-size", "16", "--efficiency", "0", "--smoothness-poses", "0", "--json")  # fmt: skip
+    assert code == 0, err
+    a, b = json.loads((first / "config.json").read_text()), json.loads((again / "config.json").read_text())
+    assert b["normalizer"] == a["normalizer"] and b["model"] == a["model"]
+    assert b["init"]["path"] == str(first) and "kept" in b["init"]["normalizer"]
+    code, _, err = cli(
+        "train", "--init", str(first), "--data", str(dataset), "--out", str(work / "x"), *_TINY_ARGS
+    )
+    assert code == 2 and len(err) == 1 and "--hidden" in err[0] and not (work / "x").exists(), err
+
+
+def test_train_warns_of_a_one_sided_dataset_and_a_held_out_own_object(dataset, work, cli):
+    data = load_grasp_data(dataset)
+    parts = split(data, "object", seed=0)
+    lines = dataset_warnings(data, parts)
+    assert any("your own object" in ln and parts.test_objects[0] in ln for ln in lines)
+    assert not any("success rate" in ln for ln in lines) or not 0.05 <= data.success.mean() <= 0.95
+    full = dataclasses.replace(data, success=np.ones(len(data), dtype=bool))
+    none = dataclasses.replace(data, success=np.zeros(len(data), dtype=bool))
+    assert any("100.0%" in ln and "above 95%" in ln for ln in dataset_warnings(full))
+    assert any("0.0%" in ln and "below 5%" in ln for ln in dataset_warnings(none))
+    assert dataset_warnings(full, split(data, "random", seed=0)) == dataset_warnings(
+        full
+    )  # no object held out
+    code, _, err = cli("train", "--data", str(dataset), "--out", str(work / "warned"), *_TINY_ARGS, "--efficiency", "0",
+                       "--smoothness-poses", "0")  # fmt: skip
+    assert code == 0 and sum(ln.startswith("warning: your own object") for ln in err) == 1, err

@@ -12,7 +12,7 @@ import sys
 import time
 from pathlib import Path
 
-from mjcodesign.cli.common import emit, finite_float, int_at_least, path_text, user_cache_dir
+from mjcodesign.cli.common import add_mass_mode, emit, finite_float, int_at_least, path_text, user_cache_dir
 
 __all__ = ["add_bench_parser", "add_parser", "run", "run_bench"]
 
@@ -20,6 +20,7 @@ _RECORDED_PER_DESIGN = 2  # best and worst rollouts per design re-run into --rrd
 _QUICK_OBJECTS = "012_strawberry,013_apple,025_mug,egad-like:1,egad-like:7"  # 3 in-domain, 2 out
 _QUICK_POSES = 2
 _QUICK_PERTURBATIONS = 2
+_EGAD_DEFAULT = 60  # egad-like shapes of a bare --egad-like: about the in-domain count, for a like interval
 
 
 def add_parser(subparsers) -> None:
@@ -90,6 +91,17 @@ def add_parser(subparsers) -> None:
         "--ckpt", type=path_text, default=None, help="surrogate checkpoint (for --pose-sampling surrogate)"
     )
     p.add_argument("--density", default="light", help="comma-separated densities: light, heavy or kg/m³")
+    add_mass_mode(p, "one regime 'real' in place of --density (an object without one is refused up front)")
+    p.add_argument(
+        "--egad-like",
+        type=int_at_least(0),
+        nargs="?",
+        const=_EGAD_DEFAULT,
+        default=0,
+        metavar="N",
+        help=f"add N procedural egad-like shapes (N: {_EGAD_DEFAULT} when omitted) to the out-of-domain split, "
+        "posed now with the suite's seed; their indices follow the suite's own egad-like shapes",
+    )
     p.add_argument(
         "--impulse", default="0.1", help="disturbances in the paper's units [N s], comma-separated (a sweep)"
     )
@@ -155,7 +167,12 @@ def _run_config(args: argparse.Namespace):
     densities = parse_list(args.density, "density")
     for d in densities:
         parse_density(d)
+    if args.mass == "real" and args.density != "light":
+        from mjcodesign.errors import DesignError
+
+        raise DesignError("--mass real sets each object's density from its published mass: drop --density")
     return SuiteRun(
+        mass=args.mass,
         designs=parse_design_groups(args.designs),
         perturbations=_QUICK_PERTURBATIONS if args.quick else args.perturbations,
         densities=densities,
@@ -169,7 +186,7 @@ def _run_config(args: argparse.Namespace):
 def _suite_source(args: argparse.Namespace):
     """('file', suite) or ('build', (names, poses per object, perturbation model)), all checked."""
     from mjcodesign.errors import DesignError
-    from mjcodesign.evaluation.suite import PerturbationModel, load_suite
+    from mjcodesign.evaluation.suite import PerturbationModel, egad_sources, load_suite
 
     adhoc = args.objects is not None or args.quick
     if sum((args.suite is not None, args.objects is not None, args.quick)) > 1:
@@ -193,7 +210,7 @@ def _suite_source(args: argparse.Namespace):
         return "file", load_suite(args.suite or "default")
     names = _names(_QUICK_OBJECTS if args.quick else args.objects)
     poses = _QUICK_POSES if args.quick else args.poses_per_object
-    return "build", (names, poses, ranges)
+    return "build", ((*names, *egad_sources(args.egad_like, names)), poses, ranges)
 
 
 def _trim(suite, n: int | None):
@@ -209,13 +226,17 @@ def run(args: argparse.Namespace) -> int:
     """Run ``evaluate``; library errors propagate (exit 2 there)."""
     from mjcodesign.errors import DesignError, OutputError
     from mjcodesign.evaluation.analysis import analyse
-    from mjcodesign.evaluation.rollouts import record_suite_examples, run_suite
-    from mjcodesign.evaluation.suite import build_suite
+    from mjcodesign.evaluation.rollouts import check_real_masses, record_suite_examples, run_suite
+    from mjcodesign.evaluation.suite import add_objects, build_suite, egad_sources
     from mjcodesign.evaluation.suite_report import suite_header, write_suite_report
     from mjcodesign.outputs import OutputKind, check_output
 
     run_cfg = _run_config(args)
     kind, source = _suite_source(args)
+    if run_cfg.mass == "real":  # refused before any folder or work
+        check_real_masses(source[0] if kind == "build" else [o.source for o in source.objects])
+        if kind == "file" and args.egad_like:
+            check_real_masses(egad_sources(args.egad_like, [o.source for o in source.objects]))
     folder = check_output(
         args.out,
         OutputKind.EVALUATION,
@@ -234,9 +255,9 @@ def run(args: argparse.Namespace) -> int:
             raise DesignError(
                 "--pose-sampling surrogate needs --ckpt DIR (a checkpoint from `mjcodesign train`)"
             )
-        from mjcodesign.surrogate import load_surrogate
+        from mjcodesign.surrogate import load_any
 
-        surrogate = load_surrogate(args.ckpt)
+        surrogate = load_any(args.ckpt)  # one checkpoint, or the K networks of `train --folds`
         n_points = int(surrogate.meta["dataset"]["cloud_points"])
     cache = user_cache_dir()
     t0 = time.perf_counter()
@@ -258,6 +279,16 @@ def run(args: argparse.Namespace) -> int:
                 suite = suite.save(args.save_suite)
         else:
             suite = source
+            if args.egad_like:
+                sources = egad_sources(args.egad_like, [o.source for o in suite.objects])
+                suite = add_objects(
+                    suite,
+                    sources,
+                    label=f"egad-like:{args.egad_like}",
+                    cache_dir=cache,
+                    progress=lambda s, d, t: progress("posing egad-like objects", d, t),
+                    warn=_warn,
+                )
         suite = _trim(suite, args.candidates)
         result = run_suite(
             suite,
@@ -276,18 +307,21 @@ def run(args: argparse.Namespace) -> int:
     meta = {
         "designs": labels,
         "perturbations": run_cfg.perturbations,
-        "densities": list(run_cfg.densities),
+        "densities": ["real"] if run_cfg.mass == "real" else list(run_cfg.densities),
         "impulses_paper_ns": list(run_cfg.impulses),
         "pose_policies": list(run_cfg.pose_policies),
         "model": run_cfg.model,
         "seed": run_cfg.seed,
         "perturbation_model": suite.perturbation.as_dict(),
         "checkpoint": args.ckpt,
+        "mass": run_cfg.mass,
         "command": args.command_line,
         "wall_time_s": wall,
         "rollout_wall_time_s": result["wall_time_s"],
         "rollouts_per_s": len(result["rows"]) / max(result["wall_time_s"], 1e-9),
     }
+    if hasattr(surrogate, "for_object"):
+        meta["checkpoint_folds"] = _fold_use(result["surrogate_choice"], suite, len(surrogate.surrogates))
     if args.rrd:
         from mjcodesign.cli.viz import open_recorder
 
@@ -304,6 +338,17 @@ def run(args: argparse.Namespace) -> int:
     summary["out"] = str(args.out)
     emit(summary if args.json else _flat(summary), args.json)
     return 0
+
+
+def _fold_use(choice: dict, suite, folds: int) -> dict:
+    """Per domain: objects scored by a fold network that held them out, and objects no fold trained on."""
+    out = {"folds": folds}
+    for o in suite.objects:
+        entries = [e for per_density in choice.get(o.name, {}).values() for e in per_density.values()]
+        if entries:
+            d = out.setdefault(o.domain, {"held_out": 0, "unseen": 0})
+            d["held_out" if entries[0]["held_out"] else "unseen"] += 1
+    return out
 
 
 def _warn(message: str) -> None:

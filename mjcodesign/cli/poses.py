@@ -16,6 +16,7 @@ from mjcodesign.cli.common import int_at_least, path_text, user_cache_dir
 __all__ = ["add_parser", "add_bench_parser", "run", "run_bench", "poses"]
 
 _DEFAULT_BENCH_OBJECTS = "012_strawberry,013_apple,005_tomato_soup_can,010_potted_meat_can"
+_DEFAULT_N = 10  # sampled poses returned when --n is not given
 
 
 def add_parser(subparsers) -> argparse.ArgumentParser:
@@ -29,7 +30,20 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         type=path_text,
         help="YCB name (e.g. 025_mug), egad-like:N, or an OBJ/STL/PLY file",
     )
-    p.add_argument("--n", type=int_at_least(1), default=10, help="poses to return (best first)")
+    p.add_argument(
+        "--n",
+        type=int_at_least(1),
+        default=None,
+        help=f"poses to return: sampled ones best first (default {_DEFAULT_N}); with --import the first N "
+        "rows in --order (default: every row)",
+    )
+    p.add_argument(
+        "--order",
+        choices=("source", "rank"),
+        default="source",
+        help="with --import: rows in the file's order (source) or best first (rank); refused rows are "
+        "listed under 'refused'",
+    )
     p.add_argument("--seed", type=int, default=0, help="seeds the surface samples, picks, tilts and noise")
     p.add_argument(
         "--top-fraction",
@@ -49,6 +63,12 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         default=None,
         help="refine external candidates instead of sampling: AnyGrasp .npz (T_pose, N×4×4), .npy 4×4 / "
         "N×4×4 / N×17, or text rows of 17 GraspNet floats, in the authors' camera frame",
+    )
+    p.add_argument(
+        "--fit-depth",
+        action="store_true",
+        help="the refinement also sets the depth along the approach (the paper's L_init): every finger "
+        "point pulled towards the object or the ground, fingertips stopping 2 mm above the ground",
     )
     p.add_argument(
         "--point-cloud",
@@ -110,16 +130,22 @@ def add_bench_parser(bench_subparsers) -> argparse.ArgumentParser:
 
 def poses(
     source: str,
-    n: int = 10,
+    n: int | None = None,
     seed: int = 0,
     *,
+    order: str = "source",
     top_fraction: float = 0.0,
     augment: int = 0,
     import_file: str | None = None,
     point_cloud: str | None = None,
     allow_open: bool = False,
+    fit_depth: bool = False,
 ):
-    """(object, candidates) for the ``poses`` command."""
+    """(object, candidates) for the ``poses`` command.
+
+    ``n``: sampled poses (default ``_DEFAULT_N``), or the first ``n`` imported rows (default: all) in
+    ``order``: ``source`` (the file's rows, each followed by its noisy copies) or ``rank`` (best first).
+    """
     import numpy as np
 
     from mjcodesign.errors import PoseError
@@ -151,11 +177,20 @@ def poses(
             augment=augment,
             source=Path(import_file).name,
             cache_dir=user_cache_dir(),
+            fit_depth=fit_depth,
         )
-        return obj, cands.head(n)
-    options = SamplerOptions(top_fraction=top_fraction, augment=augment)
+        if order == "source":
+            cands = cands.in_source_order()
+        return obj, cands if n is None else cands.head(n)
+    options = SamplerOptions(top_fraction=top_fraction, augment=augment, fit_depth=fit_depth)
     return obj, sample_poses(
-        obj, n, seed=seed, options=options, points=points, normals=normals, cache_dir=user_cache_dir()
+        obj,
+        _DEFAULT_N if n is None else n,
+        seed=seed,
+        options=options,
+        points=points,
+        normals=normals,
+        cache_dir=user_cache_dir(),
     )
 
 
@@ -167,11 +202,13 @@ def run(args: argparse.Namespace) -> int:
         args.object,
         args.n,
         args.seed,
+        order=args.order,
         top_fraction=args.top_fraction,
         augment=args.augment,
         import_file=args.import_file,
         point_cloud=args.point_cloud,
         allow_open=args.allow_open,
+        fit_depth=args.fit_depth,
     )
     if not cands.as_dicts():  # e.g. an object wider than every opening once refined
         top = sorted(cands.rejected.items(), key=lambda kv: -kv[1])[:3]
@@ -191,6 +228,20 @@ def run(args: argparse.Namespace) -> int:
         # On stderr: with --json, stdout holds the JSON alone.
         print(f"wrote {len(cands.as_dicts())} poses of {obj.name} to {out}", file=sys.stderr)
     result = {"object": obj.name, "poses": cands.as_dicts(), "rejected": cands.rejected}
+    asked = args.n if args.n is not None or args.import_file is not None else _DEFAULT_N
+    if asked is not None and len(cands) < asked:  # fewer than asked: say so, and why
+        top = sorted(cands.rejected.items(), key=lambda kv: (-kv[1], kv[0]))[:3]
+        why = ", ".join(f"{k} {v}" for k, v in top) or "no more candidates"
+        what = "rows accepted" if args.import_file is not None else "candidates accepted"
+        result["short"] = {
+            "asked": asked,
+            "returned": len(cands),
+            "reason": f"{len(cands)} {what} (most rejections: {why})",
+        }
+        print(
+            f"warning: {len(cands)} of {asked} poses for {obj.name}: {result['short']['reason']}",
+            file=sys.stderr,
+        )
     if cands.source != "sampler":  # an import names its file and every row it refused
         result.update(source=cands.source, refused=cands.refused_dicts())
     if args.json:
@@ -198,7 +249,8 @@ def run(args: argparse.Namespace) -> int:
     elif args.out is None:
         for i, row in enumerate(result["poses"]):
             print(
-                f"{i:3d} score {row['score']:.3f} openings {row['openings']} sd {row['min_signed_distance_m']:.2e}"
+                f"{i:3d} source {row['source_index']}/{row['copy_index']} score {row['score']:.3f} "
+                f"openings {row['openings']} sd {row['min_signed_distance_m']:.2e}"
             )
         print("rejected", result["rejected"])
     return 0

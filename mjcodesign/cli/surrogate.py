@@ -20,6 +20,7 @@ from mjcodesign.cli.common import (
     path_text,
     user_cache_dir,
 )
+from mjcodesign.errors import DesignError
 
 __all__ = ["add_bench_parser", "add_parser", "run_bench", "run_predict", "run_smoothness", "run_train"]
 
@@ -115,6 +116,21 @@ def add_parser(subparsers) -> None:
         "--threads", type=int_at_least(1), default=None, help="torch CPU threads (default: torch's)"
     )
     t.add_argument("--tensorboard", type=path_text, default=None, help="also write TensorBoard events to DIR")
+    t.add_argument(
+        "--folds",
+        type=int_at_least(2),
+        default=None,
+        help="train K surrogates on an object-level K-fold split (the default evaluation suite's folds for "
+        "its in-domain objects when K is theirs, the other objects dealt by --seed), each object held out "
+        "once; writes foldK/ checkpoints and folds.json (no efficiency or smoothness runs)",
+    )
+    t.add_argument(
+        "--init",
+        type=path_text,
+        default=None,
+        help="continue from this checkpoint (fine-tuning on --data): its architecture and its normaliser "
+        "are kept, not refitted; give no model options",
+    )
     t.add_argument("--json", action="store_true")
     t.set_defaults(func=run_train)
 
@@ -181,6 +197,7 @@ def run_train(args: argparse.Namespace) -> int:
         TensorBoardLog,
         TrainConfig,
         train_and_report,
+        train_folds,
     )
 
     if args.threads:
@@ -189,6 +206,14 @@ def run_train(args: argparse.Namespace) -> int:
         **_fields(args, _TRAIN_OPTIONS), optimizer=OptimizerConfig(**_fields(args, _OPTIMIZER_OPTIONS))
     )
     mcfg = ModelConfig(**_fields(args, _MODEL_OPTIONS), frame_inputs=not args.no_frame_inputs)
+    if args.init is not None:
+        changed = [f for f, dest, _, default, _ in _MODEL_OPTIONS if getattr(args, dest) != default]
+        if changed or args.no_frame_inputs:
+            raise DesignError(
+                f"--init keeps the checkpoint's architecture: drop {', '.join(changed or ['--no-frame-inputs'])}"
+            )
+        mcfg = None
+    fold_of = _fold_of(args) if args.folds is not None else None
     if args.tensorboard:
         TensorBoardLog.check()  # a missing package is refused before any work
     boards: list = []  # the event writer, made at the first epoch (bad input leaves no file behind)
@@ -211,6 +236,11 @@ def run_train(args: argparse.Namespace) -> int:
                         boards.append(TensorBoardLog(args.tensorboard))
                     boards[0](log)
 
+            if fold_of is not None:
+                m = train_folds(args.data, args.out, fold_of, overwrite=args.overwrite, config=cfg,
+                                model_config=mcfg, init=args.init, on_epoch=on_epoch, warn=_warn)  # fmt: skip
+                emit(_folds_summary(args, m), args.json)
+                return 0
             m = train_and_report(
                 args.data,
                 args.out,
@@ -223,6 +253,8 @@ def run_train(args: argparse.Namespace) -> int:
                 smoothness_lines=args.smoothness_lines,
                 cache_dir=user_cache_dir(),
                 on_epoch=on_epoch,
+                init=args.init,
+                warn=_warn,
             )
     finally:
         for board in boards:
@@ -243,6 +275,40 @@ def run_train(args: argparse.Namespace) -> int:
         res["efficiency_test_loss"] = m["efficiency"]["test"]["loss"]
     emit(res, args.json)
     return 0
+
+
+def _warn(message: str) -> None:
+    print(f"warning: {message}", file=sys.stderr, flush=True)
+
+
+_FOLDS_REFUSES = (("--split", "split", "object"), ("--efficiency", "efficiency", 0.25),
+                  ("--tensorboard", "tensorboard", None))  # fmt: skip
+
+
+def _fold_of(args: argparse.Namespace) -> dict[str, int]:
+    """``--folds K``: each dataset object's fold (:func:`~mjcodesign.evaluation.suite.suite_folds`)."""
+    from mjcodesign.data import open_dataset
+    from mjcodesign.evaluation.suite import load_suite, suite_folds
+
+    bad = [flag for flag, dest, default in _FOLDS_REFUSES if getattr(args, dest) != default]
+    if bad:
+        raise DesignError(f"--folds trains no {', '.join(bad)} run: drop {', '.join(bad)}")
+    objects = open_dataset(args.data).manifest.get("objects", ())
+    names = [str(o["name"]) for o in objects if o.get("status") == "ready"]
+    fold_of = suite_folds(load_suite("default"), names, args.folds, seed=args.seed)
+    filled = len(set(fold_of.values()))
+    if filled < args.folds:
+        raise DesignError(
+            f"--folds {args.folds}: the dataset's {len(names)} objects fill {filled} of the folds "
+            "(each fold holds out at least one object)"
+        )
+    return fold_of
+
+
+def _folds_summary(args: argparse.Namespace, m: dict) -> dict:
+    per_fold = [{"fold": f["path"], "held_out": len(f["held_out"]), "test_loss": f["test"]["loss"],
+                 "success_roc_auc": f["test"]["success"]["roc_auc"]} for f in m["folds"]]  # fmt: skip
+    return {"out": args.out, "folds": len(m["folds"]), "held_out": m["held_out"], "per_fold": per_fold}
 
 
 def run_predict(args: argparse.Namespace) -> int:

@@ -19,20 +19,27 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mjcodesign.design.stiffness import Stiffness
-from mjcodesign.errors import DesignError, MjcodesignError, PoseError
+from mjcodesign.errors import DesignError, MeshError, MjcodesignError, PoseError
 from mjcodesign.evaluation.candidates import ObjectCandidates, predict_candidates
 from mjcodesign.evaluation.config import DesignGroup
 from mjcodesign.evaluation.suite import Suite, SuiteObject
 from mjcodesign.jobs import GraspJob, SceneCache, load_grasp_object, run_jobs
 from mjcodesign.models.types import FingerModel
-from mjcodesign.objects import parse_density
+from mjcodesign.objects import MASS_MODES, parse_density, published_mass
 from mjcodesign.poses.candidates import MAX_PENETRATION
 from mjcodesign.scenarios.grasp import GraspScenario, paper_impulse, scene_at_pose
 from mjcodesign.scenarios.outcome import Outcome
 from mjcodesign.scenarios.perturb import Perturbation, perturbed_scene, start_penetration
 from mjcodesign.sim.protocol import get_backend
 
-__all__ = ["MAX_REDRAWS", "POSE_POLICIES", "SuiteRun", "record_suite_examples", "run_suite"]
+__all__ = [
+    "MAX_REDRAWS",
+    "POSE_POLICIES",
+    "SuiteRun",
+    "check_real_masses",
+    "record_suite_examples",
+    "run_suite",
+]
 
 POSE_POLICIES = ("fixed", "surrogate", "oracle")
 """``fixed``: each object's first pose; ``surrogate``: the surrogate's best pose for the design;
@@ -56,6 +63,9 @@ class SuiteRun:
     impulses: tuple[float, ...] = (0.1,)
     """Disturbances in the paper's units [N s] (``paper_impulse`` maps them); the first is the table's."""
     pose_policies: tuple[str, ...] = ("fixed",)
+    mass: str = "density"
+    """``density``: each object at every density of ``densities``; ``real``: each object at its
+    published mass instead (one regime, ``real``; objects without one are refused)."""
     model: str = "chain"
     seed: int = 0
     """Seed of the perturbation draws."""
@@ -76,6 +86,8 @@ class SuiteRun:
         for p in self.pose_policies:
             if p not in POSE_POLICIES:
                 raise DesignError(f"pose sampling {p!r}: choose from {', '.join(POSE_POLICIES)}")
+        if self.mass not in MASS_MODES:
+            raise DesignError(f"mass {self.mass!r}: choose from {', '.join(MASS_MODES)}")
         if isinstance(self.seed, bool) or int(self.seed) < 0:
             raise DesignError(f"seed must be >= 0, got {self.seed}")
         FingerModel(self.model)
@@ -84,6 +96,29 @@ class SuiteRun:
     def needs_surrogate(self) -> bool:
         """Whether a checkpoint is needed (``surrogate`` pose policy)."""
         return "surrogate" in self.pose_policies
+
+
+def check_real_masses(sources) -> None:
+    """Raise :class:`MeshError` (one line) when an object of ``sources`` has no published mass."""
+    missing = []
+    for src in sources:
+        try:
+            published_mass(str(src))
+        except MeshError:
+            missing.append(str(src))
+    if missing:
+        raise MeshError(
+            f"--mass real: {len(missing)} object{'s' if len(missing) > 1 else ''} without a published mass "
+            f"({', '.join(missing[:4])}{', …' if len(missing) > 4 else ''}): evaluate them at a --density, "
+            "or leave them out"
+        )
+
+
+def _regimes(run: SuiteRun, so: SuiteObject, obj, densities: list) -> list[tuple[str, float]]:
+    """(label, density [kg/m³]) of each regime of one object: ``run``'s densities, or its published mass."""
+    if run.mass != "real":
+        return densities
+    return [("real", published_mass(so.source).mass * obj.density / obj.mass)]  # mass / volume
 
 
 def _draws(
@@ -126,7 +161,15 @@ def _outcome_row(o: Outcome, scenario: GraspScenario) -> dict:
 
 
 def _surrogate_choice(surrogate, obj, so: SuiteObject, run: SuiteRun, rho: float, n_points: int) -> dict:
-    """Per design label: the pose the surrogate scores best (suite pose index) and every pose's score."""
+    """Per design label: the pose the surrogate scores best (suite pose index) and every pose's score.
+
+    K-fold surrogates (:class:`~mjcodesign.surrogate.FoldSurrogates`) score the object with the fold
+    that never trained on it; the choice records that fold and whether the object was in their data.
+    """
+    fold = {}
+    if hasattr(surrogate, "for_object"):
+        fold = {"fold": surrogate.fold_for(so.name), "held_out": surrogate.held_out_for(so.name)}
+        surrogate = surrogate.for_object(so.name)
     cands = ObjectCandidates(
         obj,
         so.poses,
@@ -143,6 +186,7 @@ def _surrogate_choice(surrogate, obj, so: SuiteObject, run: SuiteRun, rho: float
         out[g.label] = {
             "pose": best,
             "scores": {int(i): float(s) for i, s in zip(cands.source_index, scores, strict=True)},
+            **fold,
         }
     return out
 
@@ -159,12 +203,16 @@ def run_suite(
 ) -> dict:
     """Run every rollout; ``{"rows": [...], "objects": [...], "surrogate_choice": {...}, "wall_time_s"}``.
 
+    ``surrogate``: a :class:`~mjcodesign.surrogate.Surrogate`, or K-fold surrogates (one per object).
+
     Rows are in a fixed order (object, density, impulse, pose, draw, design) and hold no wall time, so
     the same suite and seed give identical rows. An object that cannot be loaded is reported in
     ``objects`` with its error and left out (``warn`` receives one line).
     """
     if run.needs_surrogate and surrogate is None:
         raise DesignError("the surrogate pose policy needs a checkpoint (--ckpt)")
+    if run.mass == "real":
+        check_real_masses(o.source for o in suite.objects)
     backend = get_backend("mujoco")
     t0 = time.perf_counter()
     rows: list[dict] = []
@@ -179,7 +227,8 @@ def run_suite(
             if warn:
                 warn(f"{so.name}: left out ({type(exc).__name__}: {exc})")
             continue
-        scenes = SceneCache(size=len(densities) * len(run.impulses) + 1)
+        regimes = _regimes(run, so, obj, densities)
+        scenes = SceneCache(size=len(regimes) * len(run.impulses) + 1)
         first = GraspJob(
             obj=obj,
             pose=so.poses[0],
@@ -189,7 +238,7 @@ def run_suite(
             ),
             finger_model=run.model,
             scenario=run.scenario,
-            density=densities[0][1],
+            density=regimes[0][1],
         )
         base = scenes.scene(first)
         draws, redrawn, given_up = [], 0, 0
@@ -205,7 +254,7 @@ def run_suite(
             redrawn += r
             given_up += sum(x is None for x in d)
         jobs, meta = [], []
-        for dens, rho in densities:
+        for dens, rho in regimes:
             if surrogate is not None:
                 choice.setdefault(so.name, {})[dens] = _surrogate_choice(
                     surrogate, obj, so, run, rho, n_points

@@ -26,8 +26,8 @@ import hashlib
 import json
 import math
 import zlib
-from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 
@@ -35,7 +35,7 @@ import numpy as np
 
 from mjcodesign.errors import DesignError, MjcodesignError
 from mjcodesign.models.types import GripperPose
-from mjcodesign.objects import YCB_IN_DOMAIN
+from mjcodesign.objects import YCB_IN_DOMAIN, parse_egad_index
 from mjcodesign.scenarios.perturb import Perturbation
 
 __all__ = [
@@ -46,8 +46,12 @@ __all__ = [
     "Suite",
     "SuiteError",
     "SuiteObject",
+    "add_objects",
     "build_suite",
+    "deal_folds",
+    "egad_sources",
     "load_suite",
+    "suite_folds",
 ]
 
 SUITE_FORMAT = "mjcodesign-eval-suite"
@@ -59,6 +63,7 @@ DEFAULT_SUITE = "default-v1"
 DEFAULT_FOLDS = 5
 """Object-level folds of the in-domain objects (``fold``), for K-fold held-out surrogates."""
 _PERTURB_STREAM = 0x5E7  # the perturbation draws' own random stream, apart from the suite's pose seed
+_FOLD_STREAM = 0xF01D  # the folds' own random stream
 
 
 class SuiteError(MjcodesignError):
@@ -200,8 +205,6 @@ class Suite:
 
 
 def _with_digest(suite: Suite, raw: bytes) -> Suite:
-    from dataclasses import replace
-
     return replace(suite, digest=hashlib.sha256(raw).hexdigest())
 
 
@@ -266,6 +269,108 @@ def load_suite(source: str | Path) -> Suite:
 Progress = Callable[[str, int, int], None]
 
 
+def deal_folds(
+    names: Sequence[str], folds: int, *, seed: int = 0, fixed: Mapping[str, int] | None = None
+) -> dict[str, int]:
+    """Object-level folds of ``names``: object → fold in 0..folds-1.
+
+    ``fixed`` objects keep their fold; the others, sorted by name, are dealt into ``folds`` folds in a
+    seeded order (object i of the order goes to fold ``i % folds``).
+    """
+    if isinstance(folds, bool) or int(folds) < 2:
+        raise DesignError(f"folds must be >= 2, got {folds}")
+    fixed = {n: int(fixed[n]) for n in names if fixed and n in fixed}
+    free = sorted(set(names) - set(fixed))
+    order = np.random.default_rng([seed, _FOLD_STREAM]).permutation(len(free))
+    return {**fixed, **{free[j]: int(i % folds) for i, j in enumerate(order)}}
+
+
+def suite_folds(suite: Suite, names: Sequence[str], folds: int, *, seed: int = 0) -> dict[str, int]:
+    """Folds of ``names`` for a K-fold surrogate.
+
+    The suite's own folds where it has ``folds`` of them, so that each suite object is held out by the
+    fold the suite gives it; other objects are dealt (:func:`deal_folds`, ``seed``).
+    """
+    own = {o.name: o.fold for o in suite.objects if o.fold is not None} if suite.folds == folds else {}
+    return deal_folds(names, folds, seed=seed, fixed=own)
+
+
+def _pose_objects(sources, poses_per_object, seed, fold_of, anygrasp, cache_dir, progress, warn) -> list:
+    """A :class:`SuiteObject` per source that loads and poses (a warning for each one left out)."""
+    from mjcodesign.evaluation.candidates import object_candidates
+    from mjcodesign.jobs import load_grasp_object
+
+    objects = []
+    for i, src in enumerate(sources):
+        try:
+            obj = load_grasp_object(src, "light", seed=seed, cache_dir=cache_dir)
+            cands = object_candidates(
+                obj, poses_per_object, seed=seed, anygrasp=anygrasp, cache_dir=cache_dir
+            )
+        except MjcodesignError as exc:
+            if warn:
+                warn(f"{src}: left out of the suite ({type(exc).__name__}: {exc})")
+            cands = None
+        if cands is not None:
+            note = ""
+            if len(cands) < poses_per_object:
+                note = f"{len(cands)} of {poses_per_object} poses: the sampler accepted no more"
+                if warn:
+                    warn(f"{obj.name}: {note}")
+            objects.append(
+                SuiteObject(
+                    name=obj.name,
+                    source=str(src),
+                    domain="in-domain" if src in YCB_IN_DOMAIN else "out-of-domain",
+                    fold=fold_of.get(src),
+                    poses=tuple(cands.poses),
+                    pose_source=cands.source,
+                    source_index=tuple(int(k) for k in cands.source_index),
+                    note=note,
+                )
+            )
+        if progress:
+            progress("objects", i + 1, len(sources))
+    return objects
+
+
+def egad_sources(n: int, taken: Sequence[str] = ()) -> tuple[str, ...]:
+    """``n`` procedural ``egad-like:I`` sources, I following the highest index among the sources ``taken``."""
+    if isinstance(n, bool) or int(n) < 0:
+        raise DesignError(f"egad-like objects: a count >= 0, got {n}")
+    used = [parse_egad_index(t) for t in taken if str(t).startswith("egad-like:")]
+    first = max(used) + 1 if used else 0
+    return tuple(f"egad-like:{i}" for i in range(first, first + int(n)))
+
+
+def add_objects(
+    suite: Suite,
+    sources: Sequence[str],
+    *,
+    label: str,
+    cache_dir: str | Path | None = None,
+    progress: Progress | None = None,
+    warn: Callable[[str], None] | None = None,
+) -> Suite:
+    """``suite`` with ``sources`` posed now under its seed and poses per object, named ``NAME+label``.
+
+    The new objects are out of domain unless they are the paper's in-domain objects (then dealt into
+    the suite's folds, :func:`deal_folds` with the suite's seed, keeping the suite's own folds). An
+    object already in the suite is refused (:class:`SuiteError`).
+    """
+    have = {o.source for o in suite.objects}
+    twice = [s for s in sources if s in have]
+    if twice:
+        raise SuiteError(f"suite {suite.name!r} already holds {', '.join(twice[:3])}")
+    own = {o.source: o.fold for o in suite.objects if o.fold is not None}
+    fold_of = deal_folds(
+        [*own, *(s for s in sources if s in YCB_IN_DOMAIN)], suite.folds, seed=suite.seed, fixed=own
+    )
+    new = _pose_objects(sources, suite.poses_per_object, suite.seed, fold_of, None, cache_dir, progress, warn)
+    out = replace(suite, name=f"{suite.name}+{label}", objects=suite.objects + tuple(new))
+    return _with_digest(out, json.dumps(out.to_json(), indent=1).encode())
+
+
 def build_suite(
     sources: Sequence[str],
     *,
@@ -286,46 +391,12 @@ def build_suite(
     poses than asked keeps what it has, with a note that ``warn`` also receives; one that cannot be
     loaded or posed is left out with a warning. Raises :class:`SuiteError` when no object is left.
     """
-    from mjcodesign.evaluation.candidates import object_candidates
-    from mjcodesign.jobs import load_grasp_object
-
     if isinstance(poses_per_object, bool) or int(poses_per_object) < 1:
         raise DesignError(f"--poses-per-object must be >= 1, got {poses_per_object}")
     if isinstance(folds, bool) or int(folds) < 2:
         raise DesignError(f"folds must be >= 2, got {folds}")
-    inside = sorted(s for s in sources if s in YCB_IN_DOMAIN)
-    order = np.random.default_rng([seed, 0xF01D]).permutation(len(inside))
-    fold_of = {inside[j]: int(i % folds) for i, j in enumerate(order)}
-    objects = []
-    for i, src in enumerate(sources):
-        try:
-            obj = load_grasp_object(src, "light", seed=seed, cache_dir=cache_dir)
-            cands = object_candidates(
-                obj, poses_per_object, seed=seed, anygrasp=anygrasp, cache_dir=cache_dir
-            )
-        except MjcodesignError as exc:
-            if warn:
-                warn(f"{src}: left out of the suite ({type(exc).__name__}: {exc})")
-            continue
-        note = ""
-        if len(cands) < poses_per_object:
-            note = f"{len(cands)} of {poses_per_object} poses: the sampler accepted no more"
-            if warn:
-                warn(f"{obj.name}: {note}")
-        objects.append(
-            SuiteObject(
-                name=obj.name,
-                source=str(src),
-                domain="in-domain" if src in YCB_IN_DOMAIN else "out-of-domain",
-                fold=fold_of.get(src),
-                poses=tuple(cands.poses),
-                pose_source=cands.source,
-                source_index=tuple(int(k) for k in cands.source_index),
-                note=note,
-            )
-        )
-        if progress:
-            progress("objects", i + 1, len(sources))
+    fold_of = deal_folds([s for s in sources if s in YCB_IN_DOMAIN], folds, seed=seed)
+    objects = _pose_objects(sources, poses_per_object, seed, fold_of, anygrasp, cache_dir, progress, warn)
     if not objects:
         raise SuiteError("no object could be loaded and posed")
     suite = Suite(

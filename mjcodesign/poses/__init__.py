@@ -27,13 +27,25 @@ from mjcodesign.poses.candidates import (
 )
 from mjcodesign.poses.external import ANYGRASP_DEPTH, anygrasp_to_world, import_anygrasp, load_external
 from mjcodesign.poses.gripper import COARSE_EDGE, DENSE_EDGE, RigidGripper, palm_frame, rotvec, scene_offset
-from mjcodesign.poses.refine import LOSS_THRESHOLD, MAX_FINGER_GAP, T_RANGE, W_D, W_P, Refined, refine
+from mjcodesign.poses.refine import (
+    DEPTH_CLEARANCE,
+    LOSS_THRESHOLD,
+    MAX_FINGER_GAP,
+    T_RANGE,
+    W_D,
+    W_P,
+    W_T,
+    Refined,
+    approach_depth,
+    refine,
+)
 from mjcodesign.poses.sampler import FRICTION, SamplerOptions, antipodal_pairs, ray_pairs, sample_poses
 from mjcodesign.poses.sdf import MeshSDF
 
 __all__ = [
     "ANYGRASP_DEPTH",
     "COARSE_EDGE",
+    "DEPTH_CLEARANCE",
     "FILE_FORMAT",
     "DENSE_EDGE",
     "FRICTION",
@@ -46,6 +58,7 @@ __all__ = [
     "T_RANGE",
     "W_D",
     "W_P",
+    "W_T",
     "Candidates",
     "MeshSDF",
     "Refined",
@@ -53,6 +66,7 @@ __all__ = [
     "SamplerOptions",
     "Rejection",
     "antipodal_pairs",
+    "approach_depth",
     "anygrasp_to_world",
     "approach_spread_deg",
     "augment_poses",

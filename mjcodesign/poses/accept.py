@@ -19,7 +19,7 @@ from mjcodesign.objects import FingerSweep, GraspObject, SweepStatus, sweep_star
 from mjcodesign.poses.candidates import MAX_PENETRATION, Candidates, rank_order
 from mjcodesign.poses.grid import ObjectSDF
 from mjcodesign.poses.gripper import COARSE_EDGE, RigidGripper, scene_offset
-from mjcodesign.poses.refine import LOSS_THRESHOLD, MAX_FINGER_GAP, T_RANGE, refine
+from mjcodesign.poses.refine import LOSS_THRESHOLD, MAX_FINGER_GAP, T_RANGE, approach_depth, refine
 
 __all__ = ["OPEN_CLEARANCE", "Rejection", "grasped_part_fits", "refine_and_rank", "start_check"]
 
@@ -114,23 +114,30 @@ def refine_and_rank(
     copy_index: np.ndarray | None = None,
     source: str = "sampler",
     sdf: ObjectSDF | None = None,
+    fit_depth: bool = False,
 ) -> Candidates:
     """Refine palm poses (P, 4, 4) with prior scores (P,), drop the failures and rank the rest.
 
     Each drop is counted in ``rejected`` (reason -> count), which the result carries, and listed with
     its provenance in :attr:`Candidates.refused`. ``source_index`` (P,) and ``copy_index`` (P,) say
-    where each pose came from (default: its position, no copy).
+    where each pose came from (default: its position, no copy). ``fit_depth``: each pose first moves along
+    its approach to the depth :func:`~mjcodesign.poses.refine.approach_depth` sets, where the openings
+    are then refined.
     """
     P = len(T)
     src = np.arange(P) if source_index is None else np.asarray(source_index, dtype=np.int64)
     cpy = np.zeros(P, dtype=np.int64) if copy_index is None else np.asarray(copy_index, dtype=np.int64)
     why: list[Rejection | None] = [None] * P
     s0, fits = _initial_openings(obj, T, design)
+    if fit_depth:  # deeper, the grasped part may differ: its start openings again
+        T = T.copy()
+        T[fits] = approach_depth(obj, T[fits], s0[fits], design=design, sdf=sdf)
+        s0, fits = _initial_openings(obj, T, design)
     low = fits & _below_ground(T, s0, design)
     _mark(why, ~fits, Rejection.PART_TOO_WIDE)
     _mark(why, low, Rejection.GROUND)
     run = np.flatnonzero(fits & ~low)
-    r = refine(obj, T[run], s0[run], design=design, sdf=sdf)
+    r = refine(obj, T[run], s0[run], design=design, sdf=sdf, fixed_offset=fit_depth)
     ground = r.min_ground < -MAX_PENETRATION
     collide = ~ground & (r.min_object < -MAX_PENETRATION)
     high = ~(ground | collide) & (r.loss > LOSS_THRESHOLD)

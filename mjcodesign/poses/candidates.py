@@ -100,6 +100,16 @@ class Candidates:
             refused=list(self.refused),
         )
 
+    def in_source_order(self) -> Candidates:
+        """The same poses sorted by (``source_index``, ``copy_index``): an imported file's row order."""
+        order = np.lexsort((self.copy_index, self.source_index))
+        return Candidates(
+            **{k: getattr(self, k)[order] for k in _ARRAYS},
+            rejected=dict(self.rejected),
+            source=self.source,
+            refused=list(self.refused),
+        )
+
     @classmethod
     def concat(cls, parts: list[Candidates]) -> Candidates:
         """One ranked set from several (:func:`rank_order`); ``rejected`` is the last part's dict."""

@@ -125,11 +125,14 @@ def import_anygrasp(
     depth: float | None = None,
     source: str = "anygrasp",
     cache_dir: str | Path | None = None,
+    fit_depth: bool = False,
 ) -> Candidates:
     """AnyGrasp poses mapped (:func:`anygrasp_to_world`), optionally augmented, refined and ranked.
 
     ``source_index`` of each candidate is its row in ``T_pose``; ``source`` names the file (``source``).
     ``cache_dir`` keeps the object's signed-distance grid (:class:`~mjcodesign.poses.grid.ObjectSDF`).
+    ``fit_depth``: each pose first moves along its approach from ``depth``'s start to the depth
+    :func:`~mjcodesign.poses.refine.approach_depth` sets.
     """
     if len(source_vertices) == 0:
         raise MeshError("source mesh has no vertices")
@@ -148,4 +151,5 @@ def import_anygrasp(
         copy_index=copies,
         source=source,
         sdf=ObjectSDF(obj.mesh, cache_dir=cache_dir),
+        fit_depth=fit_depth,
     )

@@ -88,6 +88,10 @@ class SamplerOptions:
     """At most this many candidates are tried per requested pose (the rounds stop earlier once enough
     are accepted). With 8, 50 poses fell short on 5 of the 46 ycb-in-domain objects (024_bowl 34,
     028_skillet_lid 33); the rounds stop as soon as n are accepted, so the others cost no more."""
+    fit_depth: bool = False
+    """Each candidate first moves along its approach to the depth the paper's L_init sets
+    (:func:`~mjcodesign.poses.refine.approach_depth`); otherwise the contacts stay about ``_TIP_INSET``
+    from the fingertips."""
 
     def __post_init__(self) -> None:
         if not (0.0 <= self.top_fraction <= 1.0):
@@ -303,6 +307,7 @@ def _refine_round(obj, T, prior, first, design, options, rng, rejected, sdf) -> 
         source_index=np.repeat(np.arange(first, first + len(prior)), copies),
         copy_index=np.tile(np.arange(copies), len(prior)),
         sdf=sdf,
+        fit_depth=options.fit_depth,
     )
 
 
