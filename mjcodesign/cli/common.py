@@ -39,8 +39,40 @@ __all__ = [
 _NO_DRIVER = b"Could not find or load the NVIDIA CUDA driver"  # expected on CPU-only machines
 
 
+class _DefaultsFormatter(argparse.HelpFormatter):
+    """Help that ends each option's text with its default, where it has one worth saying.
+
+    Like ``argparse.ArgumentDefaultsHelpFormatter``, but silent on ``None``, ``False`` (a flag) and
+    suppressed defaults, and on positionals; a help text that already names ``%(default)s`` or says
+    "default" keeps its own wording.
+    """
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if (
+            default is None
+            or default is False
+            or default is argparse.SUPPRESS
+            or not action.option_strings
+            or "default" in text.lower()
+        ):
+            return text
+        return f"{text} (default: %(default)s)" if text else "default: %(default)s"
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse that reports a usage error as one line and exit code 2."""
+    """argparse that reports a usage error as one line and exit code 2, and shows defaults in ``--help``."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", _DefaultsFormatter)
+        super().__init__(*args, **kwargs)
+
+    def add_argument(self, *args, **kwargs):  # noqa: D102
+        action = super().add_argument(*args, **kwargs)
+        if action.help is None and action.option_strings and action.default not in (None, False):
+            action.help = ""  # the formatter writes the default; argparse skips an option without help
+        return action
 
     def error(self, message: str):  # noqa: D102
         sys.stderr.write(f"error: {message}\n")

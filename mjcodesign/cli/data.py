@@ -13,6 +13,7 @@ import importlib.util
 import json
 import os
 import sys
+import time
 from pathlib import Path
 
 from mjcodesign.cli.common import Parser, add_mass_mode, emit, int_at_least, quiet_warp, user_cache_dir
@@ -27,10 +28,14 @@ __all__ = [
     "run_verify",
     "run_bench",
     "datagen_config",
+    "success_warning",
 ]
 
 _MODELS = ("chain", "flex")
 _BENCH_OBJECTS = "012_strawberry,013_apple,010_potted_meat_can"
+# A dataset whose success rate is outside [_SUCCESS_LOW, _SUCCESS_HIGH] holds almost one outcome: too
+# little of the other for a surrogate to learn where designs differ.
+_SUCCESS_LOW, _SUCCESS_HIGH = 0.05, 0.95
 _DAMAGED_SHOWN = 5  # damaged files named on the one error line of `data verify` (--json lists all)
 # Ray binds its external address unless told otherwise; these keep a local instance on loopback.
 _RAY_LOCAL_ENV = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0", "RAY_USAGE_STATS_ENABLED": "0"}
@@ -207,50 +212,47 @@ def _check_run(args: argparse.Namespace, config) -> None:
         )
 
 
-class _Bar:
-    """The progress bar on stderr: samples done of expected, samples/s of this run, ETA."""
+class _DatagenProgress:
+    """``datagen``'s progress (:class:`~mjcodesign.cli.progress.StageProgress`), from the run's events.
 
-    def __init__(self, designs_per_pose: int):
-        from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+    Two stages: ``posing objects`` (each object prepared or failed) and ``shards`` (each shard written,
+    with the samples/s of this run); an object that failed or has fewer poses than asked says why in
+    one line.
+    """
 
-        console = Console(stderr=True)
-        self.progress = Progress(
-            TextColumn("{task.description}"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn("{task.fields[rate]:.1f} samples/s"),
-            TimeRemainingColumn(),
-            console=console,
-            transient=True,
-            disable=not console.is_terminal,
-        )
-        self.per_shard = designs_per_pose
-        self.task = None
-        self.done = 0
-        self.t0 = None
+    def __init__(self, *, stream=None, tty: bool | None = None):
+        from mjcodesign.cli.progress import StageProgress
+
+        self.bar = StageProgress("datagen", stream=stream, tty=tty)
+        self.objects = self.objects_done = self.shards = self.shards_done = self.samples = 0
 
     def __enter__(self):
-        self.progress.__enter__()
+        self.bar.__enter__()
         return self
 
     def __exit__(self, *exc):
-        return self.progress.__exit__(*exc)
+        return self.bar.__exit__(*exc)
 
     def __call__(self, event) -> None:
-        import time
-
-        p = self.progress
         if event.kind == "start":
-            self.t0 = time.perf_counter()
-            self.task = p.add_task("datagen", total=event.total * self.per_shard, rate=0.0)
-            p.update(self.task, completed=event.done * self.per_shard)
-        elif event.kind == "object" or event.kind == "object_failed":
-            p.update(self.task, total=event.total * self.per_shard, description=f"datagen {event.keys[0]}")
+            self.objects, self.shards, self.shards_done = event.objects, event.total, event.done
+            if self.objects:
+                self.bar.update("posing objects", 0, self.objects)
+            self.bar.update("shards", self.shards_done, self.shards)
+        elif event.kind in ("object", "object_failed"):
+            self.objects_done += 1
+            self.shards = event.total
+            name = event.keys[0]
+            self.bar.update("posing objects", self.objects_done, self.objects, unit=name)
+            if event.message:
+                verb = "failed: " if event.kind == "object_failed" else ""
+                self.bar.note(f"{name}: {verb}{event.message}")
         elif event.kind in ("shard", "shard_failed"):
-            self.done += event.samples + event.rejected
-            rate = self.done / max(time.perf_counter() - self.t0, 1e-9)
-            p.update(self.task, advance=self.per_shard, rate=rate)
+            self.shards_done += 1
+            self.samples += event.samples + event.rejected
+            rate = self.samples / max(time.perf_counter() - self.bar.t0, 1e-9)
+            detail = f"{rate:.3g} samples/s" + (" (failed)" if event.kind == "shard_failed" else "")
+            self.bar.update("shards", self.shards_done, self.shards, unit=event.keys[0], detail=detail)
 
 
 def run_datagen(args: argparse.Namespace) -> int:
@@ -267,7 +269,7 @@ def run_datagen(args: argparse.Namespace) -> int:
         for k, v in _RAY_LOCAL_ENV.items():
             os.environ.setdefault(k, v)
     try:
-        with _Bar(config.designs_per_pose) as bar:
+        with _DatagenProgress() as bar:
             res = generate(
                 config,
                 args.out,
@@ -286,12 +288,26 @@ def run_datagen(args: argparse.Namespace) -> int:
     return 0
 
 
+def success_warning(rate: float, samples: int) -> str | None:
+    """The one-line warning ``data info`` gives on a dataset whose success rate is near 0 or 1, else None."""
+    if samples == 0 or _SUCCESS_LOW <= rate <= _SUCCESS_HIGH:
+        return None
+    side = f"above {_SUCCESS_HIGH:.0%}" if rate > _SUCCESS_HIGH else f"below {_SUCCESS_LOW:.0%}"
+    return (
+        f"success rate {rate:.1%} of {samples} samples is {side}: a surrogate trained on it sees almost one "
+        "outcome (change the density or mass, the tendon or the disturbance)"
+    )
+
+
 def run_info(args: argparse.Namespace) -> int:
     """Run ``data info``."""
     from mjcodesign.data import open_dataset, plot_success, summarize
 
     ds = open_dataset(args.dir)
     res = summarize(ds)
+    warning = success_warning(res["success_rate"], res["samples"])
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr, flush=True)
     if args.plot:
         res["plot"] = str(plot_success(ds, args.plot))
     if args.json:

@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from mjcodesign.cli.common import add_mass_mode, emit, finite_float, int_at_least, path_text, user_cache_dir
+from mjcodesign.cli.progress import StageProgress
 
 __all__ = ["add_bench_parser", "add_parser", "run", "run_bench"]
 
@@ -261,7 +262,7 @@ def run(args: argparse.Namespace) -> int:
         n_points = int(surrogate.meta["dataset"]["cloud_points"])
     cache = user_cache_dir()
     t0 = time.perf_counter()
-    with _progress() as progress:
+    with StageProgress("evaluate") as progress:
         if kind == "build":
             names, poses, ranges = source
             suite = build_suite(
@@ -353,45 +354,6 @@ def _fold_use(choice: dict, suite, folds: int) -> dict:
 
 def _warn(message: str) -> None:
     print(f"warning: {message}", file=sys.stderr, flush=True)
-
-
-class _progress:
-    """A rich bar with an ETA in a terminal; one plain line per finished unit on stderr otherwise."""
-
-    def __enter__(self):
-        from rich.console import Console
-        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
-        self.console = Console(stderr=True)
-        self.tty = self.console.is_terminal
-        self.bar = Progress(
-            TextColumn("{task.description}"),
-            BarColumn(),
-            TextColumn("{task.completed}/{task.total}"),
-            TimeElapsedColumn(),
-            TimeRemainingColumn(),
-            console=self.console,
-            transient=True,
-            disable=not self.tty,
-        )
-        self.bar.__enter__()
-        self.tasks: dict[str, int] = {}
-        self.t0 = time.perf_counter()
-        return self.update
-
-    def update(self, stage: str, done: int, total: int) -> None:
-        if stage not in self.tasks:
-            self.tasks[stage] = self.bar.add_task(stage, total=total)
-        self.bar.update(self.tasks[stage], completed=done)
-        if not self.tty:
-            print(
-                f"evaluate: {stage} {done}/{total} ({time.perf_counter() - self.t0:.0f} s)",
-                file=sys.stderr,
-                flush=True,
-            )
-
-    def __exit__(self, *exc):
-        return self.bar.__exit__(*exc)
 
 
 def _flat(summary: dict) -> list[dict]:

@@ -37,11 +37,13 @@ MAX_WORLDS = 2048
 class Event:
     """Progress of a run, handed to ``on_event``.
 
-    ``kind``: ``start`` (``total``: shards expected, ``done``: already finished), ``submit`` (``keys``:
-    the shards, or the object's source, sent out), ``object`` / ``object_failed`` (``keys``: the
-    object's source; ``total``: the shards expected, now that its poses are known), ``shard`` /
-    ``shard_failed`` (``samples`` and ``rejected`` of the shard). ``submit`` comes before the task
-    runs, the others after its rows and the manifest are written.
+    ``kind``: ``start`` (``total``: shards expected, ``done``: already finished, ``objects``: objects
+    to prepare), ``submit`` (``keys``: the shards, or the object's source, sent out), ``object`` /
+    ``object_failed`` (``keys``: the object's source; ``total``: the shards expected, now that its
+    poses are known; ``message``: why it failed, or why it has fewer poses than asked, else empty),
+    ``shard`` / ``shard_failed`` (``samples`` and ``rejected`` of
+    the shard). ``submit`` comes before the task runs, the others after its rows and the manifest are
+    written.
     """
 
     kind: str
@@ -51,6 +53,7 @@ class Event:
     total: int = 0
     done: int = 0
     message: str = ""
+    objects: int = 0
 
 
 def generate(
@@ -101,6 +104,11 @@ def generate(
         "complete": ds.manifest["complete"],
         **counts,
         "success_rate": _success_rate(ds),
+        "short_poses": {
+            o.get("name", o["source"]): note
+            for o in ds.manifest["objects"]
+            if (note := _short_poses(o, config.poses_per_object))
+        },
         "computed": computed,
         "damaged_redone": ds.damaged,
         "wall_s": wall,
@@ -122,6 +130,27 @@ def _executor(workers, ray, device, setup, slots, backend):
             else InlineExecutor(device)
         )
     return PoolExecutor(workers, device=device, setup=setup, slots=slots)
+
+
+def _short_poses(entry: dict, asked: int) -> str | None:
+    """Why a prepared object (its manifest entry) has fewer than ``asked`` poses, or None if it has them.
+
+    One line: the count, then the sampler's shortfall with its most frequent rejections and the poses
+    dropped for want of a point cloud.
+    """
+    got = int(entry.get("poses", 0))
+    if entry.get("status") != "ready" or got >= asked:
+        return None
+    parts = []
+    accepted = int(entry.get("candidates", got))
+    if accepted < asked:
+        top = sorted(entry.get("sampler_rejected", {}).items(), key=lambda kv: (-kv[1], kv[0]))[:3]
+        why = ", ".join(f"{k} {v}" for k, v in top) or "none recorded"
+        parts.append(f"the sampler accepted {accepted} of the candidates it tried (most rejections: {why})")
+    dropped = entry.get("dropped_poses", {})
+    if dropped:
+        parts.append(f"{len(dropped)} dropped without a point cloud ({next(iter(dropped.values()))})")
+    return f"{got} of {asked} poses: " + "; ".join(parts)
 
 
 def _success_rate(ds: DatasetDir) -> float:
@@ -146,7 +175,7 @@ class _Scheduler:
         for i in range(len(self.config.objects)):
             if self.ds.object_entry(i)["status"] == "ready":
                 self._enqueue(i, done)
-        self.emit(Event("start", total=self._total(), done=len(done)))
+        self.emit(Event("start", total=self._total(), done=len(done), objects=len(self.pending)))
         while self.pending or self.queue or self.in_flight:
             self._fill()
             for handle, result, error in self.executor.wait(list(self.in_flight)):
@@ -192,7 +221,8 @@ class _Scheduler:
         self.ds.object_ready(result)
         self.computed["objects"] += 1
         self._enqueue(index, self.ds.done_shards())
-        self.emit(Event("object", keys=(name,), total=self._total()))
+        note = _short_poses(self.ds.object_entry(index), self.config.poses_per_object) or ""
+        self.emit(Event("object", keys=(name,), total=self._total(), message=note))
 
     def _enqueue(self, index: int, done: set[str]) -> None:
         """Queue the unfinished shards of a ready object (MJWarp: grouped by density into worlds)."""
