@@ -139,3 +139,23 @@ def test_routing_flag_gives_the_options():
     assert routing_options(p.parse_args([])) is None
     assert routing_options(p.parse_args(["--routing", "printed"])) == SimOptions(routing="printed")
     assert routing_options(argparse.Namespace()) is None
+
+
+def test_grasp_routing_flag_reaches_the_model(tmp_path, monkeypatch, capsys):
+    import json
+
+    import trimesh
+
+    import mjcodesign.cli.grasp as cg
+    from mjcodesign.cli.main import main
+
+    monkeypatch.setattr(cg, "user_cache_dir", lambda: tmp_path / "cache")
+    box = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(box)
+    outs = {}
+    for routing in ("guided", "printed"):
+        args = ["grasp", "--object", str(box), "--density", "heavy", "--design", "semi-rigid", "--json"]
+        assert main([*args, "--routing", routing]) == 0
+        outs[routing] = json.loads(capsys.readouterr().out)
+    assert outs["guided"]["success"] and outs["printed"]["success"]  # routing_compare: both hold it at 10 N
+    assert outs["guided"]["displacement"] != outs["printed"]["displacement"]
