@@ -3,7 +3,8 @@
 Success always comes from the simulator; the surrogate (optional, imported lazily) only chooses poses.
 
 - :mod:`~mjcodesign.evaluation.suite`: :class:`Suite`, objects with frozen poses and the perturbation
-  model, versioned files (``--suite``), :func:`build_suite` for an ad-hoc one;
+  model, versioned files (``--suite``), :func:`build_suite` for an ad-hoc one, :func:`add_objects` and
+  :func:`egad_sources` to extend one, :func:`deal_folds` and :func:`suite_folds` for object-level folds;
 - :mod:`~mjcodesign.evaluation.config`: design groups (``--designs``) and the paper's Table 1 figures;
 - :mod:`~mjcodesign.evaluation.candidates`: per object, its first candidates and their point clouds;
 - :mod:`~mjcodesign.evaluation.rollouts`: :func:`run_suite`, every rollout (objects × poses × draws ×
@@ -21,6 +22,7 @@ from mjcodesign.evaluation.rollouts import (
     MAX_REDRAWS,
     POSE_POLICIES,
     SuiteRun,
+    check_real_masses,
     record_suite_examples,
     run_suite,
 )
@@ -40,8 +42,12 @@ from mjcodesign.evaluation.suite import (
     Suite,
     SuiteError,
     SuiteObject,
+    add_objects,
     build_suite,
+    deal_folds,
+    egad_sources,
     load_suite,
+    suite_folds,
 )
 from mjcodesign.evaluation.suite_report import PAPER_MEASURED, suite_header, write_suite_report
 
@@ -63,9 +69,13 @@ __all__ = [
     "SuiteError",
     "SuiteObject",
     "SuiteRun",
+    "add_objects",
     "analyse",
     "bootstrap_mean",
     "build_suite",
+    "check_real_masses",
+    "deal_folds",
+    "egad_sources",
     "load_suite",
     "mean_interval",
     "object_candidates",
@@ -77,6 +87,7 @@ __all__ = [
     "record_suite_examples",
     "run_suite",
     "select_policy",
+    "suite_folds",
     "suite_header",
     "wilson",
     "write_suite_report",
