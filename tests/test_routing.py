@@ -159,3 +159,64 @@ def test_grasp_routing_flag_reaches_the_model(tmp_path, monkeypatch, capsys):
         outs[routing] = json.loads(capsys.readouterr().out)
     assert outs["guided"]["success"] and outs["printed"]["success"]  # routing_compare: both hold it at 10 N
     assert outs["guided"]["displacement"] != outs["printed"]["displacement"]
+
+
+_TOL_REST = 5e-4  # hinge angle [rad]: run_to_rest's stop against the energy minimum (measured ≤ 1.1e-4)
+
+
+def _planar_tendon(design: FingerDesign):
+    """ℓ(θ) [m]: the printed tendon's length at hinge angles θ, by planar kinematics alone (no MuJoCo)."""
+    from mjcodesign.models.chain import hinge_axes
+    from mjcodesign.models.types import tendon_exit_site
+
+    hinges = np.array([[b.mid, a] for b, a in zip(design.blocks(), hinge_axes(design), strict=True)])
+    segments = [b.index for b in design.blocks() if b.kind is BlockKind.SEGMENT]
+    # (point (x, z, 1), body: -1 the base) of every site the tendon passes, in order
+    sites = [(np.r_[tendon_exit_site(design)[[0, 2]], 1.0], -1)]
+    for i, pts in zip(segments, channel_points(design), strict=True):
+        sites += [(np.r_[p[[0, 2]], 1.0], k) for p, k in zip(pts, (i - 1, i, i), strict=True)]
+
+    def length(theta: np.ndarray) -> float:
+        frames = [np.eye(3)]  # body k's pose: turned about hinges 0..k in turn (homogeneous, 3x3)
+        for (hx, hz), th in zip(hinges, theta, strict=True):
+            c, s = np.cos(th), np.sin(th)
+            turn = np.array([[c, -s, hx - c * hx + s * hz], [s, c, hz - s * hx - c * hz], [0.0, 0.0, 1.0]])
+            frames.append(frames[-1] @ turn)
+        xy = np.array([(frames[k + 1] @ p)[:2] for p, k in sites])
+        return float(np.linalg.norm(np.diff(xy, axis=0), axis=1).sum())
+
+    return length
+
+
+@pytest.mark.parametrize("seed", [1, 3])
+def test_printed_curl_is_the_minimum_of_spring_and_tendon_energy(seed):
+    # At rest under tension T the chain minimises U(θ) = ½ Σ k_j θ_j² + T ℓ(θ), ℓ the length of the
+    # tendon through the channel points placed by planar kinematics (no MuJoCo). Up to ~1.7 rad of bend,
+    # below buckling and short of every stop (no active constraint), MuJoCo's rest must be that minimum.
+    from scipy.optimize import minimize
+
+    from mjcodesign.scenarios.static import curl
+
+    design, stiffness = FingerDesign(), Stiffness.random(seed)
+    built = build_finger(design, stiffness, FingerModel.CHAIN, options=_PRINTED)
+    k = built.model.jnt_stiffness.copy()
+    tension = 0.2 * buckling_tension(built)[0]
+    rest = {}
+    curl(
+        design,
+        stiffness,
+        FingerModel.CHAIN,
+        tension,
+        options=SimOptions(routing="printed"),
+        observe=lambda b, d: rest.update(q=d.qpos.copy(), constraints=d.nefc),
+    )
+    assert rest["constraints"] == 0  # no stop reached: the energy below is the whole story
+
+    length = _planar_tendon(design)
+
+    def energy(theta):
+        return 0.5 * k @ theta**2 + tension * length(theta)
+
+    ref = minimize(energy, np.zeros(len(k)), method="BFGS", options={"gtol": 1e-10}).x
+    assert ref.sum() > 0.5  # a real curl, not the straight finger
+    np.testing.assert_allclose(rest["q"], ref, atol=_TOL_REST)
