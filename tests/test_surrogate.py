@@ -526,7 +526,8 @@ def test_train_folds_writes_one_checkpoint_per_fold_and_evaluate_uses_the_one_th
 
 
 def test_bad_folds_input_exits_2_with_one_line(dataset, work, cli, tmp_path):
-    for extra in (("--folds", "1"), ("--folds", "3", "--split", "random"), ("--folds", "4")):
+    for extra in (("--folds", "1"), ("--folds", "3", "--split", "random"), ("--folds", "4"),
+                  ("--folds", "3", "--smoothness-poses", "2")):  # fmt: skip
         out = tmp_path / "o"
         code, stdout, err = cli("train", "--data", str(dataset), "--out", str(out), *extra, *_TINY_ARGS)
         assert code == 2 and len(err) == 1 and "Traceback" not in err[0] and not out.exists(), (extra, err)

@@ -282,7 +282,8 @@ def _warn(message: str) -> None:
 
 
 _FOLDS_REFUSES = (("--split", "split", "object"), ("--efficiency", "efficiency", 0.25),
-                  ("--tensorboard", "tensorboard", None))  # fmt: skip
+                  ("--smoothness-poses", "smoothness_poses", 16), ("--smoothness-lines", "smoothness_lines", 4),
+                  ("--tensorboard", "tensorboard", None))  # flags whose run --folds does not make, at their defaults  # fmt: skip
 
 
 def _fold_of(args: argparse.Namespace) -> dict[str, int]:
