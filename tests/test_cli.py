@@ -9,6 +9,9 @@ from pathlib import Path
 
 import pytest
 
+_VIEW_EXIT_S = 30  # view ends within this after a signal: it gives its viewer 10 s to stop, then kills it
+_ENV = {**os.environ, "RERUN_ANALYTICS": "0"}
+
 
 def _run(*args, timeout=300):
     return subprocess.run(
@@ -238,6 +241,53 @@ def test_desktop_view_binds_loopback_only(tmp_path, fake_display):
     assert code == 130, proc.stderr.read()
     left = _sockets_on(port)  # the viewer went with it; if not, name who still holds the port
     assert not left, {pid: _cmdline(pid) for pid in _pids_holding(left)} or left
+
+
+def _children(pid: int) -> set[int]:
+    """The processes ``pid`` started that are still its children (every thread's list)."""
+    kids = set()
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        try:
+            kids |= {int(k) for k in (task / "children").read_text().split()}
+        except OSError:
+            continue
+    return kids
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` is a running process (not gone, not a zombie)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT, signal.SIGKILL])
+def test_web_view_leaves_no_viewer_behind_whatever_ends_it(tmp_path, sig):
+    # SIGINT, SIGTERM, SIGHUP: view closes its viewer and returns 128 + the signal; SIGKILL: the kernel
+    # ends the viewer with it (PR_SET_PDEATHSIG). Either way no process view started survives it.
+    if not (sys.platform.startswith("linux") and Path("/proc/net/tcp").exists()):
+        pytest.skip("reads listening sockets and children from /proc")
+    pytest.importorskip("rerun")
+    rrd, port, web_port = _box_recording(tmp_path), _free_tcp_port(), _free_tcp_port()
+    cmd = [sys.executable, "-m", "mjcodesign.cli", "view", str(rrd), "--web", "--port", str(port)]
+    cmd += ["--web-port", str(web_port)]
+    proc = subprocess.Popen(cmd, env=_ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        _await_sockets(port, lambda: proc.poll() is None)
+        kids = _children(proc.pid)
+        assert kids, "view started no viewer"
+    finally:
+        proc.send_signal(sig)
+        code = proc.wait(timeout=_VIEW_EXIT_S)
+    assert code == (-sig if sig == signal.SIGKILL else 128 + sig)
+    deadline = time.monotonic() + _VIEW_EXIT_S
+    while any(_alive(k) for k in kids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    survivors = {k: _cmdline(k) for k in kids if _alive(k)}
+    for k in survivors:
+        os.kill(k, signal.SIGKILL)
+    assert not survivors, survivors
 
 
 def _cmdline(pid: int) -> str:

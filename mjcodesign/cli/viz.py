@@ -8,8 +8,10 @@ that ships with ``rerun-sdk``; its gRPC server (desktop and web) and web viewer 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -41,6 +43,7 @@ DEFAULT_VIEWER_PORT = 9876
 """Rerun's default viewer port."""
 _VIEWER_START_S = 20.0  # a spawned desktop viewer listens within this time, or is reported [s]
 _POLL_S = 0.05  # [s]
+_VIEWER_STOP_S = 10.0  # a viewer asked to stop (SIGTERM) is killed after this [s]
 
 
 def add_recording_flags(p: argparse.ArgumentParser, *, decimation: bool = True) -> None:
@@ -205,17 +208,55 @@ def _cmd_view(args) -> int:
             "no display (DISPLAY or WAYLAND_DISPLAY) for the desktop viewer: use --web to serve the "
             "web viewer on 127.0.0.1"
         )
-    proc = subprocess.Popen(view_command(path, web=args.web, port=args.port, web_port=args.web_port))
-    try:
-        return proc.wait()
-    except KeyboardInterrupt:  # let the viewer close its servers, then go
-        proc.terminate()
+    cmd = view_command(path, web=args.web, port=args.port, web_port=args.web_port)
+    with _signals_interrupt((signal.SIGTERM, signal.SIGHUP)) as received:
+        proc = subprocess.Popen(cmd, preexec_fn=_die_with_parent)
         try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        return 130
+            return proc.wait()
+        except KeyboardInterrupt:  # SIGINT, SIGTERM or SIGHUP: close the viewer's servers, then go
+            proc.terminate()
+            try:
+                proc.wait(timeout=_VIEWER_STOP_S)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+            return 128 + received.get("signal", signal.SIGINT)
+
+
+_PR_SET_PDEATHSIG = 1  # prctl(2) option: the signal the child gets when its parent dies (Linux)
+
+
+def _die_with_parent() -> None:
+    """In the viewer's process, before exec: ask the kernel to end it (SIGTERM) when its parent dies.
+
+    So a command killed by any signal, SIGKILL included, leaves no viewer behind. Linux only; elsewhere
+    the viewer goes with the command on SIGINT, SIGTERM and SIGHUP (:func:`_signals_interrupt`).
+    """
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+
+    ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+
+
+@contextlib.contextmanager
+def _signals_interrupt(signals: tuple[int, ...]):
+    """Within the block, ``signals`` raise :class:`KeyboardInterrupt` as SIGINT does.
+
+    Yields a dict that then holds the ``signal`` received; the previous handlers are put back after.
+    """
+    received: dict = {}
+
+    def handler(signum, frame):
+        received["signal"] = signum
+        raise KeyboardInterrupt
+
+    previous = {s: signal.signal(s, handler) for s in signals}
+    try:
+        yield received
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
 
 
 def _check_recording(path: Path) -> None:
