@@ -92,6 +92,7 @@ def test_png_bytes_decode_to_the_image():
         ("unwritable out", "not a writable folder"),
         ("no weights", "no pretrained surrogate ships"),
         ("budget below one draw", "--budget"),
+        ("folder of other files", "not empty"),
     ],
 )
 def test_bad_input_exits_2_with_one_line_and_no_folder(case, expect, meshes, tiny_checkpoint, tmp_path):
@@ -106,15 +107,22 @@ def test_bad_input_exits_2_with_one_line_and_no_folder(case, expect, meshes, tin
         "unwritable out": [box, "--ckpt", tiny_checkpoint],
         "no weights": [box],
         "budget below one draw": [box, "--ckpt", tiny_checkpoint, "--budget", "5"],
+        "folder of other files": [box, "--ckpt", tiny_checkpoint],
     }[case]
     if case == "unwritable out":
         (tmp_path / "file").write_text("x")
         out = tmp_path / "file" / "out"
+    if case == "folder of other files":
+        out.mkdir()
+        (out / "notes.txt").write_text("mine")
     r = _cli(*args, "--out", out, cwd=tmp_path)
     assert r.returncode == 2, r.stderr[-3000:]
     assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1 and expect in r.stderr, r.stderr
     assert r.stdout == ""
-    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) in ([], ["file"])
+    if case == "folder of other files":  # left as it was
+        assert [p.name for p in out.iterdir()] == ["notes.txt"] and (out / "notes.txt").read_text() == "mine"
+        out = tmp_path / "nothing"
+    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) in ([], ["file"], ["out"])
 
 
 class _Page(HTMLParser):

@@ -123,13 +123,14 @@ def _sweep_figure(record: dict, path: Path) -> Path:
         pts = [s for s in v["sweep"] if s["design"] == label]
         x = np.array([s["impulse_paper_ns"] for s in pts]) * (1 + 0.03 * (i - 1.5))  # side by side
         y = np.array([100 * s["p"]["value"] for s in pts])
-        lo = y - np.array([100 * s["p"]["low"] for s in pts])
-        hi = np.array([100 * s["p"]["high"] for s in pts]) - y
+        lo = np.maximum(y - np.array([100 * s["p"]["low"] for s in pts]), 0.0)  # 0 up to round-off
+        hi = np.maximum(np.array([100 * s["p"]["high"] for s in pts]) - y, 0.0)
         ax.errorbar(
             x, y, yerr=[lo, hi], marker="o", capsize=3, label=label, lw=2 if label == "optimised" else 1
         )
     ax.set_xscale("log")
     ax.set_xticks(v["impulses_paper_ns"], [f"{x:g}" for x in v["impulses_paper_ns"]])
+    ax.set_xticks([], minor=True)
     ax.set_xlabel("disturbance impulse [N s, the paper's units]")
     ax.set_ylabel("success [%] (95% Wilson)")
     ax.set_ylim(-5, 105)
