@@ -1,7 +1,8 @@
 """Protocol peers for `hw selftest` and the tests: franky-sim with a box, and the XL330 emulator.
 
 `franka_sim` runs franky-sim's MuJoCo simulator and `SimulationServer` in a child process, bound to
-127.0.0.1 only; franky then speaks the libfranka protocol to it over loopback, as to a robot on
+127.0.0.1 only (its UDP state channel too, which franky-sim itself binds to every interface; libfranka's
+own UDP socket, in the calling process, it cannot: :data:`STATE_CHANNEL_NOTE`); franky then speaks the libfranka protocol to it over loopback, as to a robot on
 the network, and the simulator keeps stepping whatever the client process does (franky's blocking
 C++ calls, the GIL, a stuck test). `run_selftest`
 performs the whole ``hw grasp`` code path against both peers, starting from a recorded point
@@ -79,9 +80,38 @@ class SimScene:
         return float(self._conn.recv())
 
 
+STATE_CHANNEL_NOTE = (
+    "note: libfranka (franky) opens its robot-state channel on UDP port 0 of every interface (0.0.0.0) "
+    "while it is connected, reachable from the network; it has no option to bind it to 127.0.0.1 "
+    "(franky-sim's side is bound to 127.0.0.1)"
+)
+"""What the selftest says on stderr about the one socket it cannot keep on loopback."""
+
+
+def _loopback_datagrams() -> None:
+    """In franky-sim's own process: bind its UDP state channel to 127.0.0.1, not every interface.
+
+    franky-sim 1.0.4 binds that socket to ``0.0.0.0`` in ``FrankaServer._setup_udp_connection`` with
+    no option; this process runs nothing else, so every IPv4 datagram socket bound to all interfaces
+    is bound to loopback instead.
+    """
+    import socket
+
+    bind = socket.socket.bind
+
+    def loopback_bind(sock, address):
+        if sock.family == socket.AF_INET and sock.type == socket.SOCK_DGRAM and address[0] in ("", "0.0.0.0"):
+            address = (LOOPBACK, *address[1:])
+        return bind(sock, address)
+
+    socket.socket.bind = loopback_bind
+
+
 def _serve_sim(conn: Any, box: bool) -> None:
     """Child process of `franka_sim`: build and serve the simulator, answer box-height queries."""
     import xml.etree.ElementTree as ET
+
+    _loopback_datagrams()
 
     import franky_sim
     from franky_sim.mujoco_simulator import MujocoSimulator

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -243,7 +244,7 @@ def _emulate(args: argparse.Namespace) -> int:
 def _selftest(args: argparse.Namespace) -> int:
     import faulthandler
 
-    from mjcodesign.hardware.selftest import run_selftest
+    from mjcodesign.hardware.selftest import STATE_CHANNEL_NOTE, run_selftest
 
     if not args.timeout_s > 0:
         raise HardwareError(f"--timeout-s must be positive, got {args.timeout_s}")
@@ -257,6 +258,7 @@ def _selftest(args: argparse.Namespace) -> int:
         parse_design(args.design)  # refused before any process starts
     # franky's and the SDK's blocking calls cannot be interrupted from Python; if a peer hangs
     # in a way no motion or serial timeout catches, leave its stacks for the report, not a hang.
+    print(STATE_CHANNEL_NOTE, file=sys.stderr)
     faulthandler.dump_traceback_later(args.timeout_s, exit=True)
     try:
         result = run_selftest(
