@@ -32,6 +32,7 @@ def main() -> None:
     from mjcodesign.design.stiffness import Stiffness
     from mjcodesign.models.types import FingerModel
     from mjcodesign.objects import box_object
+    from mjcodesign.scenarios.drive import TendonForce
     from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
     from mjcodesign.sim.fem import FemDynamics, FemOptions, fem_grasp_loss_and_grad
     from mjcodesign.sim.fem.grasp_outcome import paper_loss
@@ -45,7 +46,7 @@ def main() -> None:
     )
     scene = dataclasses.replace(scene, start_openings=(0.0152, 0.0152))  # touching the box's top edge
     phases = dict(settle_s=0.0, close_s=0.002, tighten_s=0.004, lift_s=0.004, hold_s=0.008, post_hold_s=0.002)
-    scenario = GraspScenario(**phases, tension=2.0, lift=0.002, impulse=0.0)
+    scenario = GraspScenario(**phases, tendon=TendonForce(tension=2.0), lift=0.002, impulse=0.0)
     dyn = FemDynamics(
         dt=1e-5, contact_kd=0.0
     )  # kd's onset jump is invisible to the adjoint (the test's note)

@@ -109,6 +109,7 @@ def main() -> None:
     from mjcodesign.design.stiffness import Stiffness
     from mjcodesign.models.types import FingerModel
     from mjcodesign.poses import sample_poses, to_gripper_pose
+    from mjcodesign.scenarios.drive import TendonForce
     from mjcodesign.scenarios.grasp import GraspScenario, build_scene
     from mjcodesign.sim.fem import FemDynamics, FemOptions
     from mjcodesign.sim.fem.gripper_grasp import FemGrasp
@@ -120,7 +121,7 @@ def main() -> None:
     if args.free_space:
         pose = dataclasses.replace(pose, position=tuple(np.asarray(pose.position) + [0.0, 0.0, 0.15]))
     scene = build_scene(obj, design, Stiffness.parse(args.design), FingerModel.CHAIN, pose)
-    kw = {"tension": args.tension}
+    kw = {"tendon": TendonForce(tension=args.tension)}
     if args.tighten_s is not None:
         kw["tighten_s"] = args.tighten_s
     scenario = GraspScenario(**kw)

@@ -219,6 +219,7 @@ def test_chain_margin_moves_the_palm_a_millimetre_each_way():
     from mjcodesign.crosscheck.grasp import MARGIN_SHIFT, chain_margin
     from mjcodesign.models.types import FingerModel
     from mjcodesign.objects import box_object
+    from mjcodesign.scenarios.drive import TendonForce
     from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
     from mjcodesign.sim.mujoco_c import MujocoBackend
 
@@ -228,7 +229,7 @@ def test_chain_margin_moves_the_palm_a_millimetre_each_way():
         obj, design, Stiffness.preset("semi-rigid"), FingerModel.CHAIN, auto_pose(obj, design)
     )
     phases = dict(settle_s=0.004, close_s=0.03, tighten_s=0.05, lift_s=0.05, hold_s=0.03, post_hold_s=0.01)
-    scenario = GraspScenario(**phases, tension=4.0, lift=0.01)
+    scenario = GraspScenario(**phases, tendon=TendonForce(tension=4.0), lift=0.01)
     nominal = MujocoBackend(nthread=1).run(scene, scenario)
     # Unmoved, the six rollouts are the nominal one (deterministic, and the scene is rebuilt faithfully).
     still = chain_margin(scene, scenario, shift=0.0)

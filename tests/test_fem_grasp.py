@@ -16,6 +16,7 @@ from mjcodesign.design.finger import FingerDesign  # noqa: E402
 from mjcodesign.design.stiffness import Stiffness  # noqa: E402
 from mjcodesign.models.types import FingerModel  # noqa: E402
 from mjcodesign.objects import box_object  # noqa: E402
+from mjcodesign.scenarios.drive import TendonForce  # noqa: E402
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene  # noqa: E402
 from mjcodesign.scenarios.outcome import Failure  # noqa: E402
 
@@ -64,7 +65,7 @@ def held():
 
     scene = _box_scene("semi-rigid", 0.022)
     phases = dict(settle_s=0.004, close_s=0.03, tighten_s=0.05, lift_s=0.05, hold_s=0.3, post_hold_s=0.0)
-    scenario = GraspScenario(**phases, tension=2.0, lift=0.01, impulse=0.0)
+    scenario = GraspScenario(**phases, tendon=TendonForce(tension=2.0), lift=0.01, impulse=0.0)
     # 10 µs with selective mass scaling: the weight balance is a static law, whatever the finger's inertia.
     grasp = FemGrasp(scene, scenario, options=_coarse(), dynamics=FemDynamics(dt=1e-5))
     return grasp, grasp.run()
@@ -97,7 +98,10 @@ def test_energy_bound_flags_fingers_started_inside_the_object(start, plausible):
 
     scene = _box_scene("semi-rigid", start)
     grasp = FemGrasp(
-        scene, GraspScenario(**_BRIEF, tension=2.0), options=_coarse(), dynamics=FemDynamics(dt=1e-5)
+        scene,
+        GraspScenario(**_BRIEF, tendon=TendonForce(tension=2.0)),
+        options=_coarse(),
+        dynamics=FemDynamics(dt=1e-5),
     )
     run = grasp.run()
     assert run.energy.plausible is plausible, run.energy
@@ -189,7 +193,7 @@ def test_recorded_forward_equals_taped_steps(order):
     from mjcodesign.sim.fem.gripper_grasp import FemGrasp
 
     scene = _box_scene("paper-optimized", 0.0152)  # touching the box's top edge from the start
-    scenario = GraspScenario(**_BRIEF, tension=2.0, lift=0.002, impulse=0.0)
+    scenario = GraspScenario(**_BRIEF, tendon=TendonForce(tension=2.0), lift=0.002, impulse=0.0)
     grasp = FemGrasp(scene, scenario, options=_coarse(order=order), dynamics=FemDynamics(dt=1e-5))
     s0, n = 400, 200
     full = grasp.run(checkpoints=(s0, s0 + n))
@@ -211,7 +215,7 @@ def test_l_opt_gradient_matches_central_differences(locking):
     from mjcodesign.sim.fem.gripper_grasp import FemGrasp
 
     scene = _box_scene("paper-optimized", 0.0152)
-    scenario = GraspScenario(**_BRIEF, tension=2.0, lift=0.002, impulse=0.0)
+    scenario = GraspScenario(**_BRIEF, tendon=TendonForce(tension=2.0), lift=0.002, impulse=0.0)
     # kd = 0: the paper's contact damping kd·v switches on with a jump when a vertex enters contact,
     # which moves the trajectory by an amount the adjoint (contact set held fixed) cannot see.
     dyn = FemDynamics(dt=1e-5, contact_kd=0.0)
@@ -257,7 +261,7 @@ def test_fem_backend_runs_the_grasp_protocol():
     backend = get_backend("fem", dynamics=FemDynamics(dt=1e-5), grasp_options=_coarse())
     assert isinstance(backend, FemBackend) and isinstance(backend, Simulator)
     scene = _box_scene("semi-rigid", 0.022)
-    scenario = GraspScenario(**_BRIEF, tension=2.0)
+    scenario = GraspScenario(**_BRIEF, tendon=TendonForce(tension=2.0))
     designs = [Stiffness.preset("semi-rigid"), Stiffness.preset("paper-optimized")]
     outs = backend.run_batch(scene, scenario, designs)
     assert len(outs) == 2
@@ -310,7 +314,7 @@ def test_blow_up_is_a_diverged_outcome_without_nan():
     from mjcodesign.sim.fem.gripper_grasp import FemGrasp
 
     scene = _box_scene("soft", 0.0152)
-    scenario = GraspScenario(**_BRIEF, tension=2.0)
+    scenario = GraspScenario(**_BRIEF, tendon=TendonForce(tension=2.0))
     # α·dt = 3 > 2: each step multiplies a vertex's velocity by 1 − α·dt = −2.
     grasp = FemGrasp(scene, scenario, options=_coarse(), dynamics=FemDynamics(dt=1e-5, mass_damping=3e5))
     out = grasp.run().outcome
@@ -442,7 +446,10 @@ def test_tendon_kernel_applies_the_reference_law(law, guides):
     scene = _box_scene("soft", 0.0152)
     options = _coarse(tendon_law=law, flexure_guides=guides)
     grasp = FemGrasp(
-        scene, GraspScenario(**_BRIEF, tension=2.0), options=options, dynamics=FemDynamics(dt=1e-5)
+        scene,
+        GraspScenario(**_BRIEF, tendon=TendonForce(tension=2.0)),
+        options=options,
+        dynamics=FemDynamics(dt=1e-5),
     )
     g = grasp.gripper
     assert g.n_waypoints == (g.n_blocks if guides else (g.n_blocks + 1) // 2)

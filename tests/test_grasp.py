@@ -11,6 +11,7 @@ from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import PoseError
 from mjcodesign.models.types import FingerModel, GripperPose, SimOptions
 from mjcodesign.objects import box_object
+from mjcodesign.scenarios.drive import TendonForce
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
 from mjcodesign.sim import MujocoBackend, with_stiffness
 
@@ -30,7 +31,7 @@ def box_scene():
 def test_hold_force_equals_weight(box_scene):
     # Static equilibrium of the lifted box with no ground contact (the palm does not touch it):
     #   sum_i F_z,i (finger contacts) = m g
-    scenario = GraspScenario(tension=10.0, impulse=0.0, hold_s=0.3)
+    scenario = GraspScenario(tendon=TendonForce(tension=10.0), impulse=0.0, hold_s=0.3)
     out = MujocoBackend().run(box_scene, scenario)
     assert out.success, out.reason
     assert not out.ground_contact

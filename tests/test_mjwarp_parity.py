@@ -12,6 +12,7 @@ from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.models.types import FingerModel, GripperPose
 from mjcodesign.objects import box_object
+from mjcodesign.scenarios.drive import TendonForce
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
 from mjcodesign.sim import MujocoBackend
 from mjcodesign.sim.mjwarp import MjwarpBackend
@@ -48,7 +49,10 @@ def test_mjwarp_matches_mujoco_c():
     )
     batches = (
         (GraspScenario(**short), [Stiffness.preset("paper-optimized"), Stiffness(np.full((2, 11), 14.0))]),
-        (GraspScenario(tension=3.0, **short), [Stiffness(np.full((2, 11), v)) for v in (15.0, 16.0)]),
+        (
+            GraspScenario(tendon=TendonForce(tension=3.0), **short),
+            [Stiffness(np.full((2, 11), v)) for v in (15.0, 16.0)],
+        ),
     )
     for (scenario, designs), success in zip(batches, ([True, True], [False, False]), strict=True):
         ref = MujocoBackend().run_batch(scene, scenario, designs)

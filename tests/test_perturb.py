@@ -10,7 +10,7 @@ from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError
 from mjcodesign.models.types import FingerModel, GripperPose
 from mjcodesign.objects import box_object
-from mjcodesign.scenarios.drive import TendonPosition
+from mjcodesign.scenarios.drive import TendonForce, TendonPosition
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene, drive_scene
 from mjcodesign.scenarios.perturb import NOMINAL, Perturbation, perturbed_pose, perturbed_scene
 from mjcodesign.sim import MujocoBackend
@@ -63,7 +63,7 @@ def test_palm_moves_and_turns_by_the_draw():
 @pytest.mark.parametrize("scale", [0.9, 1.1])
 def test_hold_force_follows_the_scaled_mass(box_scene, scale):
     # Static hold of the lifted box: sum F_z (finger contacts) = (scale m) g
-    scenario = GraspScenario(tension=10.0, impulse=0.0, hold_s=0.3)
+    scenario = GraspScenario(tendon=TendonForce(tension=10.0), impulse=0.0, hold_s=0.3)
     scene = perturbed_scene(box_scene, scenario, Perturbation(mass_scale=scale))
     assert scene.model.body_mass[scene.object_body] == pytest.approx(scale * box_scene.obj.mass, rel=1e-12)
     out = MujocoBackend().run(scene, scenario)
@@ -96,7 +96,7 @@ def _actuators(scene):
 
 def test_force_mode_tension_scales(box_scene):
     # Force mode: tendon force = gear * control, so the applied tension is scale * the commanded one.
-    scenario = GraspScenario(tension=10.0)
+    scenario = GraspScenario(tendon=TendonForce(tension=10.0))
     scene = perturbed_scene(box_scene, scenario, Perturbation(tendon_scale=1.05))
     ids = _actuators(box_scene)
     np.testing.assert_allclose(

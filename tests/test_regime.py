@@ -11,6 +11,7 @@ from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError
 from mjcodesign.models.types import FingerModel, SimOptions
 from mjcodesign.objects import box_object
+from mjcodesign.scenarios.drive import TendonForce
 from mjcodesign.scenarios.grasp import (
     DEFAULT_IMPULSE,
     PAPER_DELTA_V,
@@ -94,8 +95,8 @@ def test_friction_below_one_takes_effect():
     # A 50 g box needs 2 μ N >= m g: at μ = 0.01 a grip of 10 N tension cannot hold it (N >= 25 N),
     # at the paper's μ = 1 it holds. Before the object's own sliding friction was 0, MuJoCo's larger-
     # coefficient rule kept μ = 1 on every finger contact whatever the fingers carried.
-    hold = GraspScenario(tension=10.0, impulse=0.0)
-    slip = GraspScenario(tension=10.0, impulse=0.0, friction=0.01)
+    hold = GraspScenario(tendon=TendonForce(tension=10.0), impulse=0.0)
+    slip = GraspScenario(tendon=TendonForce(tension=10.0), impulse=0.0, friction=0.01)
     held = MujocoBackend().run(_scene(400.0), hold)
     slid = MujocoBackend().run(_scene(400.0, scene_options(slip)), slip)
     assert held.success, held.reason

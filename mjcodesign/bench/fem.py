@@ -134,6 +134,7 @@ def _bench_gripper(mesh: str, *, gradient: bool, dt: float | None = None) -> dic
     from mjcodesign.errors import DesignError
     from mjcodesign.models.types import FingerModel
     from mjcodesign.objects import box_object
+    from mjcodesign.scenarios.drive import TendonForce
     from mjcodesign.scenarios.grasp import GraspScenario, auto_pose, build_scene
     from mjcodesign.sim.fem import FemDynamics, FemOptions
     from mjcodesign.sim.fem.grasp_adjoint import loss_gradient
@@ -148,7 +149,9 @@ def _bench_gripper(mesh: str, *, gradient: bool, dt: float | None = None) -> dic
     )
     options = FemOptions(waypoint_layers=False, **GRIPPER_MESHES[mesh])
     dynamics = FemDynamics() if dt is None else FemDynamics(dt=dt)
-    grasp = FemGrasp(scene, GraspScenario(tension=GRASP_TENSION), options=options, dynamics=dynamics)
+    grasp = FemGrasp(
+        scene, GraspScenario(tendon=TendonForce(tension=GRASP_TENSION)), options=options, dynamics=dynamics
+    )
     grasp.run(steps=10)  # compile and warm up
     c0, t0 = time.process_time(), time.perf_counter()
     run = grasp.run()

@@ -93,10 +93,11 @@ def _cmd_grasp(args) -> int:
     if args.tensions is not None:  # the study's scenario at another tension (the CI version's phases kept)
         import dataclasses
 
+        from mjcodesign.scenarios.drive import TendonForce
         from mjcodesign.scenarios.grasp import GraspScenario
 
         base = settings.get("scenario") or GraspScenario()
-        settings["scenario"] = dataclasses.replace(base, tension=args.tensions[0])
+        settings["scenario"] = dataclasses.replace(base, tendon=TendonForce(tension=args.tensions[0]))
 
     done: list[dict] = []
 

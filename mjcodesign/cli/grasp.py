@@ -222,7 +222,7 @@ def grasp(
             source, density, pose, mass=mass, seed=seed, allow_open=allow_open, cache_dir=cache_dir
         )
     obj, rho, gripper_pose = prepared
-    kwargs = {k: v for k, v in (("tension", tension), ("lift", lift), ("impulse", impulse)) if v is not None}
+    kwargs = {k: v for k, v in (("lift", lift), ("impulse", impulse)) if v is not None}
     kwargs.update(_physics(delta_v, friction))
     if tendon is not None:  # --tendon
         from mjcodesign.scenarios import parse_tendon
@@ -230,6 +230,10 @@ def grasp(
         if tension is not None:
             raise DesignError("give --tension or --tendon, not both")
         kwargs["tendon"] = parse_tendon(tendon)
+    elif tension is not None:  # --tension
+        from mjcodesign.scenarios import TendonForce
+
+        kwargs["tendon"] = TendonForce(tension=tension)
     scenario = GraspScenario(**kwargs)
     job = GraspJob(
         obj=obj,

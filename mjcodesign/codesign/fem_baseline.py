@@ -20,13 +20,14 @@ from mjcodesign.codesign.optimize import log_e_of, z_of
 from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, N_LOG_E
 from mjcodesign.errors import DesignError
 from mjcodesign.objects import GraspObject
+from mjcodesign.scenarios.drive import TendonForce
 from mjcodesign.scenarios.grasp import GraspScenario, auto_pose
 
 __all__ = ["FEM_SCENARIO", "FemDescent", "fem_descent"]
 
 FEM_SCENARIO = GraspScenario(
     settle_s=0.0, close_s=0.002, tighten_s=0.004, lift_s=0.004, hold_s=0.008, post_hold_s=0.002,
-    tension=2.0, lift=0.002, impulse=0.0,
+    tendon=TendonForce(tension=2.0), lift=0.002, impulse=0.0,
 )  # fmt: skip
 """A 20 ms grasp that starts 2 mm from the object (tests/test_fem_grasp.py's gradient case)."""
 _START_GAP = 0.002  # [m] the carriages start this far outside the pose's openings

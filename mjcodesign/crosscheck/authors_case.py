@@ -77,6 +77,7 @@ def authors_case(
     from mjcodesign.objects import load_mesh
     from mjcodesign.poses import to_gripper_pose
     from mjcodesign.poses.external import import_anygrasp, load_external
+    from mjcodesign.scenarios.drive import TendonForce
     from mjcodesign.scenarios.grasp import GraspScenario, GraspScene, build_scene, start_openings
 
     if start not in STARTS:
@@ -96,7 +97,7 @@ def authors_case(
         )
     pose = to_gripper_pose(cands, 0)
     start_openings(obj, pose)  # PoseError if the object is too wide for our stroke at this pose
-    scenario = GraspScenario(tension=_TENSION, lift=_LIFT)
+    scenario = GraspScenario(tendon=TendonForce(tension=_TENSION), lift=_LIFT)
     sims = model_runners(models, fem_options, fem_dynamics)
     out = []
     for log_e, theirs in AUTHORS_RESULT.items():

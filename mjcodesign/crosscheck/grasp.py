@@ -105,12 +105,15 @@ def short_settings() -> dict:
     cells and 8 mm in the flexures (396 vertices a finger, about as coarse as the authors' 432
     particles) and steps 10 µs with selective mass scaling.
     """
+    from mjcodesign.scenarios.drive import TendonForce
     from mjcodesign.scenarios.grasp import GraspScenario
     from mjcodesign.sim.fem import FemDynamics, FemOptions
 
     return {
         "cases": SHORT_CASES,
-        "scenario": GraspScenario(**SHORT_PHASES, tension=STUDY_TENSION, lift=0.01, impulse=0.0),
+        "scenario": GraspScenario(
+            **SHORT_PHASES, tendon=TendonForce(tension=STUDY_TENSION), lift=0.01, impulse=0.0
+        ),
         "fem_options": FemOptions(h=10e-3, h_flexure=8e-3, spine_layers=2, waypoint_layers=False),
         "fem_dynamics": FemDynamics(dt=1e-5),
     }
@@ -146,12 +149,13 @@ def grasp_study(
     from mjcodesign.errors import DesignError, PoseError
     from mjcodesign.models.types import FingerModel
     from mjcodesign.poses import sample_poses, to_gripper_pose
+    from mjcodesign.scenarios.drive import TendonForce
     from mjcodesign.scenarios.grasp import GraspScenario, build_scene
 
     for m in models:
         if m not in GRASP_MODELS:
             raise DesignError(f"the grasp study compares {GRASP_MODELS}, not {m!r}")
-    scenario = scenario or GraspScenario(tension=STUDY_TENSION)
+    scenario = scenario or GraspScenario(tendon=TendonForce(tension=STUDY_TENSION))
     design = FingerDesign()
     objects, poses, records = {}, {}, []
     sims = model_runners(models, fem_options, fem_dynamics)

@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-from dataclasses import InitVar, dataclass, field
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -171,8 +171,8 @@ paper's mu = 1 (the authors' value, not a measurement of the tape)."""
 class GraspScenario:
     """Phase durations [s], the tendon drive, lift [m] and disturbance impulse [N s].
 
-    ``tension=T`` [N] is a shorthand for ``tendon=TendonForce(tension=T)``; ``scenario.tension`` reads
-    the force mode's tension (None in position mode).
+    A force-mode scenario at T [N] is ``GraspScenario(tendon=TendonForce(tension=T))``; :attr:`tension`
+    reads the force mode's tension (None in position mode).
     """
 
     settle_s: float = 0.05
@@ -182,7 +182,6 @@ class GraspScenario:
     tendon: TendonForce | TendonPosition = field(default_factory=TendonForce)
     """How the tendons are driven (:mod:`mjcodesign.scenarios.drive`): a tension ramped over the
     tighten phase (default 10 N, the paper's simulator) or the XL330's position servo."""
-    tension: InitVar[float | None] = None
     lift: float = 0.03
     """Lift distance [m] (paper: about 3 cm in simulation)."""
     lift_s: float = 0.2
@@ -206,11 +205,7 @@ class GraspScenario:
     paper's 1). A scene for this scenario is compiled with it (:func:`scene_options`).
     :data:`TAPE_FRICTION_RANGE` is the range of the hardware's gripping tape."""
 
-    def __post_init__(self, tension: float | None) -> None:
-        if tension is not None and not isinstance(tension, _ReadTension):
-            if isinstance(self.tendon, TendonPosition):
-                raise DesignError("tension is the force mode's shorthand: give it or a position-mode tendon")
-            object.__setattr__(self, "tendon", TendonForce(tension=tension))
+    def __post_init__(self) -> None:
         if not isinstance(self.tendon, TendonForce | TendonPosition):
             raise DesignError(f"tendon must be a TendonForce or TendonPosition, got {self.tendon!r}")
         for name in ("settle_s", "close_s", "tighten_s", "lift_s", "hold_s", "post_hold_s"):
@@ -231,6 +226,11 @@ class GraspScenario:
             np.isfinite(self.friction) and 0 < self.friction <= _MAX_FRICTION
         ):
             raise DesignError(f"friction must be in (0, {_MAX_FRICTION:g}], got {self.friction}")
+
+    @property
+    def tension(self) -> float | None:
+        """Tension per finger of the force-mode tendon [N]; None in position mode."""
+        return self.tendon.tension if isinstance(self.tendon, TendonForce) else None
 
     def impulse_on(self, mass: float) -> float:
         """The disturbance impulse [N s] on an object of ``mass`` [kg]: m·``delta_v``, or ``impulse``."""
@@ -272,22 +272,6 @@ the arm's speed, the paper's disturbance relative to the object (:data:`PAPER_DE
 finger–object friction at the top of :data:`TAPE_FRICTION_RANGE`. With real object masses (``--mass
 real``, :func:`mjcodesign.objects.published_mass`) it is the regime of a real grasp; it is not the
 default of any command."""
-
-
-class _ReadTension(float):
-    """A tension read from a scenario: ``dataclasses.replace`` passes it back, and the tendon then wins."""
-
-
-def _scenario_tension(self: GraspScenario) -> float | None:
-    """Tension per finger of the force-mode tendon [N]; None in position mode."""
-    return _ReadTension(self.tendon.tension) if isinstance(self.tendon, TendonForce) else None
-
-
-# ``tension`` is an init-only shorthand for the force mode; reading it goes through the tendon. Python
-# 3.11's ``dataclasses.replace`` passes every init argument again, read with getattr: a value read
-# here is marked, so ``replace(s, tendon=...)`` keeps the new tendon and ``replace(s, tension=T)``
-# (a plain float) still sets the force mode's tension.
-GraspScenario.tension = property(_scenario_tension)
 
 
 @dataclass

@@ -135,12 +135,13 @@ def fem_grasp_loss_and_grad(
     from mjcodesign.design.finger import FingerDesign
     from mjcodesign.design.stiffness import Stiffness
     from mjcodesign.models.types import FingerModel
+    from mjcodesign.scenarios.drive import TendonForce
     from mjcodesign.scenarios.grasp import GraspScenario, build_scene
     from mjcodesign.sim.fem.gripper_grasp import GRASP_TENSION, FemGrasp
 
     stiffness = log_e if isinstance(log_e, Stiffness) else Stiffness(np.asarray(log_e, dtype=float).ravel())
     design = design or FingerDesign()
-    scenario = scenario or GraspScenario(tension=GRASP_TENSION)
+    scenario = scenario or GraspScenario(tendon=TendonForce(tension=GRASP_TENSION))
     scene = build_scene(obj, design, stiffness, FingerModel.CHAIN, pose)
     if start_openings is not None:
         scene = dataclasses.replace(scene, start_openings=tuple(float(s) for s in start_openings))
