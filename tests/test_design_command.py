@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mjcodesign.cli import main as cli_main
 from mjcodesign.errors import MeshError
 from mjcodesign.pipeline import parse_mass_text, parse_objects, png_bytes, read_masses
 
@@ -95,7 +96,9 @@ def test_png_bytes_decode_to_the_image():
         ("folder of other files", "not empty"),
     ],
 )
-def test_bad_input_exits_2_with_one_line_and_no_folder(case, expect, meshes, tiny_checkpoint, tmp_path):
+def test_bad_input_exits_2_with_one_line_and_no_folder(
+    case, expect, meshes, tiny_checkpoint, tmp_path, capsys, monkeypatch
+):
     out = tmp_path / "out"
     box = str(meshes / "box.stl")
     args = {
@@ -115,10 +118,12 @@ def test_bad_input_exits_2_with_one_line_and_no_folder(case, expect, meshes, tin
     if case == "folder of other files":
         out.mkdir()
         (out / "notes.txt").write_text("mine")
-    r = _cli(*args, "--out", out, cwd=tmp_path)
-    assert r.returncode == 2, r.stderr[-3000:]
-    assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1 and expect in r.stderr, r.stderr
-    assert r.stdout == ""
+    monkeypatch.chdir(tmp_path)
+    code = cli_main.main(["design", *map(str, args), "--out", str(out)])  # in process: no interpreter start
+    r = capsys.readouterr()
+    assert code == 2, r.err[-3000:]
+    assert r.err.startswith("error: ") and r.err.count("\n") == 1 and expect in r.err, r.err
+    assert r.out == ""
     if case == "folder of other files":  # left as it was
         assert [p.name for p in out.iterdir()] == ["notes.txt"] and (out / "notes.txt").read_text() == "mine"
         out = tmp_path / "nothing"
