@@ -1,4 +1,5 @@
 import os
+import signal
 from pathlib import Path
 
 import pytest
@@ -37,7 +38,10 @@ def tiny_checkpoint(tmp_path_factory):
 
     work = tmp_path_factory.mktemp("tiny_surrogate")
     files = []
-    for name, mesh in {"box": trimesh.creation.box(extents=(0.05, 0.04, 0.06)), "ball": trimesh.creation.icosphere(radius=0.03)}.items():
+    for name, mesh in {
+        "box": trimesh.creation.box(extents=(0.05, 0.04, 0.06)),
+        "ball": trimesh.creation.icosphere(radius=0.03),
+    }.items():
         mesh.export(work / f"{name}.stl")
         files.append(str(work / f"{name}.stl"))
     scenario = GraspScenario(impulse=0.0, tighten_s=0.1, lift_s=0.2, hold_s=0.1, post_hold_s=0.02)
@@ -57,11 +61,89 @@ def tiny_checkpoint(tmp_path_factory):
         result = train(
             data,
             split(data, "random", seed=0),
-            TrainConfig(epochs=5, batch_size=16, optimizer=OptimizerConfig(lr=1e-2), early_stop_patience=5, seed=0),
+            TrainConfig(
+                epochs=5, batch_size=16, optimizer=OptimizerConfig(lr=1e-2), early_stop_patience=5, seed=0
+            ),
             ModelConfig(point_widths=(8, 16), hidden=16, depth=2, penultimate=8, dropout=0.0),
         )
     finally:
         torch.set_num_threads(n)
-    meta = {"dataset": {"density": {"low_kg_m3": 100.0, "high_kg_m3": 400.0}, "object_seed": 0, "cloud_points": 256}}
-    sur = Surrogate(result.model, result.normalizer, lift=data.lift, lifted_fraction=data.lifted_fraction, meta=meta)
+    meta = {
+        "dataset": {
+            "density": {"low_kg_m3": 100.0, "high_kg_m3": 400.0},
+            "object_seed": 0,
+            "cloud_points": 256,
+        }
+    }
+    sur = Surrogate(
+        result.model, result.normalizer, lift=data.lift, lifted_fraction=data.lifted_fraction, meta=meta
+    )
     return save_checkpoint(work / "ckpt", sur)
+
+
+# The suite's own long-lived helpers, which end with the pytest process itself.
+_SUITE_HELPERS = ("multiprocessing.resource_tracker", "multiprocessing.forkserver")
+_LEFTOVER_WAIT_S = 15.0  # a process the suite started gets this long after the last test to end [s]
+_PR_SET_CHILD_SUBREAPER = 36  # prctl(2): orphans of our descendants become our children (Linux)
+
+
+def _cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")[:200]
+    except OSError:
+        return ""
+
+
+def _running_children() -> set[int]:
+    """This process's children that are running (zombies reaped), not the suite's own helpers."""
+    kids = set()
+    for task in Path(f"/proc/{os.getpid()}/task").glob("*"):
+        try:
+            kids |= {int(k) for k in (task / "children").read_text().split()}
+        except OSError:
+            continue
+    running = set()
+    for pid in kids:
+        try:
+            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if state == "Z":
+            try:
+                os.waitpid(pid, os.WNOHANG)
+            except ChildProcessError:
+                pass
+        elif not any(h in _cmdline(pid) for h in _SUITE_HELPERS):
+            running.add(pid)
+    return running
+
+
+@pytest.fixture(scope="session", autouse=True)
+def no_process_outlives_the_suite():
+    """After the last test, no process the suite started is still running.
+
+    The pytest process becomes a child subreaper, so a process orphaned by its parent (a viewer left
+    behind by a killed command, a daemon) is re-parented here rather than to init, and is seen. Any
+    still running after :data:`_LEFTOVER_WAIT_S` is named, killed, and fails the suite.
+    """
+    import sys
+    import time
+
+    if not (sys.platform.startswith("linux") and Path("/proc/self/task").exists()):
+        yield
+        return
+    import ctypes
+
+    ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
+    before = _running_children()
+    yield
+    deadline = time.monotonic() + _LEFTOVER_WAIT_S
+    while (left := _running_children() - before) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    named = {pid: _cmdline(pid) for pid in left}
+    for pid in left:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
+    assert not named, f"processes the suite started outlived it (killed now): {named}"
