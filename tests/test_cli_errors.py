@@ -61,3 +61,25 @@ def test_a_file_name_that_is_not_utf8_is_read(box, tmp_path):
     (tmp_path / "bôx.stl").write_bytes(box.read_bytes())
     r = _run(["grasp", "--object", "bôx.stl", "--json"], tmp_path, env={"LC_ALL": "C"})
     assert r.returncode == 0, r.stderr.decode(errors="replace")[-1500:]
+
+
+def test_datagen_names_each_object_it_left_out(tmp_path, capsys):
+    # A run that leaves an object out says so on stderr, not only as a count in its JSON.
+    import json
+
+    from mjcodesign.cli.common import warn_failed_objects
+
+    objects = [
+        {"index": 0, "source": "good.stl", "status": "ready"},
+        {
+            "index": 1,
+            "source": "broken\nname.stl",
+            "status": "failed",
+            "error": "MeshError: mesh file is empty",
+        },
+    ]
+    (tmp_path / "manifest.json").write_text(json.dumps({"objects": objects}))
+    assert warn_failed_objects(tmp_path) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err == ["warning: object broken\\nname.stl left out: MeshError: mesh file is empty"]
+    assert warn_failed_objects(tmp_path / "none") == 0

@@ -34,6 +34,7 @@ __all__ = [
     "output_dir",
     "check_output_link",
     "choice_list",
+    "warn_failed_objects",
 ]
 
 _NO_DRIVER = b"Could not find or load the NVIDIA CUDA driver"  # expected on CPU-only machines
@@ -198,6 +199,23 @@ def choice_list(choices: tuple[str, ...], what: str) -> Callable[[str], list[str
         return items
 
     return parse
+
+
+def warn_failed_objects(dataset: str | Path) -> int:
+    """One stderr line per object the dataset in folder ``dataset`` could not use; returns how many.
+
+    Reads its manifest's objects (``status`` failed, with the ``error`` datagen recorded), so that a
+    run that leaves an object out says so where it is seen, not only in ``objects_failed``.
+    """
+    try:
+        objects = json.loads((Path(dataset) / "manifest.json").read_text(encoding="utf-8"))["objects"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0  # no readable manifest: the command has said why already
+    failed = [o for o in objects if isinstance(o, dict) and o.get("status") == "failed"]
+    for o in failed:
+        name = one_line(str(o.get("name", o.get("source"))))
+        sys.stderr.write(f"warning: object {name} left out: {one_line(str(o.get('error')))}\n")
+    return len(failed)
 
 
 def port_number(text: str) -> int:

@@ -16,7 +16,15 @@ import sys
 import time
 from pathlib import Path
 
-from mjcodesign.cli.common import Parser, add_mass_mode, emit, int_at_least, quiet_warp, user_cache_dir
+from mjcodesign.cli.common import (
+    Parser,
+    add_mass_mode,
+    emit,
+    int_at_least,
+    quiet_warp,
+    user_cache_dir,
+    warn_failed_objects,
+)
 from mjcodesign.cli.finger_flags import grasp_model_name
 from mjcodesign.optional import WARP_DEVICES
 
@@ -285,6 +293,7 @@ def run_datagen(args: argparse.Namespace) -> int:
         sys.stderr.write("error: a worker process died (out of memory?); rerun the same command to resume\n")
         return 1
     print(json.dumps(res))
+    warn_failed_objects(args.out)
     return 0
 
 
