@@ -240,7 +240,7 @@ def _header(record: dict) -> list[str]:
     sim = record["simulation"]
     return [
         f"{len(record['objects'])} objects, {record['mode']} design; verified by {v['rollouts']} MuJoCo rollouts "
-        f"({v['draws']} perturbed draws per object, design and disturbance; chain model, tendon {sim['tendon']}).",
+        f"({v['draws']} perturbed draws per object, design and disturbance; {sim['model']} model, tendon {sim['tendon']}).",
         f"Each design at the pose the surrogate picks for it; success at the paper's {v['table_impulse_paper_ns']:g} N s "
         "disturbance with its 95% Wilson interval over the draws (palm ±2 mm ±2°, mass ±10%, friction ±20%, "
         "tendon ±5%).",

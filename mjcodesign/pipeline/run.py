@@ -49,6 +49,7 @@ from mjcodesign.objects import YCB_IN_DOMAIN, parse_density
 from mjcodesign.outputs import OutputKind, check_output, staged
 from mjcodesign.pipeline.report import GraspImages, write_report
 from mjcodesign.pipeline.specs import DEFAULT_DENSITY, ObjectSpec
+from mjcodesign.scenarios import TendonForce, TendonPosition
 from mjcodesign.scenarios.grasp import GraspScenario, paper_impulse
 from mjcodesign.sim.mujoco_c import MujocoBackend
 
@@ -70,7 +71,7 @@ class DesignOptions:
     """How ``mjcodesign design`` runs (its flags)."""
 
     mode: Mode = Mode.JOINT
-    tendon: object | None = None
+    tendon: TendonForce | TendonPosition | None = None
     """The tendon drive (:func:`mjcodesign.data.parse_tendon`); None: the checkpoint dataset's."""
     poses_per_object: int = 10
     """Grasp candidates sampled per object (the co-design's pose set)."""
