@@ -119,9 +119,7 @@ def test_crosscheck_design_sweep_ends_with_a_summary_per_model():
 def test_crosscheck_cli_refuses_a_reversed_sweep(capsys):
     from mjcodesign.cli.main import main
 
-    assert (
-        main(["crosscheck", "--scenario", "cantilever", "--models", "chain", "--design", "random:5..3"]) == 2
-    )
+    assert main(["crosscheck", "cantilever", "--models", "chain", "--design", "random:5..3"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "below the first" in err[0]
 
@@ -167,15 +165,16 @@ def test_grasp_study_case_selection():
         (["--cases", "1,99"], "--cases indices"),
         (["--cases", "two"], "--cases takes"),
         (["--fem-contact-ke", "-5"], "--fem-contact-ke"),
-        (["--tendon-lever", "path"], "--tendon-lever applies to the cantilever and the curl"),
-        (["--hinges-per-block", "2"], "--hinges-per-block applies to the cantilever and the curl"),
+        (["--tendon-lever", "path"], "unrecognized arguments: --tendon-lever"),
+        (["--hinges-per-block", "2"], "unrecognized arguments: --hinges-per-block"),
+        (["--fem-order", "2"], "unrecognized arguments: --fem-order"),  # the grasp's tets are linear
     ],
 )
 def test_grasp_study_cli_refuses_bad_selection_before_simulating(capsys, argv, says):
     from mjcodesign.cli.main import main
 
     try:
-        code = main(["crosscheck", "--scenario", "grasp", "--models", "chain,fem", *argv])
+        code = main(["crosscheck", "grasp", "--models", "chain,fem", *argv])
     except SystemExit as exc:  # argparse's own refusal
         code = exc.code
     assert code == 2
@@ -206,13 +205,85 @@ def test_authors_case_starts_at_the_refined_openings_or_sweeps_in():
         authors_case(("chain",), pose_file=pose_file, start="nowhere")
 
 
-def test_locking_correction_outside_the_grasp_is_refused(capsys):
+# Every flag of the single crosscheck parser before it had a subcommand per scenario (less --scenario,
+# now the deprecated alias, and --authors-row, retired): each is still taken by some scenario.
+_FLAT_FLAGS = """--models --design --tensions --plot --cases --short --out --fem-h-flexure --hinges-per-block
+--tendon-lever --authors-case --authors-start --fem-dt --fem-locking-correction --fem-tendon-law
+--fem-contact-ke --fem-contact-damping-ratio --fem-h --fem-layers --fem-order --rrd --spawn --viewer-port
+--json""".split()
+
+
+def _scenario_flags() -> dict[str, set[str]]:
+    import argparse
+
+    from mjcodesign.cli.main import build_parser
+
+    def subs(parser):
+        return next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+
+    crosscheck = subs(build_parser())["crosscheck"]
+    return {
+        name: {o for a in sub._actions for o in a.option_strings if o.startswith("--") and o != "--help"}
+        for name, sub in subs(crosscheck).items()
+    }
+
+
+def test_each_scenario_takes_only_its_own_flags():
+    from mjcodesign.cli.crosscheck import _SCENARIO_HELP
+    from mjcodesign.crosscheck import SCENARIOS
+
+    assert tuple(_SCENARIO_HELP) == (*SCENARIOS, "grasp")
+    flags = _scenario_flags()
+    assert set(flags) == set(_SCENARIO_HELP)
+    assert sorted(set(_FLAT_FLAGS) - set().union(*flags.values())) == []
+    grasp_only = {"--cases", "--short", "--out", "--authors-case", "--authors-start", "--fem-tendon-law"}
+    grasp_only |= {"--fem-locking-correction", "--fem-dt", "--fem-h-flexure", "--fem-contact-ke"}
+    assert grasp_only <= flags["grasp"]
+    assert not grasp_only & (flags["cantilever"] | flags["curl"] | flags["press"])
+    assert {"--tendon-lever", "--plot"} <= flags["curl"]
+    assert not {"--tendon-lever", "--plot", "--tensions"} & flags["cantilever"]
+    assert "--hinges-per-block" in flags["cantilever"] and "--hinges-per-block" not in flags["press"]
+    assert not {"--design", "--rrd", "--fem-order", "--hinges-per-block", "--plot"} & flags["grasp"]
+    assert "--authors-row" not in set().union(*flags.values())
+
+
+@pytest.mark.parametrize(
+    ("argv", "says"),
+    [
+        (["crosscheck", "curl", "--models", "chain", "--fem-locking-correction"], "--fem-locking-correction"),
+        (["crosscheck", "--scenario", "curl", "--fem-tendon-law", "paper"], "--fem-tendon-law"),
+        (["crosscheck", "--scenario", "grasp", "--authors-case", "--authors-row", "1"], "--authors-row"),
+        (["crosscheck"], "needs a scenario"),
+        (["crosscheck", "--scenario", "bend"], "choose from cantilever, curl, press, grasp, got 'bend'"),
+        (["crosscheck", "grasp", "--models", "flex"], "unknown model"),
+    ],
+)
+def test_a_flag_of_another_scenario_is_refused_in_one_line(capsys, argv, says):
     from mjcodesign.cli.main import main
 
-    code = main(["crosscheck", "--scenario", "curl", "--models", "chain", "--fem-locking-correction"])
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse's own refusal
+        code = exc.code
     assert code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--fem-locking-correction applies to the grasp" in err[0], err
+    assert len(err) == 1 and says in err[0] and "deprecated" not in err[0], err
+
+
+def test_the_scenario_flag_is_a_deprecated_alias_of_the_subcommand(capsys):
+    import json
+
+    from mjcodesign.cli.main import main
+
+    rest = ["--models", "chain", "--design", "soft", "--json"]
+    assert main(["crosscheck", "cantilever", *rest]) == 0
+    new = capsys.readouterr()
+    assert main(["crosscheck", "--scenario", "cantilever", *rest]) == 0
+    old = capsys.readouterr()
+    assert json.loads(old.out) == json.loads(new.out) and json.loads(new.out)
+    assert "deprecated" not in new.err
+    notes = [line for line in old.err.splitlines() if "deprecated" in line]
+    assert notes == ["note: 'crosscheck --scenario cantilever' is deprecated; run 'crosscheck cantilever'"]
 
 
 def test_chain_margin_moves_the_palm_a_millimetre_each_way():
@@ -241,22 +312,23 @@ def test_chain_margin_moves_the_palm_a_millimetre_each_way():
 
 
 def test_grasp_study_runs_at_the_tension_given(capsys, tmp_path, monkeypatch):
-    """``crosscheck --scenario grasp --tensions T``: every case's rollouts run at T (the CI version's phases kept)."""
+    """``crosscheck grasp --tensions T``: every case's rollouts run at T (the CI version's phases kept)."""
     import dataclasses
     import json
 
     from mjcodesign.cli.main import main
     from mjcodesign.crosscheck import grasp_study, short_settings
+    from mjcodesign.scenarios.drive import TendonForce
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
-    argv = ["crosscheck", "--scenario", "grasp", "--short", "--models", "chain", "--json"]
+    argv = ["crosscheck", "grasp", "--short", "--models", "chain", "--json"]
     assert main([*argv, "--tensions", "2"]) == 0
     at_2 = json.loads(capsys.readouterr().out)["cases"]
     assert main(argv) == 0
     at_4 = json.loads(capsys.readouterr().out)["cases"]
     assert [c["tension"] for c in at_2] == [2.0, 2.0] and [c["tension"] for c in at_4] == [4.0, 4.0]
     settings = short_settings()
-    settings["scenario"] = dataclasses.replace(settings["scenario"], tension=2.0)
+    settings["scenario"] = dataclasses.replace(settings["scenario"], tendon=TendonForce(tension=2.0))
     direct, _ = grasp_study(models=("chain",), cache_dir=tmp_path / "mjcodesign", **settings)
     for cli, lib, four in zip(at_2, direct, at_4, strict=True):
         assert cli["chain"]["body_force"] == list(lib["chain"]["body_force"])  # the same rollout

@@ -1,14 +1,18 @@
 """``mjcodesign crosscheck`` and ``mjcodesign bench fem``: the MuJoCo finger models against the Warp FEM.
 
-Rows (``--json`` prints a list of them): ``scenario``, ``model``, ``design``, ``metric``, ``value``,
-``reference``, ``rel_diff``. ``--scenario grasp`` is the grasp agreement study instead
-(`mjcodesign.crosscheck.grasp`): one line per case as it finishes on stderr, then the summary (``--json``:
-the whole report, cases and summary). The comparisons are `mjcodesign.crosscheck`; the FEM's speed
-benchmark is `mjcodesign.bench.fem`. This module parses the flags, calls them and prints.
+One subcommand per scenario, each with only its own flags: ``crosscheck cantilever``, ``curl`` and
+``press`` print rows (``--json``: a list of them) with ``scenario``, ``model``, ``design``, ``metric``,
+``value``, ``reference``, ``rel_diff``; ``crosscheck grasp`` is the grasp agreement study
+(`mjcodesign.crosscheck.grasp`): one line per case as it finishes on stderr, then the summary
+(``--json``: the whole report, cases and summary). The older form ``crosscheck --scenario NAME ...``
+still runs (a deprecated alias: a note on stderr names the new form). The comparisons are
+`mjcodesign.crosscheck`; the FEM's speed benchmark is `mjcodesign.bench.fem`. This module parses the
+flags, calls them and prints.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 
@@ -23,8 +27,8 @@ from mjcodesign.cli.common import (
 from mjcodesign.cli.viz import add_recording_flags, open_recorder
 from mjcodesign.crosscheck import (
     GRASP_CASES,
+    GRASP_MODELS,
     MODELS,
-    SCENARIOS,
     TOL_CROSS,
     crosscheck,
     grasp_study,
@@ -70,9 +74,9 @@ def _cmd_grasp(args) -> int:
 
         fem_mesh = _grasp_mesh(args)
         dyn = _fem_dynamics(args)
+        _deprecation_note(args)
         rows = authors_case(
             args.models,
-            row=args.authors_row,
             fem_options=fem_mesh,
             fem_dynamics=dyn,
             cache_dir=user_cache_dir(),
@@ -98,6 +102,7 @@ def _cmd_grasp(args) -> int:
 
         base = settings.get("scenario") or GraspScenario()
         settings["scenario"] = dataclasses.replace(base, tendon=TendonForce(tension=args.tensions[0]))
+    _deprecation_note(args)
 
     done: list[dict] = []
 
@@ -148,7 +153,10 @@ def _plain(obj):
 def _chain_options(args):
     from mjcodesign.models.types import SimOptions
 
-    return SimOptions(hinges_per_block=args.hinges_per_block, tendon_lever=args.tendon_lever)
+    return SimOptions(
+        hinges_per_block=getattr(args, "hinges_per_block", 1),
+        tendon_lever=getattr(args, "tendon_lever", "constant"),
+    )
 
 
 _MAX_SWEEP = 1000
@@ -176,47 +184,32 @@ def _check_designs(text: str) -> None:
 
 
 def _cmd_crosscheck(args) -> int:
+    """``crosscheck cantilever|curl|press``: the rows of one scenario."""
     _check_designs(args.design)
-    for flag, value, default in (
-        ("--hinges-per-block", args.hinges_per_block, 1),
-        ("--tendon-lever", args.tendon_lever, "constant"),
-    ):
-        if value != default and args.scenario not in ("cantilever", "curl"):
-            from mjcodesign.errors import DesignError
-
-            raise DesignError(f"{flag} applies to the cantilever and the curl, not to {args.scenario}")
-    for flag, given in (
-        ("--fem-locking-correction", args.fem_locking_correction),
-        ("--fem-tendon-law", args.fem_tendon_law != "frictionless"),
-    ):
-        if given and args.scenario != "grasp":
-            from mjcodesign.errors import DesignError
-
-            raise DesignError(f"{flag} applies to the grasp, not to {args.scenario}")
-    if args.scenario == "grasp":
-        return _cmd_grasp(args)
-    tensions = args.tensions
-    if args.plot and parse_sweep(args.design) is not None:
+    plot = getattr(args, "plot", None)
+    if plot and parse_sweep(args.design) is not None:
         from mjcodesign.errors import DesignError
 
         raise DesignError("--plot draws one design's curves; give --design a single design, not a sweep")
+    fem_options, chain = _fem_options(args), _chain_options(args)
     rec = open_recorder(args)
+    _deprecation_note(args)
     try:
         rows, curves = crosscheck(
             args.scenario,
             args.models,
             args.design,
-            fem_options=_fem_options(args),
-            tensions=tensions,
+            fem_options=fem_options,
+            tensions=getattr(args, "tensions", None),
             observer=rec,
             on_note=_note,
-            chain=_chain_options(args),
+            chain=chain,
         )
     finally:
         if rec is not None:
             rec.close()
-    if args.plot:
-        plot_curves(curves, args.plot)
+    if plot:
+        plot_curves(curves, plot)
     emit(rows, args.json)
     reference = "the FEM" if "fem" in args.models else "its reference (no FEM run)"
     for r in rows:
@@ -289,108 +282,187 @@ def select_cases(cases: tuple, text: str) -> tuple:
     return chosen
 
 
-def _fem_flags(p, *, h: float, layers: int, order: int) -> None:
+def _fem_flags(p, *, h: float, layers: int, order: int | None) -> None:
+    """``--fem-h``, ``--fem-layers`` and, unless ``order`` is None (the grasp's linear tets), ``--fem-order``."""
     p.add_argument("--fem-h", type=float, default=h, help="FEM cell size in the segments [m]")
     p.add_argument("--fem-layers", type=int, default=layers, help="FEM layers through the 2 mm spine (even)")
-    p.add_argument("--fem-order", type=int, choices=(1, 2), default=order, help="FEM tet order")
+    if order is not None:
+        p.add_argument("--fem-order", type=int, choices=(1, 2), default=order, help="FEM tet order")
 
 
-def add_parser(subparsers) -> None:
-    """Register ``crosscheck`` on the top-level sub-parsers."""
-    p = subparsers.add_parser("crosscheck", help="run one case in every backend (MuJoCo models, Warp FEM)")
-    p.add_argument("--scenario", choices=(*SCENARIOS, "grasp"), required=True)
+_SCENARIO_HELP = {
+    "cantilever": "tip deflection under a tip load: every model against the FEM (or Euler-Bernoulli)",
+    "curl": "bend and tip of the tendon curl at each tension: every model against the FEM",
+    "press": "the finger pressed on a plate by its tendon: contact force spread against the FEM",
+    "grasp": "the grasp agreement study (chain against the Warp FEM), or the authors' one case",
+}
+
+
+class _LegacyScenario(argparse.Action):
+    """``--scenario NAME REST...``: the deprecated form, parsed by subcommand NAME's own parser.
+
+    The scenario's flags follow ``--scenario``, as in every recorded command (a flag before it is not
+    the ``crosscheck`` parser's, and is refused). The note that names the new form is printed once the
+    command's input is checked (:func:`_deprecation_note`), so that a refused command writes one line.
+    """
+
+    def __init__(self, option_strings, dest, parsers=None, **kwargs) -> None:
+        super().__init__(option_strings, dest, nargs=argparse.REMAINDER, **kwargs)
+        self.parsers = parsers
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        if not values or values[0] not in self.parsers:
+            got = repr(values[0]) if values else "nothing"
+            parser.error(f"argument --scenario: choose from {', '.join(self.parsers)}, got {got}")
+        sub = self.parsers[values[0]].parse_args(values[1:])
+        for key, value in vars(sub).items():
+            setattr(namespace, key, value)
+        namespace.scenario = values[0]
+        namespace.legacy_scenario = True
+
+
+def _deprecation_note(args) -> None:
+    """The one-line note of the deprecated ``crosscheck --scenario NAME`` form (nothing for the new form)."""
+    if getattr(args, "legacy_scenario", False):
+        _note(
+            f"note: 'crosscheck --scenario {args.scenario}' is deprecated; run 'crosscheck {args.scenario}'"
+        )
+
+
+def _no_scenario(args) -> int:
+    from mjcodesign.errors import DesignError
+
+    raise DesignError(f"crosscheck needs a scenario: {', '.join(_SCENARIO_HELP)} (see crosscheck --help)")
+
+
+def _models_flag(p, models: tuple, default: list[str]) -> None:
     p.add_argument(
         "--models",
-        type=choice_list(MODELS, "model"),
-        default=["chain", "flex", "fem"],
-        help=f"comma-separated, from {', '.join(MODELS)}; default chain,flex,fem",
+        type=choice_list(models, "model"),
+        default=default,
+        help=f"comma-separated, from {', '.join(models)}; default {','.join(default)}",
     )
+
+
+def _rows_flags(p, *, tensions: str | None) -> None:
+    """The flags of every rows scenario (cantilever, curl, press): models, design, FEM mesh, recording."""
+    _models_flag(p, MODELS, ["chain", "flex", "fem"])
     p.add_argument(
         "--design",
         default="paper-optimized",
         help="preset name, random:SEED, 11/22 comma-separated log E, or random:A..B (a sweep of seeds A to B, "
         "ending with per-model worst and median |rel_diff| rows)",
     )
-    p.add_argument(
-        "--tensions",
-        type=finite_floats(0.0, strict=True),
-        default=None,
-        help="curl tensions [N], comma-separated (press: the first; grasp: the study's one tension, default 4)",
-    )
-    p.add_argument("--plot", default=None, help="curl: write tip paths and bend against tension to this PNG")
-    p.add_argument(
-        "--cases",
-        default=None,
-        help="grasp: run the study's cases N (the first N), A:B (a slice of them) or I,J,K (those indices)",
-    )
-    p.add_argument(
-        "--short", action="store_true", help="grasp: the CI version (two cases, short horizon, coarse mesh)"
-    )
-    p.add_argument(
-        "--out", type=output_file, default=None, help="grasp: also write the JSON report to this file"
-    )
-    p.add_argument(
-        "--fem-h-flexure", type=float, default=None, help="grasp: FEM cell size in flexures and cuts [m]"
-    )
+    if tensions is not None:
+        p.add_argument("--tensions", type=finite_floats(0.0, strict=True), default=None, help=tensions)
+    # Quadratic tets, 2 spine layers: within 4% of Euler–Bernoulli on the cantilever (mjcodesign.sim.fem).
+    _fem_flags(p, h=4e-3, layers=2, order=2)
+    add_recording_flags(p, decimation=False)
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_crosscheck)
+
+
+def _hinges_flag(p) -> None:
     p.add_argument(
         "--hinges-per-block",
         type=int,
         choices=(1, 2),
         default=1,
-        help="cantilever/curl: chain hinges per block (2: at its quarter points; follows the FEM's large-bend curl)",
+        help="chain hinges per block (2: at its quarter points, without stops; an experiment option, "
+        "docs/validation/experiment-options.md)",
+    )
+
+
+def _grasp_flags(p) -> None:
+    _models_flag(p, GRASP_MODELS, list(GRASP_MODELS))
+    p.add_argument(
+        "--tensions",
+        type=finite_floats(0.0, strict=True),
+        default=None,
+        help="the study's one tendon tension [N] (default 4)",
     )
     p.add_argument(
-        "--tendon-lever",
-        choices=_TENDON_LEVERS,
-        default="constant",
-        help="curl: the chain tendon's lever on each hinge, held at the straight finger's (constant, the "
-        "default) or following the waypoints (path)",
+        "--cases",
+        default=None,
+        help="run the study's cases N (the first N), A:B (a slice of them) or I,J,K (those indices)",
     )
     p.add_argument(
-        "--authors-case",
-        action="store_true",
-        help="grasp: the authors' simulator's one case instead (mustard bottle, ln E 13.5/15/16.5)",
+        "--short", action="store_true", help="the CI version (two cases, short horizon, coarse mesh)"
     )
-    p.add_argument("--authors-row", type=int, default=0, help="grasp --authors-case: the authors' pose row")
+    p.add_argument("--out", type=output_file, default=None, help="also write the JSON report to this file")
+    _fem_flags(p, h=4e-3, layers=2, order=None)  # linear tets (mjcodesign.sim.fem.gripper)
+    p.add_argument("--fem-h-flexure", type=float, default=None, help="FEM cell size in flexures and cuts [m]")
+    p.add_argument("--fem-dt", type=float, default=None, help="FEM substep [s] (default the paper's 2.5e-6)")
     p.add_argument(
-        "--authors-start",
-        choices=("refined", "sweep"),
-        default="refined",
-        help="grasp --authors-case: fingers start at the refined openings (theirs) or outside the object (ours)",
+        "--fem-contact-ke",
+        type=finite_float(0.0, strict=True),
+        default=None,
+        help="FEM penalty contact stiffness [Pa/m] (default the paper's 1e3 N/m per cm², 1e7)",
     )
     p.add_argument(
-        "--fem-dt", type=float, default=None, help="grasp: FEM substep [s] (default the paper's 2.5e-6)"
+        "--fem-contact-damping-ratio",
+        type=finite_float(0.0, strict=True),
+        default=None,
+        help="damp every FEM finger contact at this ratio of critical instead of the paper's kd",
     )
     p.add_argument(
         "--fem-locking-correction",
         action="store_true",
-        help="grasp: lower the linear tets' block moduli to the converged FEM's block compliances "
+        help="lower the linear tets' block moduli to the converged FEM's block compliances "
         "(the coarse mesh's flexures are 5x too stiff)",
     )
     p.add_argument(
         "--fem-tendon-law",
         choices=TENDON_VARIANTS,
         default="frictionless",
-        help="grasp: the FEM tendon's force, a frictionless tendon's (it compresses the finger) or the "
+        help="the FEM tendon's force, a frictionless tendon's (it compresses the finger) or the "
         "authors' law (across each section, a push at the tip)",
     )
     p.add_argument(
-        "--fem-contact-ke",
-        type=finite_float(0.0, strict=True),
-        default=None,
-        help="grasp: FEM penalty contact stiffness [Pa/m] (default the paper's 1e3 N/m per cm², 1e7)",
+        "--authors-case",
+        action="store_true",
+        help="the authors' simulator's one case instead (mustard bottle at their pose 0, ln E 13.5/15/16.5)",
     )
     p.add_argument(
-        "--fem-contact-damping-ratio",
-        type=finite_float(0.0, strict=True),
-        default=None,
-        help="grasp: damp every FEM finger contact at this ratio of critical instead of the paper's kd",
+        "--authors-start",
+        choices=("refined", "sweep"),
+        default="refined",
+        help="--authors-case: fingers start at the refined openings (theirs) or outside the object (ours)",
     )
-    # Quadratic tets, 2 spine layers: within 4% of Euler–Bernoulli on the cantilever (mjcodesign.sim.fem).
-    _fem_flags(p, h=4e-3, layers=2, order=2)
-    add_recording_flags(p, decimation=False)
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=_cmd_crosscheck)
+    p.set_defaults(func=_cmd_grasp)
+
+
+def add_parser(subparsers) -> None:
+    """Register ``crosscheck`` and its scenarios on the top-level sub-parsers."""
+    p = subparsers.add_parser(
+        "crosscheck",
+        help="run one case in every backend (MuJoCo models, Warp FEM)",
+        description="Run one scenario in every backend. Each scenario is a subcommand with its own flags; "
+        "the older form 'crosscheck --scenario NAME ...' still runs, with a note on stderr.",
+    )
+    sub = p.add_subparsers(dest="scenario", metavar="SCENARIO")
+    parsers = {
+        name: sub.add_parser(name, help=text, description=text) for name, text in _SCENARIO_HELP.items()
+    }
+    _rows_flags(parsers["cantilever"], tensions=None)
+    _hinges_flag(parsers["cantilever"])
+    _rows_flags(parsers["curl"], tensions="curl tensions [N], comma-separated (default: three per design)")
+    _hinges_flag(parsers["curl"])
+    parsers["curl"].add_argument(
+        "--tendon-lever",
+        choices=_TENDON_LEVERS,
+        default="constant",
+        help="the chain tendon's lever on each hinge, held at the straight finger's (constant, the "
+        "default) or following the waypoints (path: an experiment option, docs/validation/experiment-options.md)",
+    )
+    parsers["curl"].add_argument(
+        "--plot", default=None, help="write tip paths and bend against tension to this PNG"
+    )
+    _rows_flags(parsers["press"], tensions="the press's tendon tension [N] (the first value)")
+    _grasp_flags(parsers["grasp"])
+    p.add_argument("--scenario", action=_LegacyScenario, parsers=parsers, help=argparse.SUPPRESS)
+    p.set_defaults(func=_no_scenario)
 
 
 def add_bench_parser(bench_subparsers) -> None:

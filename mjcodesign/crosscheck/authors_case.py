@@ -25,10 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["AUTHORS_RESULT", "STARTS", "authors_case", "classify"]
+__all__ = ["AUTHORS_RESULT", "AUTHORS_ROW", "STARTS", "authors_case", "classify"]
 
 AUTHORS_RESULT = {13.5: "lifts", 15.0: "slips", 16.5: "no contact"}
 """Uniform ln E → what the authors' simulator did with it (module docstring)."""
+AUTHORS_ROW = 0
+"""The row of the authors' pose file (``006_mustard_bottle.npz``) that :data:`AUTHORS_RESULT` is for."""
 _OBJECT = "006_mustard_bottle"
 _TENSION = 100.0 / 25.0
 """[N] their 100 at 5× lengths, equal bending (E unchanged: T ∝ L²)."""
@@ -54,7 +56,6 @@ def authors_case(
     models=("chain", "fem"),
     *,
     pose_file: Path | None = None,
-    row: int = 0,
     fem_options=None,
     fem_dynamics=None,
     cache_dir: Path | None = None,
@@ -63,7 +64,8 @@ def authors_case(
     """Each uniform design of `AUTHORS_RESULT` in each model: outcome, contacts, and the class.
 
     ``pose_file``: the authors' ``006_mustard_bottle.npz`` (default: under ``shared/reference`` in the
-    working directory or its parent); ``row``: its pose (0 is the authors' case). Raises PoseError when
+    working directory or its parent), whose pose :data:`AUTHORS_ROW` is the one their result is for
+    (each row carries it as ``row``). Raises PoseError when
     our refinement refuses the pose or our stroke cannot take it. ``start``: one of `STARTS`.
     """
     import dataclasses
@@ -89,11 +91,11 @@ def authors_case(
         pose_file or next((p for p in (_POSES, Path("..") / _POSES) if p.is_dir()), _POSES) / f"{_OBJECT}.npz"
     )
     obj = load_grasp_object(_OBJECT, _DENSITY, cache_dir=cache_dir)
-    T = load_external(path)[row : row + 1]
+    T = load_external(path)[AUTHORS_ROW : AUTHORS_ROW + 1]
     cands = import_anygrasp(obj, T, np.asarray(load_mesh(_OBJECT).vertices), cache_dir=cache_dir)
     if len(cands) == 0:
         raise PoseError(
-            f"the authors' pose {row} of {_OBJECT} is refused by our refinement: {cands.rejected}"
+            f"the authors' pose {AUTHORS_ROW} of {_OBJECT} is refused by our refinement: {cands.rejected}"
         )
     pose = to_gripper_pose(cands, 0)
     start_openings(obj, pose)  # PoseError if the object is too wide for our stroke at this pose
@@ -108,7 +110,7 @@ def authors_case(
         rec_row = {
             "log_e": log_e,
             "authors": theirs,
-            "row": row,
+            "row": AUTHORS_ROW,
             "mass_kg": obj.mass,
             "pose": [*pose.position, *pose.quat],
             "openings": list(pose.openings),
