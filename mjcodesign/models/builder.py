@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import mujoco
 
-from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.finger import FingerDesign, Routing
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError, UnsupportedError
 from mjcodesign.models.chain import add_chain_finger
@@ -69,6 +69,13 @@ def _add_finger(spec, parent, design, young, model, prefix, tendon_mode, options
     if options.routing == "printed" and (model.is_flex or tendon_mode is not TendonMode.NATIVE):
         raise UnsupportedError(
             f"the printed routing is the chain's native tendon; not {model.value} with {tendon_mode.value}"
+        )
+    if options.routing == "printed" and design.routing is not Routing.UNIFORM_PRESSURE:
+        # The printed channels sit where the printed finger has them (the uniform-pressure law), whatever
+        # height law the design names: refused rather than silently routed by another law.
+        raise UnsupportedError(
+            f"the printed routing runs through the printed finger's measured channels; a "
+            f"{design.routing.value} design has none (give it SimOptions(routing='guided'))"
         )
     if model is FingerModel.CHAIN:
         handle = add_chain_finger(spec, parent, design, young, prefix, options)

@@ -167,7 +167,8 @@ class SimOptions:
     hinges keep a spatial tendon's lever as the block bends (the curl within 4.4% of the FEM's to 1.4 rad,
     6.7% at 3.3 rad); the default single hinge gets the same from :attr:`tendon_lever` ``constant``
     (within 7.0% on 30 random designs to 1.6 rad) and has the stops, which the split chain lacks: its
-    grasps fold a flexure's middle link and lose the tests' box (docs/benchmarks.md, large-bend curl)."""
+    grasps fold a flexure's middle link and lose the tests' box (docs/benchmarks.md, large-bend curl). An
+    experiment option, kept for the FEM curls recorded with it (docs/validation/experiment-options.md)."""
     tendon_lever: str = "constant"
     """How the chain's guided native tendon (:attr:`routing`) acts on its hinges. ``constant`` (default): a fixed tendon,
     ``ℓ = Σ_j (dℓ/dθ_j)₀ θ_j``, every hinge's lever frozen at the straight finger's
@@ -176,7 +177,9 @@ class SimOptions:
     within 2% (5.50-5.59 mm to 0.63 rad on a soft flexure of random:0). ``path``: a spatial tendon through
     the waypoints; on one hinge per block a waypoint sits on the distal body above its hinge and swings
     back over it, the lever falls (5.41 to 3.35 mm at 0.63 rad) and the curl misses the FEM's by up to 31%
-    at 1.1-1.6 rad (the default: 7.0%). The point-force mode and the flex models always act at their waypoints."""
+    at 1.1-1.6 rad (the default: 7.0%); an experiment option, kept for the records that compare the two
+    (docs/validation/experiment-options.md). The point-force mode and the flex models always act at their
+    waypoints."""
     routing: str = "guided"
     """Where the chain's native tendon runs. ``guided`` (default): through a waypoint on every block, the
     flexures included, acting as :attr:`tendon_lever` says. ``printed``: as in the printed finger, through
