@@ -123,6 +123,9 @@ FAMILIES: dict[str, list[Case]] = {
         bench fem --steps 0                                     | --steps
         bench fem --gripper-dt nan                              | --gripper-dt
         bench fem --out out/                                    | folder | out/
+        bench calibration --reference nothing.json              | nothing.json
+        bench calibration --reference random.json               | random.json | random.json
+        bench calibration --models rubber                       | rubber
         bench poses --objects no_such_object_1,no_such_object_2 | no_such_object_1
     """),
     "crosscheck": _cases("""

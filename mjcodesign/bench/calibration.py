@@ -21,7 +21,7 @@ from mjcodesign.design.beam import cantilever_tip_deflection
 from mjcodesign.design.calibration import block_compliance
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, Stiffness
-from mjcodesign.errors import DesignError
+from mjcodesign.errors import DesignError, MjcodesignError, OutputError
 from mjcodesign.scenarios.static import AUTO_DEFLECTION, validate_beam
 
 __all__ = ["bench_calibration", "REFERENCE", "CONVERGED", "TOL_CANTILEVER", "TOL_CURL"]
@@ -49,12 +49,17 @@ def bench_calibration(
     ``designs``: names to take from the files (default all of each). Returns ``rows`` (design, model,
     metric, value, reference, rel_diff, fem_mesh), ``summary`` (per FEM mesh, model and metric: worst
     and median |rel_diff|, the worst design, how many designs miss the tolerance) and
-    ``calibration_s_per_design`` (CPU seconds of one finger's calibration).
+    ``calibration_s_per_design`` (CPU seconds of one finger's calibration). Raises
+    :class:`DesignError` for an unknown model and :class:`OutputError` for a reference file that does
+    not read, before any work.
     """
+    unknown = [m for m in models if m not in _MODELS]
+    if unknown:
+        raise DesignError(f"unknown model(s) {unknown}: choose from {', '.join(_MODELS)}")
     design = FingerDesign()
+    refs = [(path, _read_reference(path)) for path in references]  # every file checked before any work
     rows, meshes = [], {}
-    for path in references:
-        ref = json.loads(Path(path).read_text(encoding="utf-8"))
+    for path, ref in refs:
         mesh = f"h {1e3 * ref['mesh']['h']:g} mm, {ref['mesh']['spine_layers']} spine layers"
         meshes[mesh] = {"file": str(path), **ref["mesh"], "designs": len(ref["designs"])}
         names = [n for n in ref["designs"] if designs is None or n in designs]
@@ -71,6 +76,26 @@ def bench_calibration(
         "summary": {m: _summary([r for r in rows if r["fem_mesh"] == m]) for m in meshes},
         "calibration_s_per_design": _time_calibration(design),
     }
+
+
+_MODELS = ("chain", "flex", "flex-quadratic")  # the MuJoCo finger models ``validate_beam`` builds
+
+
+def _read_reference(path: str | Path) -> dict:
+    """A recorded FEM file; :class:`OutputError` for one that is missing, unreadable or of another shape."""
+    try:
+        ref = json.loads(Path(path).read_text(encoding="utf-8"))
+        mesh, designs = ref["mesh"], ref["designs"]
+        float(mesh["h"]), int(mesh["spine_layers"])
+        for rec in designs.values():
+            Stiffness(rec["log_e"]), float(rec["tip"]["tip_face_z"])
+    except OSError as exc:
+        raise OutputError(f"--reference {path}: cannot read it ({exc.strerror or exc})") from None
+    except (ValueError, KeyError, TypeError, AttributeError, MjcodesignError) as exc:
+        raise OutputError(
+            f"--reference {path}: not a recorded FEM file ({type(exc).__name__}: {str(exc)[:120]})"
+        ) from None
+    return ref
 
 
 def _design_rows(design: FingerDesign, name: str, rec: dict, models) -> list[dict]:
