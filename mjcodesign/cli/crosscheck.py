@@ -447,7 +447,10 @@ def add_parser(subparsers) -> None:
     }
     _rows_flags(parsers["cantilever"], tensions=None)
     _hinges_flag(parsers["cantilever"])
-    _rows_flags(parsers["curl"], tensions="curl tensions [N], comma-separated (default: three per design)")
+    _rows_flags(
+        parsers["curl"],
+        tensions="curl tensions [N], comma-separated (default: three, scaled to the design's compliance)",
+    )
     _hinges_flag(parsers["curl"])
     parsers["curl"].add_argument(
         "--tendon-lever",
@@ -459,7 +462,10 @@ def add_parser(subparsers) -> None:
     parsers["curl"].add_argument(
         "--plot", default=None, help="write tip paths and bend against tension to this PNG"
     )
-    _rows_flags(parsers["press"], tensions="the press's tendon tension [N] (the first value)")
+    _rows_flags(
+        parsers["press"],
+        tensions="the press's tendon tension [N]: the first value (default: scaled to the design's compliance)",
+    )
     _grasp_flags(parsers["grasp"])
     p.add_argument("--scenario", action=_LegacyScenario, parsers=parsers, help=argparse.SUPPRESS)
     p.set_defaults(func=_no_scenario)
