@@ -367,7 +367,7 @@ def resolve_pose(
     A file is a candidate file (``FILE.npz`` for its first row, the best, or ``FILE.npz:ROW`` for row
     ``ROW`` counted from 0) or JSON with ``pose`` (4x4) and ``openings`` (2). ``cache_dir`` keeps the
     sampler's signed-distance grid for ``best``. A file's pose must reach the object, and a candidate
-    file must have been made for it (:mod:`mjcodesign.poses.checks`): :class:`PoseError` otherwise.
+    file must have been made for it (``mjcodesign.poses.checks``): :class:`PoseError` otherwise.
     """
     geometry = geometry or FingerDesign()
     if text == "auto":

@@ -9,7 +9,7 @@ Layout::
 
 :func:`load_surrogate` needs only the model and these two files (no training code runs). The record
 holds each input's training range (``input_range``), outside which predictions are refused; a record
-without one gets the rule of :meth:`InputRange.recorded`. A normalisation with NaN, a zero spread or a
+without one gets the rule of ``InputRange.recorded``. A normalisation with NaN, a zero spread or a
 vector of the wrong length is refused at load. Saving
 removes the JSON record first and writes it last (by a rename), so a folder whose weights were
 being replaced reads as no checkpoint rather than as a record with the wrong weights.

@@ -1,9 +1,9 @@
 """The trained surrogate as a library: batched predictions and the co-design loss with its gradient.
 
 A :class:`GraspBatch` is B rows over P poses: each row names its pose, the object's density and
-(for :meth:`Surrogate.predict`) a design. :meth:`Surrogate.prepare` computes each pose's PointNet
+(for ``Surrogate.predict``) a design. :meth:`Surrogate.prepare` computes each pose's PointNet
 feature once; a prepared batch then costs one MLP pass per call, which is what a co-design step
-repeats (:meth:`Surrogate.loss_and_grad`).
+repeats (``Surrogate.loss_and_grad``).
 
 **Success from the outputs.** The simulator's rule (``mjcodesign.scenarios.outcome``) is: lifted
 (the COM rose at least ``lifted_fraction · lift``), no ground contact at the end, a finger touching
@@ -83,8 +83,8 @@ class InputRange:
     """The range of each input the surrogate was trained on: ln E per block and the object density.
 
     Outside it the network extrapolates (a checkpoint trained at one density put a 2.2 MN force on a
-    denser object), so :meth:`Surrogate.predict` and :meth:`Surrogate.loss_and_grad` refuse such
-    inputs (:meth:`check`), and every command built on them (``predict``, ``optimize``, ``evaluate``,
+    denser object), so ``Surrogate.predict`` and ``Surrogate.loss_and_grad`` refuse such
+    inputs (``check``), and every command built on them (``predict``, ``optimize``, ``evaluate``,
     ``hw grasp``) with them.
     """
 
@@ -143,7 +143,7 @@ class InputRange:
         return cls(d["log_e_low"], d["log_e_high"], d["density_low_kg_m3"], d["density_high_kg_m3"])
 
     def check(self, log_e: np.ndarray | None, density: np.ndarray) -> None:
-        """Raise :class:`DesignError` naming the first input outside its range (widened by :data:`_RANGE_TOL`).
+        """Raise :class:`~mjcodesign.errors.DesignError` naming the first input outside its range (widened by ``_RANGE_TOL``).
 
         ``log_e`` (B, 22) or None (not checked), ``density`` (B,) [kg/m³].
         """
@@ -231,7 +231,7 @@ class GraspBatch:
     density: np.ndarray
     """Object density [kg/m³], shape (B,)."""
     log_e: np.ndarray | None = None
-    """ln(E / Pa) of each row, shape (B, 22); None for :meth:`Surrogate.loss_and_grad` (one design)."""
+    """ln(E / Pa) of each row, shape (B, 22); None for ``Surrogate.loss_and_grad`` (one design)."""
     features: PoseFeatures | None = None
     """Set by :meth:`Surrogate.prepare`."""
 
@@ -328,7 +328,7 @@ class Surrogate:
         self.model = model.eval()
         self.normalizer = normalizer
         self.trained_range = input_range
-        """The inputs' range measured on the training split (:meth:`InputRange.of_samples`), or None."""
+        """The inputs' range measured on the training split (``InputRange.of_samples``), or None."""
         self.lift = float(lift)
         self.lifted_fraction = float(lifted_fraction)
         self.meta = dict(meta or {})
@@ -340,13 +340,13 @@ class Surrogate:
     def input_range(self) -> InputRange | None:
         """The inputs' training range, or None (nothing checked).
 
-        :attr:`trained_range`, else :meth:`InputRange.recorded` of the record; None for a surrogate
+        ``trained_range``, else ``InputRange.recorded`` of the record; None for a surrogate
         with neither (one still being trained).
         """
         return self.trained_range or InputRange.recorded(self.meta)
 
     def check_inputs(self, log_e: np.ndarray | None, density: np.ndarray) -> None:
-        """Raise :class:`DesignError` for an input outside :attr:`input_range` (:meth:`InputRange.check`)."""
+        """Raise :class:`~mjcodesign.errors.DesignError` for an input outside ``input_range`` (``InputRange.check``)."""
         if (r := self.input_range) is not None:
             r.check(log_e, density)
 
@@ -410,7 +410,7 @@ class Surrogate:
     def predict(self, batch: GraspBatch) -> Prediction:
         """The outputs of every row of ``batch`` (which needs ``log_e``).
 
-        Raises :class:`DesignError` for a design or density outside :attr:`input_range`.
+        Raises :class:`~mjcodesign.errors.DesignError` for a design or density outside ``input_range``.
         """
         if batch.log_e is None:
             raise DesignError("predict needs a design per row (GraspBatch.log_e)")
@@ -426,7 +426,7 @@ class Surrogate:
     def loss_and_grad(self, design, batch: GraspBatch, loss: DesignLoss | None = None) -> DesignGradient:
         """L_opt (:class:`DesignLoss`) of one design (22 ln E) over every row, and d L / d ln E.
 
-        Raises :class:`DesignError` for a density outside :attr:`input_range` (the design moves within
+        Raises :class:`~mjcodesign.errors.DesignError` for a density outside ``input_range`` (the design moves within
         the printable range, which the optimiser keeps).
         """
         d = np.asarray(design, dtype=float).ravel()

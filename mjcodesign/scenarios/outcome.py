@@ -36,7 +36,7 @@ class Failure(enum.Enum):
     """The solver warned or the state became non-finite (the reason names the step and warning)."""
     IMPLAUSIBLE = "implausible"
     """The rollout broke a physical bound: the object gained more energy than could be put in, or moved
-    in a way no grasp can (:mod:`mjcodesign.scenarios.motion`)."""
+    in a way no grasp can (``mjcodesign.scenarios.motion``)."""
     BAD_POSE = "bad_pose"
     """The pose cannot be simulated: gripper below the ground, object too wide for the stroke."""
     NOT_LIFTED = "not_lifted"
@@ -260,7 +260,7 @@ def outcome_from_states(
     ``sensordata`` (nstep, nsensordata), each step's sensors as ``mujoco.rollout`` returns them: the
     rollout is checked against the energy bound (:mod:`mjcodesign.scenarios.energy`). Every backend
     passes it; without it the energy bound is not checked. The motion bounds
-    (:mod:`mjcodesign.scenarios.motion`) are always checked. A rollout that breaks a bound is
+    (``mjcodesign.scenarios.motion``) are always checked. A rollout that breaks a bound is
     :attr:`Failure.IMPLAUSIBLE` (listed first, with its numbers) whatever else it did.
 
     ``states[t]`` is the state after step t, ``ctrl`` the controls of :func:`phase_controls`. Contact
