@@ -211,8 +211,8 @@ def grasp(
         from mjcodesign.sim.fem import GRASP_OPTIONS
 
         # --device: the FEM's Warp device too (auto: CUDA when present, else the CPU)
-        options = replace(GRASP_OPTIONS, device=_warp_device(device, FingerModel.CHAIN))
-        sim, model = get_backend("fem", grasp_options=options), "chain"
+        fem_options = replace(GRASP_OPTIONS, device=_warp_device(device, FingerModel.CHAIN))
+        sim, model = get_backend("fem", grasp_options=fem_options), "chain"
     elif backend == "mjwarp":
         sim = get_backend(backend, device=_warp_device(device, FingerModel(model)))
     else:
