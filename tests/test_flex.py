@@ -148,3 +148,24 @@ def test_grasp_commands_refuse_flex_before_any_work(command, tmp_path, capsys):
     assert exc.value.code == 2 and len(err) == 1, err
     assert "--model" in err[0] and "cannot grasp" in err[0] and "missing" not in err[0]
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["evaluate", "--objects", "013_apple", "--designs", "soft"],
+        ["bench", "landscape", "--objects", "013_apple"],
+        ["datagen", "--objects", "013_apple"],
+    ],
+)
+def test_batch_commands_refuse_flex_at_parsing(command, tmp_path, capsys):
+    # Refused by the parser with the reason, before any object is posed or any folder is made.
+    from mjcodesign.cli.main import main
+
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as exc:
+        main([*command, "--model", "flex", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert exc.value.code == 2 and len(err) == 1, err
+    assert "--model" in err[0] and "cannot grasp" in err[0]
+    assert not out.exists()

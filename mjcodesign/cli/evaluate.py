@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from mjcodesign.cli.common import add_mass_mode, emit, finite_float, int_at_least, path_text, user_cache_dir
+from mjcodesign.cli.finger_flags import grasp_model_name
 from mjcodesign.cli.progress import StageProgress
 
 __all__ = ["add_bench_parser", "add_parser", "run", "run_bench"]
@@ -115,7 +116,7 @@ def add_parser(subparsers) -> None:
         default=None,
         help="ad-hoc suite: folder of the authors' AnyGrasp OBJECT.npz poses",
     )
-    p.add_argument("--model", choices=("chain", "flex"), default="chain")
+    p.add_argument("--model", choices=("chain",), default="chain", type=grasp_model_name)
     p.add_argument(
         "--seed", type=int_at_least(0), default=0, help="seed of the perturbation draws (and ad-hoc poses)"
     )

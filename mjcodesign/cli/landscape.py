@@ -10,6 +10,7 @@ import json
 import sys
 
 from mjcodesign.cli.common import add_mass_mode, emit, int_at_least, path_text
+from mjcodesign.cli.finger_flags import grasp_model_name
 from mjcodesign.errors import DesignError
 
 __all__ = ["add_bench_parser"]
@@ -152,7 +153,7 @@ def add_bench_parser(bench_subparsers) -> None:
         help=f"comma-separated densities: presets of the paper's relative scale, kg/m³, or real (default {_DENSITIES})",
     )
     add_mass_mode(p, "in place of --densities (objects without one are skipped)")
-    p.add_argument("--model", choices=("chain", "flex"), default="chain")
+    p.add_argument("--model", choices=("chain",), default="chain", type=grasp_model_name)
     p.add_argument("--seed", type=int, default=0, help="pose sampler and CoACD seed")
     p.add_argument(
         "--no-sweep",
