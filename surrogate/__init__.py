@@ -12,7 +12,9 @@ does. Import from here (``from mjcodesign.surrogate import Surrogate``): each na
   baselines, lines in design space;
 - :mod:`~mjcodesign.surrogate.report`: :func:`train_and_report` and :func:`train_folds` (``mjcodesign train``);
 - :mod:`~mjcodesign.surrogate.folds`: :class:`FoldSurrogates`, the networks of ``train --folds``;
-- :mod:`~mjcodesign.surrogate.grasp`: :func:`predict_grasp` (``mjcodesign predict``).
+- :mod:`~mjcodesign.surrogate.grasp`: :func:`predict_grasp` (``mjcodesign predict``);
+- :mod:`~mjcodesign.surrogate.shipped`: :func:`shipped_checkpoint`, the weights that ship (if any), and
+  :func:`checkpoint_or_shipped`, every command's ``--ckpt`` default.
 """
 
 from mjcodesign.surrogate.checkpoint import (
@@ -53,6 +55,7 @@ from mjcodesign.surrogate.report import (
     train_and_report,
     train_folds,
 )
+from mjcodesign.surrogate.shipped import checkpoint_or_shipped, shipped_checkpoint
 from mjcodesign.surrogate.train import EpochLog, OptimizerConfig, TrainConfig, TrainResult, train
 
 __all__ = [
@@ -78,6 +81,7 @@ __all__ = [
     "TensorBoardLog",
     "TrainConfig",
     "TrainResult",
+    "checkpoint_or_shipped",
     "checkpoint_smoothness",
     "dataset_config",
     "dataset_warnings",
@@ -89,6 +93,7 @@ __all__ = [
     "normalize_clouds",
     "predict_grasp",
     "save_checkpoint",
+    "shipped_checkpoint",
     "split",
     "success_score",
     "train",

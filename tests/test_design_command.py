@@ -268,3 +268,48 @@ def test_prusaslicer_slices_the_design_s_3mf(design_run, tmp_path):
                        capture_output=True, text=True, timeout=300)  # fmt: skip
     assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
     assert re.search(r"^; filament used \[mm\] = [\d.]+", (tmp_path / "g.gcode").read_text(), re.M)
+
+
+_NO_CKPT = {  # every command that reads a surrogate, without --ckpt (hw grasp: a bare --surrogate)
+    "predict": ["predict", "--object", "box.stl", "--pose", "auto", "--design", "soft"],
+    "optimize": ["optimize", "--objects", "box.stl", "--poses", "cands.npz", "--no-ground-truth", "--out", "o"],
+    "evaluate": ["evaluate", "--designs", "soft", "--objects", "box.stl", "--pose-sampling", "surrogate",
+                 "--out", "o"],
+    "hw grasp": ["hw", "grasp", "--dry-run", "--surrogate", "--design", "soft", "--cloud", "cloud.npy"],
+    "design": ["design", "box.stl", "--out", "o"],
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("command", sorted(_NO_CKPT))
+def test_without_a_checkpoint_every_command_says_no_weights_ship(
+    command, meshes, tmp_path, capsys, monkeypatch
+):
+    from mjcodesign.surrogate import shipped
+
+    monkeypatch.setattr(shipped, "shipped_checkpoint", lambda: None)  # as while no weights ship
+    shutil.copy(meshes / "box.stl", tmp_path / "box.stl")
+    np.save(tmp_path / "cloud.npy", np.random.default_rng(0).random((64, 3)))
+    monkeypatch.chdir(tmp_path)
+    code = cli_main.main(_NO_CKPT[command])
+    r = capsys.readouterr()
+    assert code == 2 and r.err.count("\n") == 1 and r.out == "", r.err[-2000:]
+    flag = "--surrogate" if command == "hw grasp" else "--ckpt"
+    assert r.err.startswith("error: no pretrained surrogate ships") and f"pass {flag} ckpt" in r.err
+    assert "mjcodesign train" in r.err and sorted(p.name for p in tmp_path.iterdir()) == [
+        "box.stl",
+        "cloud.npy",
+    ]
+
+
+def test_without_ckpt_predict_reads_the_shipped_weights(
+    meshes, tiny_checkpoint, tmp_path, capsys, monkeypatch
+):
+    from mjcodesign.surrogate import shipped
+
+    monkeypatch.setattr(shipped, "shipped_checkpoint", lambda: Path(tiny_checkpoint))
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    argv = ["predict", "--object", str(meshes / "box.stl"), "--pose", "auto", "--design", "soft", "--json"]
+    assert cli_main.main(argv) == 0
+    without = json.loads(capsys.readouterr().out)
+    assert cli_main.main([*argv, "--ckpt", str(tiny_checkpoint)]) == 0
+    assert json.loads(capsys.readouterr().out) == without

@@ -81,7 +81,6 @@ def add_parser(subparsers) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run ``design``; library errors propagate to the main CLI (exit 2, one line)."""
     from mjcodesign.codesign import Mode
-    from mjcodesign.errors import DesignError
     from mjcodesign.pipeline import DesignOptions, parse_objects, read_masses, run_design
 
     masses = read_masses(args.masses) if args.masses else None
@@ -99,15 +98,9 @@ def run(args: argparse.Namespace) -> int:
         seed=args.seed,
         max_iterations=args.max_iterations,
     )
-    ckpt = args.ckpt
-    if ckpt is None:
-        from mjcodesign.surrogate.shipped import TRAIN_HINT, shipped_checkpoint
+    from mjcodesign.surrogate import checkpoint_or_shipped
 
-        ckpt = shipped_checkpoint()
-        if ckpt is None:
-            raise DesignError(
-                f"no pretrained surrogate ships with this mjcodesign yet: train one ({TRAIN_HINT}) and pass --ckpt ckpt"
-            )
+    ckpt = checkpoint_or_shipped(args.ckpt)
     recorder = None
     if importlib.util.find_spec("rerun") is not None:
         from mjcodesign.sim import load_observer

@@ -56,7 +56,7 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--pose-sampling",
         default="fixed,oracle",
-        help="comma-separated pose policies: fixed (first pose), surrogate (needs --ckpt), oracle (the "
+        help="comma-separated pose policies: fixed (first pose), surrogate (--ckpt's network), oracle (the "
         "simulator's best); every report also gives 'all' (every pose)",
     )
     p.add_argument(
@@ -90,7 +90,10 @@ def add_parser(subparsers) -> None:
         "--quick", action="store_true", help=f"a small suite for CI ({_QUICK_OBJECTS}; 2 poses, 2 draws)"
     )
     p.add_argument(
-        "--ckpt", type=path_text, default=None, help="surrogate checkpoint (for --pose-sampling surrogate)"
+        "--ckpt",
+        type=path_text,
+        default=None,
+        help="surrogate checkpoint for --pose-sampling surrogate (default: the shipped weights)",
     )
     p.add_argument("--density", default="light", help="comma-separated densities: light, heavy or kg/m³")
     add_mass_mode(p, "one regime 'real' in place of --density (an object without one is refused up front)")
@@ -239,11 +242,16 @@ def run(args: argparse.Namespace) -> int:
         check_real_masses(source[0] if kind == "build" else [o.source for o in source.objects])
         if kind == "file" and args.egad_like:
             check_real_masses(egad_sources(args.egad_like, [o.source for o in source.objects]))
+    ckpt = args.ckpt
+    if run_cfg.needs_surrogate:  # refused in one line, before any folder, while no weights ship
+        from mjcodesign.surrogate.shipped import checkpoint_or_shipped
+
+        ckpt = checkpoint_or_shipped(args.ckpt)
     folder = check_output(
         args.out,
         OutputKind.EVALUATION,
         overwrite=args.overwrite,
-        inputs={"--ckpt": args.ckpt, "--anygrasp": args.anygrasp, "--suite": args.suite},
+        inputs={"--ckpt": ckpt, "--anygrasp": args.anygrasp, "--suite": args.suite},
     )
     if args.rrd is not None and not Path(args.rrd).resolve().parent.is_dir():
         raise OutputError(f"--rrd {args.rrd}: folder {Path(args.rrd).parent} does not exist")
@@ -253,13 +261,9 @@ def run(args: argparse.Namespace) -> int:
         raise OutputError(f"--save-suite {args.save_suite}: its folder does not exist")
     surrogate, n_points = None, 1024
     if run_cfg.needs_surrogate:
-        if args.ckpt is None:
-            raise DesignError(
-                "--pose-sampling surrogate needs --ckpt DIR (a checkpoint from `mjcodesign train`)"
-            )
         from mjcodesign.surrogate import load_any
 
-        surrogate = load_any(args.ckpt)  # one checkpoint, or the K networks of `train --folds`
+        surrogate = load_any(ckpt)  # one checkpoint, or the K networks of `train --folds`
         n_points = int(surrogate.meta["dataset"]["cloud_points"])
     cache = user_cache_dir()
     t0 = time.perf_counter()
@@ -315,7 +319,7 @@ def run(args: argparse.Namespace) -> int:
         "model": run_cfg.model,
         "seed": run_cfg.seed,
         "perturbation_model": suite.perturbation.as_dict(),
-        "checkpoint": args.ckpt,
+        "checkpoint": None if ckpt is None else str(ckpt),
         "mass": run_cfg.mass,
         "command": args.command_line,
         "wall_time_s": wall,

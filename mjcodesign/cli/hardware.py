@@ -37,6 +37,18 @@ def _path(text: str) -> Path:
     return Path(path_text(text))
 
 
+_SHIPPED = object()  # a bare ``--surrogate`` (not a str: argparse would pass a str const through type=)
+
+
+def _surrogate(value: Path | object | None) -> Path | None:
+    """``hw grasp``'s checkpoint: the folder given, the shipped one for a bare ``--surrogate``, or None."""
+    if value is not _SHIPPED:
+        return value
+    from mjcodesign.surrogate.shipped import checkpoint_or_shipped
+
+    return Path(checkpoint_or_shipped(None, "--surrogate"))
+
+
 def _paths(text: str) -> tuple[Path, ...]:
     return tuple(Path(path_text(t.strip())) for t in text.split(","))
 
@@ -92,8 +104,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     g.add_argument(
         "--surrogate",
         type=_path,
+        nargs="?",
+        const=_SHIPPED,
         default=None,
-        help="surrogate checkpoint: run the candidate it predicts best",
+        metavar="CKPT",
+        help="surrogate checkpoint: run the candidate it predicts best (--surrogate alone: the shipped weights)",
     )
     g.add_argument("--design", default=None, help="the printed design (preset, 22 ln E or a design file)")
     g.add_argument(
@@ -175,7 +190,7 @@ def _grasp(args: argparse.Namespace) -> int:
         grasp_force=args.force,
         realtime=not args.no_realtime,
         dry_run=args.dry_run,
-        surrogate=args.surrogate,
+        surrogate=_surrogate(args.surrogate),
         design=None if args.design is None else parse_design(args.design),
         density=args.density,
     )

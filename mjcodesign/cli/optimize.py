@@ -24,7 +24,10 @@ def add_parser(subparsers) -> None:
         "optimize", help="co-design the 22 block stiffnesses and a grasp pose per object (surrogate)"
     )
     p.add_argument(
-        "--ckpt", type=path_text, required=True, help="surrogate checkpoint folder (`train --out`)"
+        "--ckpt",
+        type=path_text,
+        default=None,
+        help="surrogate checkpoint folder (default: the shipped weights)",
     )
     p.add_argument(
         "--objects",
@@ -77,9 +80,11 @@ def run(args: argparse.Namespace) -> int:
     from mjcodesign.codesign.run import run_codesign
     from mjcodesign.data import resolve_objects
     from mjcodesign.objects import parse_density
+    from mjcodesign.surrogate import checkpoint_or_shipped
 
     density = parse_density(args.density)
     objects, meshes = _objects(args.objects, resolve_objects)
+    ckpt = checkpoint_or_shipped(args.ckpt)
     if args.threads:
         import torch
 
@@ -102,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
                 bar[0].update(bar[1], description=msg)
 
         record, result = run_codesign(
-            checkpoint=args.ckpt,
+            checkpoint=ckpt,
             objects=objects,
             poses=args.poses,
             per_object=args.poses_per_object,

@@ -154,7 +154,9 @@ def add_parser(subparsers) -> None:
     s.set_defaults(func=run_smoothness)
 
     p = subparsers.add_parser("predict", help="the surrogate's outputs for one object, pose and design")
-    p.add_argument("--ckpt", required=True, type=path_text, help="checkpoint folder (mjcodesign train --out)")
+    p.add_argument(
+        "--ckpt", type=path_text, default=None, help="checkpoint folder (default: the shipped weights)"
+    )
     p.add_argument("--object", required=True, type=path_text, help="YCB name, egad-like:N or a mesh file")
     p.add_argument(
         "--pose",
@@ -319,10 +321,16 @@ def run_predict(args: argparse.Namespace) -> int:
     design = parse_design(args.design)  # a wrong length exits 2 before torch is imported
     density = None if args.density is None else parse_density(args.density)
 
-    from mjcodesign.surrogate import predict_grasp
+    from mjcodesign.surrogate import checkpoint_or_shipped, predict_grasp
 
     res = predict_grasp(
-        args.ckpt, args.object, args.pose, design, density, seed=args.seed, cache_dir=user_cache_dir()
+        checkpoint_or_shipped(args.ckpt),
+        args.object,
+        args.pose,
+        design,
+        density,
+        seed=args.seed,
+        cache_dir=user_cache_dir(),
     )
     emit(res if args.json else {k: v for k, v in res.items() if k not in ("pose", "design")}, args.json)
     return 0
