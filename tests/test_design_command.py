@@ -21,12 +21,13 @@ import numpy as np
 import pytest
 
 from mjcodesign.cli import main as cli_main
-from mjcodesign.errors import MeshError
+from mjcodesign.errors import DesignError, MeshError
 from mjcodesign.pipeline import parse_mass_text, parse_objects, png_bytes, read_masses
 
 pytest.importorskip("torch")
 
 _BUDGET = 24  # 2 objects × 4 designs × 3 disturbances: one draw each
+_ADAPT = 6  # rollouts per object of the whole run's --adapt
 _CHROMIUM = next(
     (shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None
 )
@@ -161,6 +162,7 @@ def design_run(meshes, tiny_checkpoint, tmp_path_factory):
         work / "g",
     ]
     args += ["--poses-per-object", "2", "--budget", str(_BUDGET), "--max-iterations", "30", "--json"]
+    args += ["--adapt", str(_ADAPT)]
     r = _cli(*args, cwd=work, env=env)
     assert r.returncode == 0, r.stderr[-4000:]
     return work / "g", json.loads(r.stdout)
@@ -184,6 +186,20 @@ def test_design_writes_every_file(design_run):
         assert (out / "run.rrd").stat().st_size > 0
     box = next(o for o in record["objects"] if o["name"] == "box")
     assert box["mass_kg"] == pytest.approx(0.036) and box["mass_given"]
+
+
+def test_the_run_says_whether_it_adapted(design_run):
+    out, record = design_run
+    a = record["adapt"]
+    assert a["rollouts_per_object"] == _ADAPT and a["rollouts"] == 2 * _ADAPT
+    assert a["samples"] + a["sample_errors"] == a["rollouts"]
+    assert a["adapted"] == (0 < a["successes"] < a["samples"])  # one outcome only: nothing to learn
+    if a["adapted"]:
+        assert a["split"]["mode"] == "pose" and set(a["held_out"]) == {"before", "after"}
+    else:
+        assert "nothing to learn" in a["reason"]
+    assert a["summary"] in (out / "report.md").read_text(encoding="utf-8")
+    assert a["summary"] in (out / "report.html").read_text(encoding="utf-8")
 
 
 def test_verification_counts_every_rollout(design_run):
@@ -313,3 +329,94 @@ def test_without_ckpt_predict_reads_the_shipped_weights(
     without = json.loads(capsys.readouterr().out)
     assert cli_main.main([*argv, "--ckpt", str(tiny_checkpoint)]) == 0
     assert json.loads(capsys.readouterr().out) == without
+
+
+def _adapt_inputs(n_poses: int):
+    """Two objects' poses (random clouds of the tiny checkpoint's 256 points) and a rollout stand-in."""
+    from types import SimpleNamespace
+
+    from mjcodesign.codesign import PoseSet
+
+    rng = np.random.default_rng(0)
+    p = 2 * n_poses
+    poses = PoseSet(
+        ("a", "b"),
+        np.repeat([0, 1], n_poses),
+        (0.03 * rng.standard_normal((p, 256, 3))).astype(np.float32),
+        np.zeros((p, 3)),
+        np.tile(np.eye(4), (p, 1, 1)),
+        np.full((p, 2), 0.05),
+        np.full(p, 1.2e-4),
+    )
+
+    def rollouts(poses, objs, rho, scenario, model, n, seed, say, succeed=None):
+        rows = np.repeat(np.arange(len(poses)), n // n_poses)
+        log_e = np.random.default_rng(seed).uniform(13.5, 17.0, (len(rows), 22))
+        ok = log_e.mean(axis=1) > 15.25 if succeed is None else np.full(len(rows), succeed)
+        outs = [
+            SimpleNamespace(body_force=(0, 0, 0, 0, 0, 0.3 * s), displacement=(0, 0, 0.002 * (1 - s)),
+                            ground_contact=not s, success=bool(s))
+            for s in ok
+        ]  # fmt: skip
+        return rows, log_e, outs, 0
+
+    return poses, rollouts
+
+
+def test_adapt_fine_tunes_on_held_out_poses_and_keeps_the_checkpoint(tiny_checkpoint, monkeypatch):
+    import torch
+
+    from mjcodesign.pipeline import adapt
+    from mjcodesign.scenarios.grasp import GraspScenario
+    from mjcodesign.surrogate import load_surrogate
+
+    base = load_surrogate(tiny_checkpoint)
+    before = {k: v.clone() for k, v in base.model.state_dict().items()}
+    poses, rollouts = _adapt_inputs(4)
+    monkeypatch.setattr(adapt, "_rollouts", rollouts)
+    monkeypatch.setattr(adapt, "ADAPT_EPOCHS", 5)  # seconds: the test checks the path, not convergence
+    rho = {"a": 300.0, "b": 300.0}
+    net, rec = adapt.adapt_surrogate(base, poses, {}, rho, GraspScenario(), None, 40, seed=1)
+    assert rec["adapted"] and rec["lr"] == adapt.ADAPT_LR == 1e-4 and rec["samples"] == 80
+    split = rec["split"]
+    assert split["mode"] == "pose" and split["train"] + split["val"] + split["test"] == 80
+    assert sum(split["poses"].values()) == 8 and min(split["poses"].values()) >= 1  # whole poses
+    for part in ("before", "after"):
+        assert np.isfinite(rec["held_out"][part]["loss"])
+    assert rec["held_out"]["after"]["loss"] != rec["held_out"]["before"]["loss"]
+    assert net is not base and net.meta["adapt"] is rec and net.normalizer is base.normalizer
+    assert any(not torch.equal(v, net.model.state_dict()[k]) for k, v in before.items())
+    assert all(torch.equal(v, base.model.state_dict()[k]) for k, v in before.items())  # the base untouched
+    assert "adapted on 40 rollouts per object" in adapt.summary_line(rec)
+
+
+@pytest.mark.parametrize("succeed", [True, False])
+def test_adapt_with_one_outcome_only_keeps_the_checkpoint_and_says_why(succeed, tiny_checkpoint, monkeypatch):
+    import functools
+
+    from mjcodesign.pipeline import adapt
+    from mjcodesign.scenarios.grasp import GraspScenario
+    from mjcodesign.surrogate import load_surrogate
+
+    base = load_surrogate(tiny_checkpoint)
+    poses, rollouts = _adapt_inputs(3)
+    monkeypatch.setattr(adapt, "_rollouts", functools.partial(rollouts, succeed=succeed))
+    net, rec = adapt.adapt_surrogate(base, poses, {}, {"a": 300.0, "b": 300.0}, GraspScenario(), None, 6)
+    assert net is base and not rec["adapted"] and "nothing to learn" in rec["reason"]
+    assert ("every one succeeded" if succeed else "none succeeded") in rec["reason"]
+    with pytest.raises(DesignError, match="3 or more"):
+        adapt.adapt_surrogate(base, _adapt_inputs(1)[0], {}, {}, GraspScenario(), None, 6)
+
+
+def test_adapt_below_zero_is_refused_in_one_line(meshes, tiny_checkpoint, tmp_path, capsys, monkeypatch):
+    from mjcodesign.pipeline import DesignOptions
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        cli_main.main(["design", str(meshes / "box.stl"), "--ckpt", str(tiny_checkpoint), "--adapt", "-1",
+                       "--out", "o"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and err.startswith("error: argument --adapt") and err.count("\n") == 1
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(DesignError, match="--adapt"):
+        DesignOptions(adapt=-1)

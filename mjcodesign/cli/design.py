@@ -73,6 +73,14 @@ def add_parser(subparsers) -> None:
         help="re-simulation rollouts of the verification (objects × 4 designs × 3 disturbances × draws)",
     )
     p.add_argument("--max-iterations", type=int_at_least(1), default=2000, help="N of Algorithm 1")
+    p.add_argument(
+        "--adapt",
+        type=int_at_least(0),
+        default=0,
+        metavar="N",
+        help="first simulate N grasps of each object at its sampled poses and fine-tune the surrogate on "
+        "them (lr 1e-4, as train --init), then co-design through the adapted network (0: no adaptation)",
+    )
     p.add_argument("--seed", type=int_at_least(0), default=0, help="poses, clouds and perturbation draws")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=run)
@@ -97,6 +105,7 @@ def run(args: argparse.Namespace) -> int:
         budget=args.budget,
         seed=args.seed,
         max_iterations=args.max_iterations,
+        adapt=args.adapt,
     )
     from mjcodesign.surrogate import checkpoint_or_shipped
 
@@ -126,6 +135,8 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(record))
     else:
         emit(_table(record), False)
+        if record["adapt"]:
+            print(f"adapt: {record['adapt']['summary']}")
         print(
             f"wrote {args.out}: design, poses, print files, report.md, report.html ({record['wall_s']:.0f} s)"
         )

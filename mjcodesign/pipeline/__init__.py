@@ -6,21 +6,25 @@ re-simulation with perturbations, the print files, and a report.
 
 - :mod:`~mjcodesign.pipeline.specs`: the objects and their masses (:func:`parse_objects`);
 - :mod:`~mjcodesign.pipeline.run`: :func:`run_design` and :class:`DesignOptions`;
+- :mod:`~mjcodesign.pipeline.adapt`: :func:`adapt_surrogate`, the fine-tuning of ``design --adapt``;
 - :mod:`~mjcodesign.pipeline.report`: ``report.md``, ``report.html`` and their figures, the grasp
   images rendered off screen (:class:`~mjcodesign.pipeline.GraspImages`).
 """
 
+from mjcodesign.pipeline.adapt import ADAPT_LR, adapt_surrogate
 from mjcodesign.pipeline.report import GRASP_IMAGE_SIZE, GraspImages, block_outline, png_bytes, write_report
 from mjcodesign.pipeline.run import BASELINES, OPTIMISED, SWEEP_IMPULSES, DesignOptions, run_design
 from mjcodesign.pipeline.specs import DEFAULT_DENSITY, ObjectSpec, parse_mass_text, parse_objects, read_masses
 
 __all__ = [
+    "ADAPT_LR",
     "BASELINES",
     "DEFAULT_DENSITY",
     "GRASP_IMAGE_SIZE",
     "OPTIMISED",
     "SWEEP_IMPULSES",
     "DesignOptions",
+    "adapt_surrogate",
     "GraspImages",
     "block_outline",
     "ObjectSpec",

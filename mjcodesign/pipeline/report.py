@@ -244,6 +244,9 @@ def _header(record: dict) -> list[str]:
         f"Each design at the pose the surrogate picks for it; success at the paper's {v['table_impulse_paper_ns']:g} N s "
         "disturbance with its 95% Wilson interval over the draws (palm ±2 mm ±2°, mass ±10%, friction ±20%, "
         "tendon ±5%).",
+        f"Surrogate: {record['checkpoint']}; "
+        + (record["adapt"]["summary"] if record.get("adapt") else "not adapted to these objects (--adapt 0)")
+        + ".",
     ]
 
 

@@ -7,6 +7,8 @@ or an unreadable mesh is refused before any long work), then:
    their partial clouds;
 2. co-designs the 22 block stiffnesses and a pose per object through the surrogate (Algorithm 1,
    :func:`~mjcodesign.codesign.optimize`), jointly or one design per object;
+   With ``adapt`` (``--adapt N``), first fine-tunes the surrogate on N simulated grasps of each object
+   at these poses (:func:`~mjcodesign.pipeline.adapt.adapt_surrogate`) and co-designs through it;
 3. verifies by re-simulation: the optimised design and the soft, semi-rigid and paper-optimized
    presets, each at the pose the surrogate picks for it, under the evaluation's perturbation model
    (:func:`~mjcodesign.evaluation.run_suite`) at every disturbance of :data:`SWEEP_IMPULSES`; per
@@ -47,6 +49,7 @@ from mjcodesign.jobs import GraspJob, load_grasp_object, run_jobs
 from mjcodesign.models.types import FingerModel
 from mjcodesign.objects import YCB_IN_DOMAIN, parse_density
 from mjcodesign.outputs import OutputKind, check_output, staged
+from mjcodesign.pipeline.adapt import adapt_surrogate, summary_line
 from mjcodesign.pipeline.report import GraspImages, write_report
 from mjcodesign.pipeline.specs import DEFAULT_DENSITY, ObjectSpec
 from mjcodesign.scenarios import TendonForce, TendonPosition
@@ -80,12 +83,17 @@ class DesignOptions:
     seed: int = 0
     max_iterations: int = 2000
     """N of Algorithm 1."""
+    adapt: int = 0
+    """Rollouts per object to fine-tune the surrogate on before the co-design
+    (:func:`~mjcodesign.pipeline.adapt.adapt_surrogate`); 0: the checkpoint as it is."""
 
     def __post_init__(self) -> None:
         for name in ("poses_per_object", "budget", "max_iterations"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise DesignError(f"{name} must be an integer >= 1, got {v!r}")
+        if isinstance(self.adapt, bool) or not isinstance(self.adapt, int) or self.adapt < 0:
+            raise DesignError(f"--adapt must be an integer >= 0, got {self.adapt!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise DesignError(f"seed must be an integer >= 0, got {self.seed!r}")
 
@@ -182,6 +190,16 @@ def run_design(
     names = [s.name for s in specs]
     poses = _pose_set(cands, volumes, names, [s.source for s in specs])
     timings["poses_s"] = time.perf_counter() - t
+    adapt = None
+    if options.adapt:
+        t = time.perf_counter()
+        surrogate, adapt = adapt_surrogate(
+            surrogate, poses, objs, rho, scenario, model, options.adapt, seed=options.seed, progress=say
+        )
+        adapt["summary"] = summary_line(adapt)
+        if not adapt["adapted"]:
+            tell(adapt["reason"])
+        timings["adapt_s"] = time.perf_counter() - t
 
     # 2. co-design through the surrogate
     t = time.perf_counter()
@@ -246,6 +264,7 @@ def run_design(
             "perturbation": PerturbationModel().as_dict(),
         },
         "checkpoint": str(checkpoint),
+        "adapt": adapt,
         "seed": options.seed,
         "poses_per_object": options.poses_per_object,
         "command": command,
