@@ -38,6 +38,15 @@ _TRAIN = ("--epochs", "2", "--batch-size", "8", "--hidden", "8", "--depth", "1",
           "--threads", "1")  # fmt: skip
 _OPTIMIZE = ("--objects", "box", "--no-ground-truth", "--max-iterations", "3", "--patience", "2",
              "--top-b", "1", "--poses-per-object", "2")  # fmt: skip
+_DESIGN = (
+    "box.stl",
+    "--poses-per-object",
+    "2",
+    "--budget",
+    "12",
+    "--max-iterations",
+    "5",
+)  # 1 object x 4 x 3
 _KILL_WAIT_S = 120  # a train run here takes ~15 s; a kill point not reached by then fails the test
 
 
@@ -96,6 +105,7 @@ def _commands(work: Path) -> dict[str, list[str]]:
         "optimize": ["optimize", "--ckpt", work / "ck", "--poses", work / "ds", *_OPTIMIZE],
         "evaluate": ["evaluate", "--designs", "soft", "--objects", "012_strawberry", "--density", "light",
                      "--pose-sampling", "fixed", "--impulse", "0.1", "--candidates", "2"],
+        "design": ["design", *_DESIGN, "--ckpt", work / "ck"],
     }  # fmt: skip
 
 
@@ -111,7 +121,7 @@ _FOREIGN = {
 
 @pytest.mark.parametrize("contents", sorted(_FOREIGN))
 @pytest.mark.parametrize(
-    "command", ["finger export", "export-print", "datagen", "train", "optimize", "evaluate"]
+    "command", ["finger export", "export-print", "datagen", "train", "optimize", "evaluate", "design"]
 )
 def test_a_folder_it_did_not_write_is_refused_and_left_alone(command, contents, work, here, capsys):
     out = here / "user"
@@ -151,6 +161,36 @@ def test_overwrite_writes_beside_the_users_files_and_a_rerun_keeps_them(work, he
     assert tree["poses/keep.txt"] == b"mine" and tree["poses/late.txt"] == b"added later"
     assert tree["poses/sub/x"] == b"mine too" and tree["link"] == "/nonexistent"
     assert out.stat().st_mode & 0o777 == 0o750  # the folder replaced whole keeps its permissions
+
+
+def test_design_overwrite_keeps_the_users_files_and_an_interrupted_rerun_the_old_output(
+    work, here, capsys, monkeypatch
+):
+    from mjcodesign.pipeline import run as design_run
+
+    out = here / "g"
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    argv = ["design", *_DESIGN, "--ckpt", work / "ck", "--out", out]
+    code, _, err = _cli(capsys, *argv, "--overwrite")
+    assert code == 0, err
+    first = _tree(out)
+    assert first["notes.txt"] == b"mine" and "design.txt" in first and "report.html" in first
+    assert (
+        json.loads(first[MARKER])["kind"] == "design"
+        and "notes.txt" not in json.loads(first[MARKER])["files"]
+    )
+
+    def interrupted(*_a, **_k):  # a Ctrl-C while the files are written
+        raise KeyboardInterrupt
+
+    # Its own output now: a rerun needs no flag (it gets as far as writing), and one interrupted while
+    # writing leaves the first run's output whole, with no sibling folder.
+    with monkeypatch.context() as mp:
+        mp.setattr(design_run, "write_report", interrupted)
+        code, _, err = _cli(capsys, *argv, "--seed", "1")
+    assert code == 130 and err[-1] == "error: interrupted" and "verifying" in " ".join(err), err
+    assert _tree(out) == first and sorted(p.name for p in here.iterdir()) == ["ball.stl", "box.stl", "g"]
 
 
 def test_another_kind_and_an_input_are_refused_even_with_overwrite(work, here, capsys):
