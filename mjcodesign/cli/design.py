@@ -44,7 +44,6 @@ def add_parser(subparsers) -> None:
             "verify the design against soft, semi-rigid and paper-optimized by perturbed re-simulation, and "
             "write the design, poses, print files, report.md, report.html and run.rrd into --out."
         ),
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument(
         "objects",

@@ -30,7 +30,6 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser(
         "evaluate",
         help="compare designs by re-simulation on a frozen suite: success with intervals, paired tests",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     p.add_argument(
         "--suite",
@@ -387,7 +386,6 @@ def add_bench_parser(bench_subparsers) -> None:
     b = bench_subparsers.add_parser(
         "evaluate",
         help="suite evaluation throughput against raw mujoco.rollout on the same scenes (JSON)",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     b.add_argument("--objects", default="013_apple,025_mug,egad-like:3", help="comma-separated objects")
     b.add_argument("--poses-per-object", type=int_at_least(1), default=3)
