@@ -5,7 +5,9 @@ writes (header, byte stuffing, CRC-16), answers with status packets, and keeps a
 per motor. Several motors share one emulated bus, as on a U2D2. Supported instructions: ping,
 read, write, reboot, sync read and sync write (and broadcast ping). Writes to the EEPROM area
 (addresses below 64) while torque is on return an access error, as on the real motor. The present
-position follows the goal position at a finite speed while torque is on.
+position follows the goal position at a finite speed while torque is on; an optional obstacle
+(`XL330Emulator.obstacle`) stops it at a position, where it presses at its current limit as a motor in
+current-based position mode stalls on a stiff finger.
 
 Pure Python, no dependencies: ``os.openpty`` and a thread. Use it as a context manager::
 
@@ -151,6 +153,9 @@ class _Motor:
     table: bytearray
     position: float = 0.0  # present position [tick], continuous
     stamp: float = 0.0  # time of the last position update [s, monotonic]
+    obstacle: int | None = None  # position the shaft cannot pass [tick]; None: free
+    obstacle_ma: int | None = None  # present current while pressing on it [mA]; None: the limit
+    obstacle_side: int = -1  # side of the obstacle the shaft is on: -1 below, +1 above
 
     @classmethod
     def new(cls, dxl_id: int, speed_ticks_s: float, position: int) -> _Motor:
@@ -186,16 +191,27 @@ class _Motor:
         """Advance the present position toward the goal and refresh the read-only items."""
         now = time.monotonic()
         goal = self.get(ADDR["goal_position"], 4, signed=True)
+        pressing = False
         if self.torque:
+            target = float(goal)
+            if self.obstacle is not None and (goal - self.obstacle) * self.obstacle_side < 0:
+                target, pressing = float(self.obstacle), True  # the goal lies beyond the obstacle
             step = self.speed_ticks_s * (now - self.stamp)
-            delta = goal - self.position
+            delta = target - self.position
             if abs(delta) <= step:
-                self.position = float(goal)
+                self.position = target
             else:
                 self.position += math.copysign(step, delta)
+                pressing = False  # still on its way to the obstacle
         self.stamp = now
         present = round(self.position)
-        moving = self.torque and present != goal
+        moving = self.torque and present != goal and not pressing
+        current = 0
+        if pressing:
+            limit = min(self.get(ADDR["goal_current"], 2), self.get(ADDR["current_limit"], 2))
+            magnitude = limit if self.obstacle_ma is None else self.obstacle_ma
+            current = round(math.copysign(magnitude, goal - self.position))
+        self.put(ADDR["present_current"], 2, current)
         self.put(ADDR["present_position"], 4, present)
         self.put(ADDR["present_velocity"], 4, round(self.speed_ticks_s / 15.6) if moving else 0)
         self.put(ADDR["moving"], 1, int(moving))
@@ -307,6 +323,22 @@ class XL330Emulator:
     def torque(self, dxl_id: int) -> bool:
         """Whether torque is enabled on one motor."""
         return self.value(dxl_id, "torque_enable", 1) == 1
+
+    def obstacle(self, dxl_id: int, position: int | None, *, current_ma: int | None = None) -> None:
+        """Put an obstacle that the shaft of one motor cannot pass at `position` [tick]; None removes it.
+
+        A goal beyond it leaves the motor pressing on it, not moving, with its present current at
+        the smaller of Goal Current and Current Limit (the saturation of current-based position
+        mode), or at `current_ma` [mA] when given (0 emulates a jam that draws no current).
+        """
+        with self._lock:
+            motor = self._motors[dxl_id]
+            motor.sync()
+            motor.obstacle = None if position is None else int(position)
+            if position is not None:  # a shaft on the obstacle itself is below it
+                motor.obstacle_side = 1 if motor.position > position else -1
+            motor.obstacle_ma = None if current_ma is None else int(current_ma)
+            motor.sync()
 
     def cut_link(self, duration_s: float) -> None:
         """Drop every byte from now on for `duration_s` seconds, as an unplugged cable would."""

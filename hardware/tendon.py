@@ -6,7 +6,10 @@ motors run as the simulator's servo (:class:`mjcodesign.design.servo.TendonPosit
 written once with no velocity profile.
 A pull is a displacement from the *slack* position, which is the present position read when the
 motors are opened; each finger has its own displacement limits, and a command outside them is
-refused before anything is written. Every exit path (normal, exception, SIGINT/SIGTERM through
+refused before anything is written. A pull ends when every motor has either reached its goal or
+stalled: a stiff finger closing on an object stops the motor short of its goal at its current limit
+(current-based position mode holds that current), so a motor whose position has not changed over a
+window while its present current is at the limit is done too (`PullOutcome.STALLED`). Every exit path (normal, exception, SIGINT/SIGTERM through
 `raise_on_signals`) leaves the motors with torque off.
 
 ``dynamixel_sdk`` is imported lazily, inside `TendonMotors.open`.
@@ -20,6 +23,7 @@ import time
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
+from enum import StrEnum
 from typing import Any, TypeVar
 
 from mjcodesign.design.servo import PAPER_TICKS, TICKS_PER_TURN, XL330_OPERATING_MODE, TendonPosition
@@ -29,6 +33,8 @@ from .xl330 import ADDR, XL330_MODEL_NUMBER
 
 __all__ = [
     "FingerMotor",
+    "MotorPull",
+    "PullOutcome",
     "TendonConfig",
     "TendonMotors",
     "port_handler",
@@ -40,6 +46,8 @@ PAPER_PULL_TICKS = PAPER_TICKS  # the paper's hardware tendon pull, of 4096 tick
 _PROTOCOL = 2.0
 _COMM_SUCCESS = 0  # dynamixel_sdk.COMM_SUCCESS
 _T = TypeVar("_T")
+_STATE_ADDR = ADDR["present_current"]  # one sync read from Present Current to Present Position
+_STATE_SIZE = ADDR["present_position"] + 4 - _STATE_ADDR  # current (2), velocity (4), position (4)
 
 
 @dataclass(frozen=True)
@@ -99,7 +107,14 @@ class TendonConfig:
             ``bytes * t_byte + 2 * latency_ms + 2`` ms, the SDK's formula, which fixes the latency
             at 16 ms (the FTDI default); raise it for slow adapters or a loaded host.
         drive: The servo every motor runs as, the simulator's own: its Current Limit is written at
-            open, and its goal is what `TendonMotors.pull` pulls by default.
+            open (and as the Goal Current, the current its position controller may use), and its
+            goal is what `TendonMotors.pull` pulls by default.
+        stall_ticks: A motor that moves no more than this over `stall_window_s` is not moving [tick].
+        stall_window_s: How long a motor must stay still at its current limit to count as
+            stalled [s].
+        stall_current: Fraction of the Current Limit at or above which the present current counts as
+            at the limit [-]. The XL330 reports its current in 1 mA units with ripple of a few tens
+            of mA about the saturated value, well above an unloaded motor's draw.
     """
 
     port: str
@@ -111,6 +126,9 @@ class TendonConfig:
     safe_stop_s: float = 2.0
     latency_ms: float = 16.0
     drive: TendonPosition = field(default_factory=TendonPosition)
+    stall_ticks: int = 3
+    stall_window_s: float = 0.2
+    stall_current: float = 0.8
     poll_s: float = field(default=0.01, repr=False)
 
     def __post_init__(self) -> None:
@@ -127,6 +145,11 @@ class TendonConfig:
             raise HardwareError("safe_stop_s and poll_s must be positive")
         if not (0 < self.latency_ms <= 1000):
             raise HardwareError(f"latency_ms must be in (0, 1000] ms, got {self.latency_ms}")
+        if self.stall_ticks < 0 or self.stall_window_s <= 0 or not 0 < self.stall_current <= 1:
+            raise HardwareError(
+                "stall_ticks must be >= 0, stall_window_s > 0 and stall_current in (0, 1], got "
+                f"{self.stall_ticks}, {self.stall_window_s}, {self.stall_current}"
+            )
         if not isinstance(self.drive, TendonPosition):
             raise HardwareError(f"the tendon motors run a TendonPosition servo, got {self.drive!r}")
 
@@ -134,6 +157,63 @@ class TendonConfig:
         """Raise `HardwareError` if pulling every tendon by `ticks` is outside any limit."""
         for motor in self.motors:
             motor.check(ticks)
+
+
+class PullOutcome(StrEnum):
+    """How one motor's pull ended."""
+
+    REACHED = "reached"
+    """Within `TendonConfig.tolerance_ticks` of its goal."""
+    STALLED = "stalled"
+    """Still, at its current limit, short of its goal (the finger met the object)."""
+
+
+@dataclass(frozen=True)
+class MotorPull:
+    """The end of one motor's pull.
+
+    Args:
+        dxl_id: Dynamixel ID.
+        outcome: Reached its goal or stalled.
+        displacement_ticks: Final displacement from the slack position [tick].
+        goal_ticks: Commanded displacement [tick].
+        current_ma: Present current at the end [mA], signed as the motor reports it.
+    """
+
+    dxl_id: int
+    outcome: PullOutcome
+    displacement_ticks: int
+    goal_ticks: int
+    current_ma: int
+
+    def as_dict(self) -> dict:
+        """JSON-ready fields; the outcome as its text."""
+        return {
+            "outcome": self.outcome.value,
+            "displacement_ticks": self.displacement_ticks,
+            "goal_ticks": self.goal_ticks,
+            "current_ma": self.current_ma,
+        }
+
+
+class _StallWatch:
+    """Per-motor stall detector: still within `stall_ticks` for `stall_window_s` at the current limit."""
+
+    def __init__(self, config: TendonConfig) -> None:
+        self._config = config
+        self._limit_ma = config.stall_current * config.drive.current_limit_register
+        self._anchor: dict[int, tuple[int, float]] = {}  # position and time it was first seen there
+
+    def stalled(self, dxl_id: int, position: int, current_ma: int, now: float) -> bool:
+        anchor = self._anchor.get(dxl_id)
+        if (
+            anchor is None
+            or abs(position - anchor[0]) > self._config.stall_ticks
+            or abs(current_ma) < self._limit_ma
+        ):
+            self._anchor[dxl_id] = (position, now)
+            return False
+        return now - anchor[1] >= self._config.stall_window_s
 
 
 def port_handler(sdk: Any, port: str, latency_ms: float) -> Any:
@@ -150,6 +230,11 @@ def port_handler(sdk: Any, port: str, latency_ms: float) -> Any:
 def _signed32(value: int) -> int:
     """Two's-complement reading of an unsigned 4-byte value (the SDK returns it unsigned)."""
     return value - (1 << 32) if value & 0x80000000 else value
+
+
+def _signed16(value: int) -> int:
+    """Two's-complement reading of an unsigned 2-byte value."""
+    return value - (1 << 16) if value & 0x8000 else value
 
 
 def _le32(value: int) -> list[int]:
@@ -219,6 +304,7 @@ class TendonMotors:
             self.torque(True)
             for motor in self.config.motors:
                 self._write(motor, "profile_velocity", 4, 0)
+                self._write(motor, "goal_current", 2, drive.current_limit_register)
             self._slack = self.present()
         except BaseException as exc:
             self.__exit__(type(exc), exc, None)
@@ -262,24 +348,37 @@ class TendonMotors:
 
     def present(self) -> dict[int, int]:
         """Present position of every motor by ID, with one sync read [tick]."""
-        sdk = self._sdk
-        group = sdk.GroupSyncRead(self._port, self._ph, ADDR["present_position"], 4)
+        raw = self._sync_read("present position", ADDR["present_position"], 4)
+        return {i: _signed32(v[ADDR["present_position"]]) for i, v in raw.items()}
+
+    def present_state(self) -> dict[int, tuple[int, int]]:
+        """Present position [tick] and present current [mA] of every motor by ID, with one sync read."""
+        raw = self._sync_read("present current and position", _STATE_ADDR, _STATE_SIZE)
+        return {
+            i: (_signed32(v[ADDR["present_position"]]), _signed16(v[ADDR["present_current"]]))
+            for i, v in raw.items()
+        }
+
+    def _sync_read(self, what: str, addr: int, size: int) -> dict[int, dict[int, int]]:
+        """One sync read of `size` bytes from `addr`; by ID, the raw value of each item read."""
+        group = self._sdk.GroupSyncRead(self._port, self._ph, addr, size)
         for motor in self.config.motors:
             group.addParam(motor.dxl_id)
+        items = {ADDR["present_position"]: 4, ADDR["present_current"]: 2}
+        items = {a: n for a, n in items.items() if addr <= a and a + n <= addr + size}
 
-        def once() -> dict[int, int]:
+        def once() -> dict[int, dict[int, int]]:
             result = group.txRxPacket()
             if result != _COMM_SUCCESS:
                 raise _Comm(self._ph.getTxRxResult(result))
             out = {}
             for motor in self.config.motors:
-                if not group.isAvailable(motor.dxl_id, ADDR["present_position"], 4):
+                if not group.isAvailable(motor.dxl_id, addr, size):
                     raise _Comm(f"no data from {motor.label}")
-                raw = group.getData(motor.dxl_id, ADDR["present_position"], 4)
-                out[motor.dxl_id] = _signed32(raw)
+                out[motor.dxl_id] = {a: group.getData(motor.dxl_id, a, n) for a, n in items.items()}
             return out
 
-        return self._retry("sync read of present position", once)
+        return self._retry(f"sync read of {what}", once)
 
     def set_goal(self, goals: Mapping[int, int]) -> None:
         """Write absolute goal positions by ID with one sync write [tick]; no limit check."""
@@ -295,29 +394,55 @@ class TendonMotors:
         self._retry("sync write of goal position", once)
 
     def pull(self, ticks: int | None = None) -> dict[int, int]:
+        """Pull every tendon `ticks` (default: the drive's goal) and wait; final displacement by ID [tick].
+
+        :meth:`pull_report` with only the displacements: each motor reached its goal or stalled.
+        """
+        return {i: r.displacement_ticks for i, r in self.pull_report(ticks).items()}
+
+    def pull_report(self, ticks: int | None = None) -> dict[int, MotorPull]:
         """Pull every tendon `ticks` (default: the drive's goal) from its slack position and wait.
 
-        Returns the final displacement of each motor by ID [tick]. A displacement outside a
-        finger's limits is refused before anything is written.
+        Waits until each motor has reached its goal (within `tolerance_ticks`) or stalled (still
+        within `stall_ticks` for `stall_window_s` at `stall_current` of its Current Limit), and
+        returns how each ended. A displacement outside a finger's limits is refused before anything
+        is written; a motor that has done neither within `move_timeout_s` raises `HardwareError`.
         """
         if ticks is None:
             ticks = self.config.drive.goal_ticks
         self.config.check_pull(ticks)
         if not self._torque_on:
             raise HardwareError("tendon motors are not torqued on")
-        goals = {m.dxl_id: self._slack[m.dxl_id] + ticks for m in self.config.motors}
+        cfg = self.config
+        goals = {m.dxl_id: self._slack[m.dxl_id] + ticks for m in cfg.motors}
         self.set_goal(goals)
-        deadline = time.monotonic() + self.config.move_timeout_s
+        watch = _StallWatch(cfg)
+        deadline = time.monotonic() + cfg.move_timeout_s
         while True:
-            now = self.present()
-            if all(abs(now[i] - g) <= self.config.tolerance_ticks for i, g in goals.items()):
-                return {i: now[i] - self._slack[i] for i in goals}
-            if time.monotonic() > deadline:
-                raise HardwareError(
-                    f"tendon pull of {ticks} ticks did not arrive within "
-                    f"{self.config.move_timeout_s} s (positions {now})"
+            state, now = self.present_state(), time.monotonic()
+            ends: dict[int, PullOutcome | None] = {}
+            for i, goal in goals.items():
+                position, current = state[i]
+                stalled = watch.stalled(i, position, current, now)  # updated every poll
+                reached = abs(position - goal) <= cfg.tolerance_ticks
+                ends[i] = PullOutcome.REACHED if reached else PullOutcome.STALLED if stalled else None
+            if all(ends.values()):
+                return {
+                    i: MotorPull(i, ends[i], state[i][0] - self._slack[i], ticks, state[i][1]) for i in goals
+                }
+            if now > deadline:
+                late = ", ".join(
+                    f"{m.label} at {state[m.dxl_id][0] - self._slack[m.dxl_id]} ticks, "
+                    f"{state[m.dxl_id][1]} mA"
+                    for m in cfg.motors
+                    if ends[m.dxl_id] is None
                 )
-            time.sleep(self.config.poll_s)
+                raise HardwareError(
+                    f"tendon pull of {ticks} ticks: neither reached its goal nor stalled at the current "
+                    f"limit within {cfg.move_timeout_s} s: {late} (limit "
+                    f"{cfg.drive.current_limit_register} mA; a jam or a cut tendon?)"
+                )
+            time.sleep(cfg.poll_s)
 
     def displacement(self) -> dict[int, int]:
         """Present displacement from the slack position by ID [tick]."""
