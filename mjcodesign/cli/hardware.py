@@ -215,8 +215,14 @@ def _tendon(args: argparse.Namespace) -> int:
     config = TendonConfig(port=args.dxl, motors=_motors(args), latency_ms=args.latency_ms)
     config.check_pull(args.ticks)  # refuse before opening the port
     with raise_on_signals(), TendonMotors(config) as motors:
-        final = motors.pull(args.ticks)
-        print("displacement [ticks]: " + ", ".join(f"ID {i}: {v}" for i, v in final.items()))
+        report = motors.pull_report(args.ticks)
+        print(
+            "displacement [ticks]: " + ", ".join(f"ID {i}: {r.displacement_ticks}" for i, r in report.items())
+        )
+        print(
+            "ended: "
+            + ", ".join(f"ID {i}: {r.outcome.value} at {r.current_ma} mA" for i, r in report.items())
+        )
         time.sleep(args.hold)
     print("torque off")
     return 0

@@ -72,6 +72,26 @@ def test_position_follows_goal_at_finite_speed(sdk_port):
     assert ph.read4ByteTxRx(port, 1, ADDR["present_position"])[0] == start + 2000
 
 
+def test_obstacle_stops_the_shaft_and_it_presses_at_the_current_limit(sdk_port, emulator):
+    port, ph = sdk_port
+    ph.write1ByteTxRx(port, 1, ADDR["torque_enable"], 1)
+    start = ph.read4ByteTxRx(port, 1, ADDR["present_position"])[0]
+    emulator.obstacle(1, start - 300)  # below the shaft: a pay-out goal presses on it
+    ph.write2ByteTxRx(port, 1, ADDR["goal_current"], 700)  # under the 1750 mA Current Limit
+    ph.write4ByteTxRx(port, 1, ADDR["goal_position"], start - 1000)
+    time.sleep(0.1)  # 300 ticks take 15 ms at 20k tick/s
+    assert ph.read4ByteTxRx(port, 1, ADDR["present_position"])[0] == start - 300
+    # Present Current: 2 bytes, two's complement, 1 mA; negative while pushing toward lower ticks,
+    # saturated at min(Goal Current, Current Limit).
+    raw = ph.read2ByteTxRx(port, 1, ADDR["present_current"])[0]
+    assert raw - (1 << 16) == -700
+    assert ph.read1ByteTxRx(port, 1, ADDR["moving"])[0] == 0
+    ph.write4ByteTxRx(port, 1, ADDR["goal_position"], start)  # away from it: free, no current
+    time.sleep(0.1)
+    assert ph.read4ByteTxRx(port, 1, ADDR["present_position"])[0] == start
+    assert ph.read2ByteTxRx(port, 1, ADDR["present_current"])[0] == 0
+
+
 def test_no_motion_without_torque(sdk_port):
     port, ph = sdk_port
     start = ph.read4ByteTxRx(port, 2, ADDR["present_position"])[0]
