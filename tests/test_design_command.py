@@ -406,6 +406,11 @@ def test_adapt_with_one_outcome_only_keeps_the_checkpoint_and_says_why(succeed, 
     assert ("every one succeeded" if succeed else "none succeeded") in rec["reason"]
     with pytest.raises(DesignError, match="3 or more"):
         adapt.adapt_surrogate(base, _adapt_inputs(1)[0], {}, {}, GraspScenario(), None, 6)
+    calls = []
+    monkeypatch.setattr(adapt, "_rollouts", lambda *a: calls.append(a))
+    with pytest.raises(DesignError, match="training range"):  # before any rollout, as the co-design would
+        adapt.adapt_surrogate(base, poses, {}, {"a": 300.0, "b": 2000.0}, GraspScenario(), None, 6)
+    assert calls == []
 
 
 def test_adapt_below_zero_is_refused_in_one_line(meshes, tiny_checkpoint, tmp_path, capsys, monkeypatch):

@@ -165,6 +165,8 @@ def adapt_surrogate(
             f"--adapt splits the poses to train, validate and test: it needs {_MIN_POSES} or more in all, "
             f"the objects have {len(poses)} (raise --poses-per-object)"
         )
+    if surrogate.input_range is not None:  # a density the co-design would refuse, refused before the rollouts
+        surrogate.input_range.check(None, np.array(list(rho.values()), dtype=float))
     rows, log_e, outs, errors = _rollouts(poses, objs, rho, scenario, model, rollouts, seed, say)
     record = {
         "rollouts_per_object": rollouts,
@@ -199,7 +201,7 @@ def adapt_surrogate(
     )
     adapted = Surrogate(
         res.model, res.normalizer, lift=surrogate.lift, lifted_fraction=surrogate.lifted_fraction,
-        meta=dict(surrogate.meta),
+        meta=dict(surrogate.meta), input_range=surrogate.trained_range,
     )  # fmt: skip
     record.update(
         adapted=True,
