@@ -215,6 +215,34 @@ def test_cli_writes_the_report_and_reruns_bitwise(tmp_path, suite_file):
     assert "evaluate: rollouts by object 2/2" in q.stderr  # one plain line per object in a log
 
 
+_LIFT_CHANGE_M = 1e-3  # a lift margin that moves by over 1 mm came from another tendon drive
+
+
+def test_tendon_drive_reaches_the_rollouts(tmp_path, suite_file, monkeypatch, capsys):
+    from mjcodesign.cli.main import main
+
+    monkeypatch.chdir(tmp_path)
+    base = ["evaluate", "--suite", str(suite_file), "--designs", "soft", "--perturbations", "1"]
+    base += ["--pose-sampling", "fixed", "--json"]
+    runs = {}
+    for tendon in ("force:10", "position:1000"):
+        out = tmp_path / tendon.replace(":", "_")
+        assert main([*base, "--tendon", tendon, "--out", str(out)]) == 0
+        summary = json.loads(capsys.readouterr().out)
+        results = json.loads((out / "results.json").read_text())
+        assert summary["tendon"] == results["run"]["tendon"] == tendon
+        runs[tendon] = {(r["object"], r["pose"]): r for r in results["rows"]}
+    force, position = runs["force:10"], runs["position:1000"]
+    assert force.keys() == position.keys()
+    # The same draws under the two drives: the servo's pull changes how the objects rise.
+    moved = [
+        k for k in force if abs(force[k]["lift_margin_m"] - position[k]["lift_margin_m"]) > _LIFT_CHANGE_M
+    ]
+    assert moved, {k: (force[k]["lift_margin_m"], position[k]["lift_margin_m"]) for k in force}
+    assert main([*base, "--out", str(tmp_path / "default")]) == 0  # no --tendon: the scenario's own
+    assert json.loads(capsys.readouterr().out)["tendon"] == "force:10"
+
+
 @pytest.mark.parametrize(
     "args",
     [
@@ -238,6 +266,8 @@ def test_cli_writes_the_report_and_reruns_bitwise(tmp_path, suite_file):
         ("--objects", "012_strawberry", "--mass", "real", "--density", "heavy"),
         ("--objects", "MESH", "--mass", "real"),
         ("--egad-like", "-1"),
+        ("--tendon", "position:abc"),
+        ("--tendon", "torque:3"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(tmp_path, args, monkeypatch, capsys):

@@ -80,6 +80,12 @@ def add_parser(subparsers) -> None:
         help="ad-hoc suite: finger–object friction error ± [-]",
     )
     p.add_argument(
+        "--tendon",
+        default=None,
+        help="tendon drive of every rollout: force:N (tension per finger [N]) or position:TICKS (the XL330 "
+        "servo's goal, e.g. position:1000 as the paper's hardware); default: the scenario's",
+    )
+    p.add_argument(
         "--tendon-range",
         type=finite_float,
         default=0.05,
@@ -167,6 +173,7 @@ def _run_config(args: argparse.Namespace):
     from mjcodesign.evaluation import parse_design_groups, parse_list
     from mjcodesign.evaluation.rollouts import SuiteRun
     from mjcodesign.objects import parse_density
+    from mjcodesign.scenarios import GraspScenario, parse_tendon
 
     densities = parse_list(args.density, "density")
     for d in densities:
@@ -175,7 +182,11 @@ def _run_config(args: argparse.Namespace):
         from mjcodesign.errors import DesignError
 
         raise DesignError("--mass real sets each object's density from its published mass: drop --density")
+    scenario = GraspScenario()
+    if args.tendon is not None:
+        scenario = GraspScenario(tendon=parse_tendon(args.tendon))
     return SuiteRun(
+        scenario=scenario,
         mass=args.mass,
         designs=parse_design_groups(args.designs),
         perturbations=_QUICK_PERTURBATIONS if args.quick else args.perturbations,
@@ -317,6 +328,7 @@ def run(args: argparse.Namespace) -> int:
         "pose_policies": list(run_cfg.pose_policies),
         "model": run_cfg.model,
         "seed": run_cfg.seed,
+        "tendon": run_cfg.scenario.tendon.text(),
         "perturbation_model": suite.perturbation.as_dict(),
         "checkpoint": None if ckpt is None else str(ckpt),
         "mass": run_cfg.mass,

@@ -229,6 +229,7 @@ def write_suite_report(
                 "pose_policies",
                 "model",
                 "seed",
+                "tendon",
             )
             if k in meta
         },
