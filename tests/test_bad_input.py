@@ -132,6 +132,8 @@ FAMILIES: dict[str, list[Case]] = {
         crosscheck --scenario curl --models chain --tensions 1,-1         | --tensions
         crosscheck --scenario grasp --models chain --tensions 2,3         | one tension
         crosscheck --scenario grasp --authors-case --models chain --tensions 2 | authors
+        crosscheck grasp --authors-case --models chain                    | --authors-poses
+        crosscheck grasp --authors-case --models chain --authors-poses none.npz | none.npz
         crosscheck --scenario curl --models chain --fem-tendon-law paper  | --fem-tendon-law
         crosscheck --scenario grasp --models chain --fem-tendon-law taut  | --fem-tendon-law
         crosscheck --scenario curl --models chain,chain                   | twice

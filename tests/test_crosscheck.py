@@ -237,6 +237,7 @@ def test_each_scenario_takes_only_its_own_flags():
     assert set(flags) == set(_SCENARIO_HELP)
     assert sorted(set(_FLAT_FLAGS) - set().union(*flags.values())) == []
     grasp_only = {"--cases", "--short", "--out", "--authors-case", "--authors-start", "--fem-tendon-law"}
+    grasp_only |= {"--authors-poses"}
     grasp_only |= {"--fem-locking-correction", "--fem-dt", "--fem-h-flexure", "--fem-contact-ke"}
     assert grasp_only <= flags["grasp"]
     assert not grasp_only & (flags["cantilever"] | flags["curl"] | flags["press"])

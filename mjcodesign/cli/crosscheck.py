@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 from mjcodesign.cli.common import (
     choice_list,
@@ -75,8 +76,11 @@ def _cmd_grasp(args) -> int:
         fem_mesh = _grasp_mesh(args)
         dyn = _fem_dynamics(args)
         _deprecation_note(args)
+        if args.authors_poses is None:
+            raise DesignError("--authors-case needs --authors-poses: the authors' 006_mustard_bottle.npz")
         rows = authors_case(
             args.models,
+            pose_file=args.authors_poses,
             fem_options=fem_mesh,
             fem_dynamics=dyn,
             cache_dir=user_cache_dir(),
@@ -422,6 +426,13 @@ def _grasp_flags(p) -> None:
         "--authors-case",
         action="store_true",
         help="the authors' simulator's one case instead (mustard bottle at their pose 0, ln E 13.5/15/16.5)",
+    )
+    p.add_argument(
+        "--authors-poses",
+        type=Path,
+        default=None,
+        metavar="NPZ",
+        help="--authors-case: the authors' AnyGrasp poses of the mustard bottle (006_mustard_bottle.npz)",
     )
     p.add_argument(
         "--authors-start",

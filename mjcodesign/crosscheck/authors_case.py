@@ -38,7 +38,6 @@ _DENSITY = 10.0
 """[kg/m³] their 2 at 5× lengths and T/25: equal grip to weight."""
 _LIFT = 0.1676 / 5.0
 """[m] their finger base rise, 0.1676 of their units."""
-_POSES = Path("shared/reference/codesign-soft-gripper/pose_info")
 STARTS = ("refined", "sweep")
 """Where the fingers start: at the refined openings (the authors'), or outside the object (ours)."""
 
@@ -55,7 +54,7 @@ def classify(rec: dict, lift: float) -> str:
 def authors_case(
     models=("chain", "fem"),
     *,
-    pose_file: Path | None = None,
+    pose_file: Path,
     fem_options=None,
     fem_dynamics=None,
     cache_dir: Path | None = None,
@@ -63,9 +62,9 @@ def authors_case(
 ) -> list[dict]:
     """Each uniform design of `AUTHORS_RESULT` in each model: outcome, contacts, and the class.
 
-    ``pose_file``: the authors' ``006_mustard_bottle.npz`` (default: under ``shared/reference`` in the
-    working directory or its parent), whose pose :data:`AUTHORS_ROW` is the one their result is for
-    (each row carries it as ``row``). Raises PoseError when
+    ``pose_file``: the authors' ``006_mustard_bottle.npz`` (their AnyGrasp poses, ``pose_info/`` of
+    their repository), whose pose :data:`AUTHORS_ROW` is the one their result is for (each row carries
+    it as ``row``); :class:`PoseError` when it is missing. Raises PoseError when
     our refinement refuses the pose or our stroke cannot take it. ``start``: one of `STARTS`.
     """
     import dataclasses
@@ -87,9 +86,9 @@ def authors_case(
 
         raise DesignError(f"unknown start {start!r}; choose from {', '.join(STARTS)}")
 
-    path = (
-        pose_file or next((p for p in (_POSES, Path("..") / _POSES) if p.is_dir()), _POSES) / f"{_OBJECT}.npz"
-    )
+    path = Path(pose_file)
+    if not path.is_file():
+        raise PoseError(f"the authors' pose file {path} is missing: give their {_OBJECT}.npz")
     obj = load_grasp_object(_OBJECT, _DENSITY, cache_dir=cache_dir)
     T = load_external(path)[AUTHORS_ROW : AUTHORS_ROW + 1]
     cands = import_anygrasp(obj, T, np.asarray(load_mesh(_OBJECT).vertices), cache_dir=cache_dir)
