@@ -78,7 +78,8 @@ def add_parser(subparsers) -> None:
         default=0,
         metavar="N",
         help="first simulate N grasps of each object at its sampled poses and fine-tune the surrogate on "
-        "them (lr 1e-4, as train --init), then co-design through the adapted network (0: no adaptation)",
+        "them (as train --init CKPT --lr 1e-4 does), then co-design through the adapted network "
+        "(0: no adaptation)",
     )
     p.add_argument("--seed", type=int_at_least(0), default=0, help="poses, clouds and perturbation draws")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
