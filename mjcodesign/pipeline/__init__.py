@@ -13,10 +13,18 @@ re-simulation with perturbations, the print files, and a report.
 
 from mjcodesign.pipeline.adapt import ADAPT_LR, adapt_surrogate
 from mjcodesign.pipeline.report import GRASP_IMAGE_SIZE, GraspImages, block_outline, png_bytes, write_report
-from mjcodesign.pipeline.run import BASELINES, OPTIMISED, SWEEP_IMPULSES, DesignOptions, run_design
+from mjcodesign.pipeline.run import (
+    ADAPTED_DIR,
+    BASELINES,
+    OPTIMISED,
+    SWEEP_IMPULSES,
+    DesignOptions,
+    run_design,
+)
 from mjcodesign.pipeline.specs import DEFAULT_DENSITY, ObjectSpec, parse_mass_text, parse_objects, read_masses
 
 __all__ = [
+    "ADAPTED_DIR",
     "ADAPT_LR",
     "BASELINES",
     "DEFAULT_DENSITY",

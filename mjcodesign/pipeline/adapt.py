@@ -241,6 +241,6 @@ def summary_line(record: dict) -> str:
 
     return (
         f"adapted on {head}, lr {record['lr']:g}, {record['epochs']} epochs; on the "
-        f"{record['split']['poses']['test']} held-out poses ({record['split']['test']} rollouts): success "
+        f"{record['split']['poses']['test']} held-out pose(s) ({record['split']['test']} rollouts): success "
         f"ROC AUC {change('success_roc_auc')}, accuracy {change('success_accuracy')}, loss {change('loss')}"
     )

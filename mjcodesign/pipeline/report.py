@@ -263,6 +263,8 @@ def _markdown(record: dict, root: Path, grasps: list[str]) -> str:
         lines.append(f"| {o['name']} | {1000 * o['mass_kg']:.0f} | " + " | ".join(row) + " |")
     lines += ["", "## Files", "", f"- design: `{record['design_file']}`"]
     lines += [f"- pose of {o['name']}: `{o['pose_file']}`" for o in record["objects"]]
+    if (record.get("adapt") or {}).get("checkpoint"):
+        lines.append(f"- the adapted surrogate (a `--ckpt` folder): `{record['adapt']['checkpoint']}`")
     for k, files in record["print"].items():
         lines.append(
             f"- print ({k}): `{files['prusaslicer_3mf']}`, `{files['bambu_orca_3mf']}`, `{files['print_sheet_md']}`"

@@ -14,7 +14,7 @@ or an unreadable mesh is refused before any long work), then:
    (:func:`~mjcodesign.evaluation.run_suite`) at every disturbance of :data:`SWEEP_IMPULSES`; per
    object and design the success probability with its Wilson interval;
 4. writes into the folder (staged: a failure leaves nothing): ``design.txt`` (or
-   ``designs/OBJECT.txt``), ``poses/OBJECT.json``, the print files under ``print/``
+   ``designs/OBJECT.txt``), ``poses/OBJECT.json``, the adapted network under ``surrogate/`` (``--adapt``), the print files under ``print/``
    (:func:`~mjcodesign.fabrication.write_print_files`), ``report.md``, ``report.html``, their figures
    under ``figures/``, ``result.json`` and, with a recorder, ``run.rrd``.
 """
@@ -56,7 +56,7 @@ from mjcodesign.scenarios import TendonForce, TendonPosition
 from mjcodesign.scenarios.grasp import GraspScenario, paper_impulse
 from mjcodesign.sim.mujoco_c import MujocoBackend
 
-__all__ = ["BASELINES", "OPTIMISED", "SWEEP_IMPULSES", "DesignOptions", "run_design"]
+__all__ = ["ADAPTED_DIR", "BASELINES", "OPTIMISED", "SWEEP_IMPULSES", "DesignOptions", "run_design"]
 
 OPTIMISED = "optimised"
 """The label of the co-designed design in the report."""
@@ -64,6 +64,8 @@ BASELINES = ("soft", "semi-rigid", "paper-optimized")
 """The presets the optimised design is verified against."""
 SWEEP_IMPULSES = (0.1, 0.2, 0.4)
 """Disturbances of the verification [N s, the paper's units]: its 0.1 (the table's, first), 0.2, 0.4."""
+ADAPTED_DIR = "surrogate"
+"""The folder of the adapted network (``--adapt``) in the output, a checkpoint folder."""
 _DENSITY_LABEL = "design"  # the one regime of the verification: each object at its own density
 
 Progress = Callable[[str, int, int], None]
@@ -271,6 +273,8 @@ def run_design(
     }
     with staged(folder) as tmp:
         _write_designs(tmp, result, names, poses)
+        if adapt is not None and adapt["adapted"]:
+            _save_adapted(tmp, root, surrogate, adapt)
         record["print"] = _write_print(tmp, root, result, names, options.mode)
         images = GraspImages()
         observers = [images]
@@ -384,6 +388,14 @@ def _write_designs(tmp: Path, result, names, poses: PoseSet) -> None:
     (tmp / "poses").mkdir()
     for k, n in enumerate(names):
         write_pose(tmp / "poses" / f"{n}.json", poses, int(result.chosen[k]))
+
+
+def _save_adapted(tmp: Path, root: Path, surrogate, adapt: dict) -> None:
+    """The adapted network as the checkpoint folder ``surrogate/`` (for any command's ``--ckpt``)."""
+    from mjcodesign.surrogate import save_checkpoint
+
+    save_checkpoint(tmp / ADAPTED_DIR, surrogate)
+    adapt["checkpoint"] = str(root / ADAPTED_DIR)
 
 
 def _write_print(tmp: Path, root: Path, result, names, mode: Mode) -> dict:
