@@ -149,6 +149,9 @@ FAMILIES: dict[str, list[Case]] = {
         # Fails midway: the PrusaSlicer 3MF could be written, the Bambu one cannot (a folder is in the way).
         export-print --design soft --out out                    | bambu | out/gripper_bambu_orca.3mf/
         export-print --design soft --out out                    | stl | out/stl
+        optimize --objects box.stl --out o --rrd out/           | folder | box.stl out/
+        optimize --objects box.stl --poses ps --out o --rrd link.rrd | symbolic | box.stl link.rrd
+        train --data ds --out o --tensorboard box.stl           | not a folder | box.stl
     """),
     "poses": _cases("""
         poses --object {long}                                   | too long

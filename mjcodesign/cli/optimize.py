@@ -11,7 +11,16 @@ import contextlib
 import json
 from pathlib import Path
 
-from mjcodesign.cli.common import add_mass_mode, add_out_folder, emit, int_at_least, path_text, user_cache_dir
+from mjcodesign.cli.common import (
+    add_mass_mode,
+    add_out_folder,
+    check_output_link,
+    emit,
+    int_at_least,
+    output_file,
+    path_text,
+    user_cache_dir,
+)
 
 __all__ = ["add_bench_parser", "add_parser", "run", "run_bench"]
 
@@ -56,7 +65,9 @@ def add_parser(subparsers) -> None:
     add_mass_mode(p, "in the surrogate's input and the re-simulation, in place of --density")
     p.add_argument("--seed", type=int_at_least(0), default=0, help="draws candidate clouds")
     add_out_folder(p, "output")
-    p.add_argument("--rrd", type=path_text, default=None, help="also log the loss curves to this Rerun file")
+    p.add_argument(
+        "--rrd", type=output_file, default=None, help="also log the loss curves to this Rerun file"
+    )
     p.add_argument("--max-iterations", type=int_at_least(1), default=2000, help="N of Algorithm 1")
     p.add_argument("--patience", type=int_at_least(1), default=100, help="T_p of Algorithm 1 (paper: 100)")
     p.add_argument("--top-b", type=int_at_least(1), default=5, help="B of Algorithm 1 (paper: 5)")
@@ -84,6 +95,8 @@ def run(args: argparse.Namespace) -> int:
 
     density = parse_density(args.density)
     objects, meshes = _objects(args.objects, resolve_objects)
+    if args.rrd:
+        check_output_link(args.rrd, "--rrd", overwrite=args.overwrite)
     ckpt = checkpoint_or_shipped(args.ckpt)
     if args.threads:
         import torch

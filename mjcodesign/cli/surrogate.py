@@ -16,6 +16,7 @@ from mjcodesign.cli.common import (
     emit,
     finite_float,
     int_at_least,
+    output_dir,
     parse_design,
     path_text,
     user_cache_dir,
@@ -115,7 +116,9 @@ def add_parser(subparsers) -> None:
     t.add_argument(
         "--threads", type=int_at_least(1), default=None, help="torch CPU threads (default: torch's)"
     )
-    t.add_argument("--tensorboard", type=path_text, default=None, help="also write TensorBoard events to DIR")
+    t.add_argument(
+        "--tensorboard", type=output_dir, default=None, help="also write TensorBoard events to DIR"
+    )
     t.add_argument(
         "--folds",
         type=int_at_least(2),
