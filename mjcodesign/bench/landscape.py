@@ -136,6 +136,11 @@ def bench_landscape(
     poses = 4 if poses is None else poses
     if poses < 1 or not designs or not objects:
         raise DesignError("the landscape needs at least one object, pose and design")
+    for tendon in tendons:  # refused before any object is posed, not after
+        parse_tendon(tendon)
+    for density in densities:
+        if density != REAL:
+            parse_density(density)
     backend = MujocoBackend(nthread)
     stiffness = {name: Stiffness.parse(name) for name in designs}
     loaded, skipped = [], {}
