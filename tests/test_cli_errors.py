@@ -1,6 +1,7 @@
 """The command line's error handler: one line whatever the name, the environment or the output stream."""
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -83,3 +84,23 @@ def test_datagen_names_each_object_it_left_out(tmp_path, capsys):
     err = capsys.readouterr().err.splitlines()
     assert err == ["warning: object broken\\nname.stl left out: MeshError: mesh file is empty"]
     assert warn_failed_objects(tmp_path / "none") == 0
+
+
+@pytest.mark.parametrize(
+    ("result", "where"),
+    [
+        ({"a": 1.0, "b": {"c": [0.5, float("nan")]}}, "b.c[1]"),
+        ([{"x": 1}, {"x": float("inf")}], "[1].x"),
+        (float("-inf"), "the top level"),
+    ],
+)
+def test_json_output_refuses_nan_and_infinity_naming_where(result, where, capsys):
+    # No command prints a NaN token as JSON: the result is refused, naming the first bad value.
+    from mjcodesign.cli.common import emit
+    from mjcodesign.errors import OutputError
+
+    with pytest.raises(OutputError, match=f"at {re.escape(where)}:"):
+        emit(result, True)
+    assert capsys.readouterr().out == ""
+    emit({"a": 1.0, "b": [2, "nan"]}, True)  # finite numbers and the string "nan" print as they are
+    assert capsys.readouterr().out.strip() == '{"a": 1.0, "b": [2, "nan"]}'

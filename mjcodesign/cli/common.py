@@ -278,9 +278,22 @@ def parse_design(text: str):
 
 
 def emit(result, as_json: bool) -> None:
-    """Print a dict or a list of row dicts: one JSON line, or a rich table."""
+    """Print a dict or a list of row dicts: one JSON line, or a rich table.
+
+    JSON is strict: a NaN or an infinity anywhere in ``result`` raises
+    :class:`~mjcodesign.errors.OutputError` naming where, instead of printing a token no JSON reader takes.
+    """
     if as_json:
-        print(json.dumps(result, indent=None))
+        try:
+            text = json.dumps(result, indent=None, allow_nan=False)
+        except ValueError:
+            from mjcodesign.errors import OutputError
+
+            where = _non_finite(result) or "?"
+            raise OutputError(
+                f"the result holds a NaN or an infinity at {where}: not printed as JSON"
+            ) from None
+        print(text)
         return
     from rich.console import Console
     from rich.table import Table
@@ -299,6 +312,19 @@ def emit(result, as_json: bool) -> None:
     for r in rows:
         table.add_row(*[_fmt(r[k]) for k in keys])
     Console().print(table)
+
+
+def _non_finite(value, path: str = "") -> str | None:
+    """The key path of the first NaN or infinity in a JSON-like ``value`` (``a.b[2]``); None if none."""
+    if isinstance(value, float):
+        return None if math.isfinite(value) else (path or "the top level")
+    if isinstance(value, dict):
+        items = ((f"{path}.{k}" if path else str(k), v) for k, v in value.items())
+    elif isinstance(value, list | tuple):
+        items = ((f"{path}[{i}]", v) for i, v in enumerate(value))
+    else:
+        return None
+    return next((p for key, v in items if (p := _non_finite(v, key)) is not None), None)
 
 
 def _fmt(v) -> str:

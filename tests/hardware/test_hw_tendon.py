@@ -132,6 +132,9 @@ def test_link_never_back_reports_unconfirmed_torque_off(emulator):
 
 
 def test_sigterm_inside_block_torques_off(emulator):
+    # The handler outside the block is put back, whatever it was (SIG_DFL, or one an earlier test's
+    # library installed in this process: Ray's driver sets its own).
+    before = signal.getsignal(signal.SIGTERM)
     timer = threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGTERM))
     with pytest.raises(SystemExit):
         with raise_on_signals(), TendonMotors(config(emulator.port)) as motors:
@@ -141,7 +144,7 @@ def test_sigterm_inside_block_torques_off(emulator):
                 time.sleep(0.005)
     timer.join()
     assert all_off(emulator)
-    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+    assert signal.getsignal(signal.SIGTERM) is before
 
 
 def test_reply_window_follows_latency(emulator):
