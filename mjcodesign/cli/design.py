@@ -11,9 +11,9 @@ import importlib.util
 import json
 import os
 import sys
-import time
 
 from mjcodesign.cli.common import add_out_folder, emit, int_at_least, path_text, user_cache_dir
+from mjcodesign.cli.progress import StageProgress
 
 __all__ = ["add_parser", "headless_gl", "run"]
 
@@ -118,7 +118,12 @@ def run(args: argparse.Namespace) -> int:
             return load_observer("rerun", path=str(path))
     else:
         _warn("rerun-sdk is not installed: no run.rrd (pip install 'mjcodesign[viz]')")
-    with _Progress() as progress:
+    with StageProgress("design") as bars:
+
+        def progress(stage: str, done: int, total: int) -> None:
+            # iterations are many and short: plain lines only for the other stages
+            bars.update(stage, done, total, log="iterations" not in stage)
+
         record = run_design(
             specs,
             checkpoint=ckpt,
@@ -159,42 +164,3 @@ def _table(record: dict) -> list[dict]:
 
 def _warn(message: str) -> None:
     print(f"warning: {message}", file=sys.stderr, flush=True)
-
-
-class _Progress:
-    """A rich bar with an ETA in a terminal; one plain line per finished unit when stderr is not one."""
-
-    def __enter__(self):
-        from rich.console import Console
-        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
-        console = Console(stderr=True)
-        self.tty = console.is_terminal
-        columns = (TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"))
-        self.bar = Progress(
-            *columns,
-            TimeElapsedColumn(),
-            TimeRemainingColumn(),
-            console=console,
-            transient=True,
-            disable=not self.tty,
-        )
-        self.bar.__enter__()
-        self.tasks: dict[str, int] = {}
-        self.t0 = time.perf_counter()
-        return self.update
-
-    def update(self, stage: str, done: int, total: int) -> None:
-        if stage not in self.tasks:
-            self.tasks[stage] = self.bar.add_task(stage, total=total)
-        self.bar.update(self.tasks[stage], completed=done)
-        # iterations are many and short: plain lines only for objects
-        if not self.tty and "iterations" not in stage:
-            print(
-                f"design: {stage} {done}/{total} ({time.perf_counter() - self.t0:.0f} s)",
-                file=sys.stderr,
-                flush=True,
-            )
-
-    def __exit__(self, *exc):
-        return self.bar.__exit__(*exc)

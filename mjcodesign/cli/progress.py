@@ -54,16 +54,19 @@ class StageProgress:
     def __exit__(self, *exc):
         return self.bar.__exit__(*exc)
 
-    def update(self, stage: str, done: int, total: int, *, unit: str = "", detail: str = "") -> None:
+    def update(
+        self, stage: str, done: int, total: int, *, unit: str = "", detail: str = "", log: bool = True
+    ) -> None:
         """Record that ``done`` of ``total`` units of ``stage`` have finished.
 
-        ``unit`` names the last one, ``detail`` adds a figure (e.g. a rate) to the line.
+        ``unit`` names the last one, ``detail`` adds a figure (e.g. a rate) to the line; ``log=False``
+        moves the bar only, with no plain line (units too many and short to log one by one).
         """
         if stage not in self.tasks:
             self.tasks[stage] = self.bar.add_task(stage, total=total)
         label = f"{stage} {detail}" if detail else stage
         self.bar.update(self.tasks[stage], completed=done, total=total, description=label)
-        if not self.tty:
+        if log and not self.tty:
             extra = f", {detail}" if detail else ""
             name = f" {unit}" if unit else ""
             self.line(f"{stage} {done}/{total}{name} ({time.perf_counter() - self.t0:.0f} s{extra})")
