@@ -31,6 +31,7 @@ import io
 import json
 import os
 import shutil
+import tempfile
 import uuid
 from collections.abc import Iterator, Mapping
 from dataclasses import KW_ONLY, dataclass
@@ -174,8 +175,12 @@ def _check(folder: OutputFolder) -> None:
     base = real.parent  # the sibling is made there: it must be a writable folder (checked before any work)
     while not os.path.lexists(base) and base != base.parent:
         base = base.parent
-    if not base.is_dir() or not os.access(base, os.W_OK | os.X_OK):
+    if not base.is_dir():
         raise OutputError(f"{where}: {base} is not a writable folder")
+    try:  # a real probe: permission bits say nothing for root, on /proc or on a read-only mount
+        os.rmdir(tempfile.mkdtemp(prefix=".mjcodesign-probe-", dir=base))
+    except OSError as exc:
+        raise OutputError(f"{where}: {base} is not a writable folder ({exc.strerror or exc})") from None
     if not real.exists():
         if os.path.lexists(folder.path):
             raise OutputError(f"{where} is a broken link")

@@ -92,6 +92,7 @@ def test_png_bytes_decode_to_the_image():
         ("missing mesh", "not found"),
         ("unreadable mesh", "broken"),
         ("unwritable out", "not a writable folder"),
+        ("out where no folder can be made", "not a writable folder"),
         ("no weights", "no pretrained surrogate ships"),
         ("budget below one draw", "--budget"),
         ("folder of other files", "not empty"),
@@ -109,6 +110,7 @@ def test_bad_input_exits_2_with_one_line_and_no_folder(
         "missing mesh": [str(meshes / "nothing.stl"), "--ckpt", tiny_checkpoint],
         "unreadable mesh": [str(meshes / "broken.stl"), "--ckpt", tiny_checkpoint],
         "unwritable out": [box, "--ckpt", tiny_checkpoint],
+        "out where no folder can be made": [box, "--ckpt", tiny_checkpoint],
         "no weights": [box],
         "budget below one draw": [box, "--ckpt", tiny_checkpoint, "--budget", "5"],
         "folder of other files": [box, "--ckpt", tiny_checkpoint],
@@ -116,6 +118,8 @@ def test_bad_input_exits_2_with_one_line_and_no_folder(
     if case == "unwritable out":
         (tmp_path / "file").write_text("x")
         out = tmp_path / "file" / "out"
+    if case == "out where no folder can be made":  # /proc: permission bits say writable to root
+        out = Path("/proc/mjcodesign-no-such-folder/out")
     if case == "folder of other files":
         out.mkdir()
         (out / "notes.txt").write_text("mine")
