@@ -32,6 +32,7 @@ BENCHMARKS: dict[str, str] = {
     "optimize": "mjcodesign.bench.optimize:bench_optimize",
     "surrogate": "mjcodesign.bench.surrogate:bench_surrogate",
     "evaluate": "mjcodesign.bench.evaluate:bench_evaluate",
+    "labels": "mjcodesign.bench.labels:bench_labels",
 }
 """Benchmark name -> ``"module:function"``; the function takes keyword arguments and returns a dict."""
 

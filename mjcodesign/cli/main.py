@@ -157,6 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
     from mjcodesign.cli import fabrication as cli_fabrication
     from mjcodesign.cli import grasp as cli_grasp
     from mjcodesign.cli import hardware as cli_hardware
+    from mjcodesign.cli import labels as cli_labels
     from mjcodesign.cli import landscape as cli_landscape
     from mjcodesign.cli import optimize as cli_optimize
     from mjcodesign.cli import poses as cli_poses
@@ -172,6 +173,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_surrogate.add_bench_parser(bsub)
     cli_landscape.add_bench_parser(bsub)
     cli_evaluate.add_bench_parser(bsub)
+    cli_labels.add_bench_parser(bsub)
     cli_viz.add_parser(sub)
     cli_grasp.add_parser(sub)
     cli_crosscheck.add_parser(sub)
