@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 from mjcodesign.cli import main as cli_main
-from mjcodesign.errors import DesignError, MeshError
-from mjcodesign.pipeline import parse_mass_text, parse_objects, png_bytes, read_masses
+from mjcodesign.errors import DesignError, MeshError, UnsupportedError
+from mjcodesign.pipeline import GraspImages, parse_mass_text, parse_objects, png_bytes, read_masses
 
 pytest.importorskip("torch")
 
@@ -81,6 +81,65 @@ def test_png_bytes_decode_to_the_image():
     rgb = np.random.default_rng(0).integers(0, 256, size=(7, 5, 3), dtype=np.uint8)
     back = imread(io.BytesIO(png_bytes(rgb)), format="png")
     np.testing.assert_array_equal(np.round(back[..., :3] * 255).astype(np.uint8), rgb)
+
+
+def test_the_backend_of_the_images_comes_from_the_environment_or_egl_without_a_display():
+    from mjcodesign.cli.design import offscreen_gl
+
+    headless = "egl" if sys.platform.startswith("linux") else None
+    assert offscreen_gl({}) == headless
+    assert offscreen_gl({"MUJOCO_GL": "OSMesa "}) == "osmesa" and offscreen_gl({"MUJOCO_GL": "egl"}) == "egl"
+    assert offscreen_gl({"MUJOCO_GL": "enable"}) is None  # MuJoCo's own choice
+    assert offscreen_gl({"DISPLAY": ":0"}) is None and offscreen_gl({"WAYLAND_DISPLAY": "w"}) is None
+    with pytest.raises(UnsupportedError, match="OpenGL backend"):
+        GraspImages(gl="vulkan")
+
+
+# A process that imported MuJoCo with no display and no MUJOCO_GL (MuJoCo then chose GLFW, once) before
+# the design runs, as pytest does when an earlier test module imports the pipeline: the images are still
+# drawn, in the context the caller names, and MuJoCo's own choice fails in one line.
+_RENDER_AFTER_IMPORT = """
+import os, sys, types
+import numpy as np
+import mujoco
+from mujoco.rendering.classic import gl_context
+assert gl_context.GLContext.__module__ == "mujoco.glfw", gl_context.GLContext
+from mjcodesign.cli.design import offscreen_gl
+from mjcodesign.errors import UnsupportedError
+from mjcodesign.pipeline import GraspImages
+m = mujoco.MjModel.from_xml_string(
+    '<mujoco><worldbody><light pos="0 0 1"/><body name="o"><freejoint/>'
+    '<geom size=".03" rgba="1 0 0 1"/></body></worldbody></mujoco>')
+d = mujoco.MjData(m)
+state = np.empty(mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_FULLPHYSICS))
+mujoco.mj_getState(m, d, state, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+rollout = types.SimpleNamespace(label="optimised/ball", model=m, states=state[None], starts={"hold": 1},
+                                x0=state, scene=types.SimpleNamespace(object_body=1))
+images = GraspImages(gl=None if sys.argv[1] == "default" else offscreen_gl(os.environ))
+try:
+    images.rollout(rollout)
+    print("png:", len(images.images["ball"]))
+except UnsupportedError as exc:  # (MuJoCo aborts on a second context after a failed one: one try each)
+    print("error:", str(exc).count("\\n"), exc)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="EGL and GLFW's no-display case are Linux's")
+def test_grasp_images_render_in_a_process_that_imported_mujoco_first(tmp_path):
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY", "MUJOCO_GL")}
+    out = {}
+    for backend in ("default", "chosen"):
+        r = subprocess.run(
+            [sys.executable, "-c", _RENDER_AFTER_IMPORT, backend],
+            capture_output=True,
+            text=True,
+            env=env,
+            timeout=120,
+        )
+        assert r.returncode == 0, r.stderr[-3000:]
+        out[backend] = r.stdout.strip().splitlines()[-1]
+    assert out["default"].startswith("error: 0 MuJoCo cannot render off screen"), out  # one line
+    assert out["chosen"].startswith("png: ") and int(out["chosen"][5:]) > 1000, out  # a 640 x 480 drawing
 
 
 @pytest.mark.parametrize(

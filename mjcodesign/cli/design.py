@@ -1,7 +1,8 @@
 """``mjcodesign design OBJECT... --out DIR``: a verified, printable gripper for the user's objects.
 
 Wire it in with ``cli_design.add_parser(subparsers)``. The pipeline is :func:`mjcodesign.pipeline.run_design`;
-this module reads the flags, the environment (the OpenGL backend of the report's images) and prints.
+this module reads the flags, the environment (the OpenGL backend of the report's images, :func:`offscreen_gl`)
+and prints.
 """
 
 from __future__ import annotations
@@ -15,23 +16,30 @@ import sys
 from mjcodesign.cli.common import add_out_folder, emit, int_at_least, path_text, user_cache_dir
 from mjcodesign.cli.progress import StageProgress
 
-__all__ = ["add_parser", "headless_gl", "run"]
+__all__ = ["add_parser", "offscreen_gl", "run"]
 
 _MODES = ("joint", "individual")
 
 
-def headless_gl(environ=os.environ) -> None:
-    """Select MuJoCo's EGL backend when Linux has no display and ``MUJOCO_GL`` is unset.
+def offscreen_gl(environ=os.environ) -> str | None:
+    """The OpenGL backend of the report's images: ``MUJOCO_GL`` when it names one, EGL without a display.
 
-    MuJoCo reads ``MUJOCO_GL`` once, when it is imported, and building the parser imports it (other
-    commands' flags read the models), so this runs when the CLI imports this module, before any parser
-    is built. EGL renders with no display (``MUJOCO_GL=osmesa`` also does).
+    Returns one of :data:`mjcodesign.pipeline.GL_BACKENDS`, or None for MuJoCo's own choice (another
+    ``MUJOCO_GL`` value, or a display). The backend is handed to the pipeline rather than set in the
+    environment: MuJoCo reads ``MUJOCO_GL`` once, when it is first imported, which in a process that
+    imported it before (a notebook, a test run) has already happened. EGL renders with no display
+    (``MUJOCO_GL=osmesa`` also does).
     """
+    from mjcodesign.pipeline import GL_BACKENDS
+
+    gl = environ.get("MUJOCO_GL", "").strip().lower()
+    if gl in GL_BACKENDS:
+        return gl
+    if gl:
+        return None
     if sys.platform.startswith("linux") and not environ.get("DISPLAY") and not environ.get("WAYLAND_DISPLAY"):
-        environ.setdefault("MUJOCO_GL", "egl")
-
-
-headless_gl()
+        return "egl"
+    return None
 
 
 def add_parser(subparsers) -> None:
@@ -135,6 +143,7 @@ def run(args: argparse.Namespace) -> int:
             recorder=recorder,
             progress=progress,
             warn=_warn,
+            gl=offscreen_gl(),
         )
     if args.json:
         print(json.dumps(record))

@@ -12,7 +12,14 @@ re-simulation with perturbations, the print files, and a report.
 """
 
 from mjcodesign.pipeline.adapt import ADAPT_LR, adapt_surrogate
-from mjcodesign.pipeline.report import GRASP_IMAGE_SIZE, GraspImages, block_outline, png_bytes, write_report
+from mjcodesign.pipeline.report import (
+    GL_BACKENDS,
+    GRASP_IMAGE_SIZE,
+    GraspImages,
+    block_outline,
+    png_bytes,
+    write_report,
+)
 from mjcodesign.pipeline.run import (
     ADAPTED_DIR,
     BASELINES,
@@ -28,6 +35,7 @@ __all__ = [
     "ADAPT_LR",
     "BASELINES",
     "DEFAULT_DENSITY",
+    "GL_BACKENDS",
     "GRASP_IMAGE_SIZE",
     "OPTIMISED",
     "SWEEP_IMPULSES",

@@ -5,8 +5,9 @@
 - the disturbance sweep: success against the disturbance per design, pooled over the objects;
 - the fingers of every design drawn block by block, coloured by Young's modulus E [MPa];
 - one image per object of the optimised design's grasp at its chosen pose, rendered off screen by
-  MuJoCo (:class:`~mjcodesign.pipeline.GraspImages`; ``mujoco.Renderer`` needs an OpenGL context: without a display, the
-  caller selects EGL or OSMesa through ``MUJOCO_GL`` before MuJoCo is imported);
+  MuJoCo (:class:`~mjcodesign.pipeline.GraspImages`, in an OpenGL context of the backend it is given:
+  ``egl`` or ``osmesa`` without a display; by default the one MuJoCo chose from ``MUJOCO_GL`` when it
+  was imported);
 - the next commands to run.
 
 The HTML holds its images inline (base64 PNG) and no external address, so it opens anywhere.
@@ -26,10 +27,13 @@ from mjcodesign.design import LOG_E_MAX, LOG_E_MIN, FingerDesign
 from mjcodesign.errors import OutputError, UnsupportedError
 from mjcodesign.outputs import new_figure, save_figure, write_atomic
 
-__all__ = ["GRASP_IMAGE_SIZE", "GraspImages", "block_outline", "png_bytes", "write_report"]
+__all__ = ["GL_BACKENDS", "GRASP_IMAGE_SIZE", "GraspImages", "block_outline", "png_bytes", "write_report"]
 
 GRASP_IMAGE_SIZE = (480, 640)
 """Height and width [px] of a grasp image (MuJoCo's default offscreen buffer holds 640 × 480)."""
+GL_BACKENDS = ("egl", "osmesa", "glfw")
+"""MuJoCo's OpenGL backends a :class:`GraspImages` can be told to use (EGL and OSMesa need no display)."""
+_MAX_GEOM = 10000  # scene capacity, as mujoco.Renderer's default
 _CAMERA_DISTANCE = 0.32  # [m] from the object: the 0.1-m fingers and the palm stay in view
 _CAMERA_AZIMUTH = 135.0  # [deg]
 _CAMERA_ELEVATION = -12.0  # [deg]: nearly level, the fingers around the object in view
@@ -59,11 +63,72 @@ def png_bytes(rgb: np.ndarray) -> bytes:
     )
 
 
-class GraspImages:
-    """An observer that renders the ``optimised/OBJECT`` rollouts at the start of their hold phase."""
+def _gl_context_class(gl: str | None):
+    """MuJoCo's GL context class for backend ``gl`` (None: MuJoCo's import-time choice, or None if off)."""
+    import importlib
 
-    def __init__(self, size: tuple[int, int] = GRASP_IMAGE_SIZE):
+    from mujoco.rendering.classic import gl_context
+
+    if gl is None:
+        return getattr(gl_context, "GLContext", None)  # absent under MUJOCO_GL=disable
+    return importlib.import_module(f"mujoco.{gl}").GLContext
+
+
+def _render(model, data, camera, size: tuple[int, int], *, gl: str | None = None) -> np.ndarray:
+    """RGB image (H, W, 3) uint8 of ``data`` seen from ``camera``, drawn off screen in a context of ``gl``.
+
+    ``gl`` is one of :data:`GL_BACKENDS`, or None for the backend MuJoCo chose when it was imported.
+    Raises :class:`~mjcodesign.errors.UnsupportedError` (one line) when no such context can be made.
+    """
+    import mujoco
+
+    h, w = size
+    ctx = con = None
+    try:
+        try:
+            cls = _gl_context_class(gl)
+            if cls is None:
+                raise RuntimeError("MuJoCo's OpenGL is disabled (MUJOCO_GL=disable)")
+            ctx = cls(w, h)
+            ctx.make_current()
+            con = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150.value)
+        except Exception as exc:  # the GL backends raise their own types (no display, no EGL device)
+            first = str(exc).splitlines()[0] if str(exc) else ""
+            raise UnsupportedError(
+                f"MuJoCo cannot render off screen with {gl or 'its default OpenGL backend'} "
+                f"({type(exc).__name__}: {first}); without a display use MUJOCO_GL=egl or MUJOCO_GL=osmesa"
+            ) from exc
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN.value, con)
+        scene = mujoco.MjvScene(model, maxgeom=_MAX_GEOM)
+        mujoco.mjv_updateScene(
+            model, data, mujoco.MjvOption(), None, camera, mujoco.mjtCatBit.mjCAT_ALL.value, scene
+        )
+        rect = mujoco.MjrRect(0, 0, w, h)
+        mujoco.mjr_render(rect, scene, con)
+        rgb = np.empty((h, w, 3), dtype=np.uint8)
+        mujoco.mjr_readPixels(rgb, None, rect, con)
+        return np.flipud(rgb)  # OpenGL's rows run bottom-up
+    finally:
+        if con is not None:
+            con.free()
+        if ctx is not None:
+            ctx.free()
+
+
+class GraspImages:
+    """An observer that renders the ``optimised/OBJECT`` rollouts at the start of their hold phase.
+
+    ``gl``: the OpenGL backend (one of :data:`GL_BACKENDS`) whose context each image is drawn in; None
+    uses the one MuJoCo chose from ``MUJOCO_GL`` when it was imported. MuJoCo makes that choice once
+    per process, so a caller that needs an offscreen context names it here rather than in the
+    environment, which is read too late once anything has imported MuJoCo.
+    """
+
+    def __init__(self, size: tuple[int, int] = GRASP_IMAGE_SIZE, *, gl: str | None = None):
+        if gl is not None and gl not in GL_BACKENDS:
+            raise UnsupportedError(f"unknown OpenGL backend {gl!r} (one of {', '.join(GL_BACKENDS)})")
         self.size = size
+        self.gl = gl
         self.images: dict[str, bytes] = {}
         """PNG bytes by object name."""
 
@@ -84,19 +149,7 @@ class GraspImages:
         cam = mujoco.MjvCamera()
         cam.lookat[:] = d.xpos[rollout.scene.object_body]
         cam.distance, cam.azimuth, cam.elevation = _CAMERA_DISTANCE, _CAMERA_AZIMUTH, _CAMERA_ELEVATION
-        h, w = self.size
-        try:
-            renderer = mujoco.Renderer(m, h, w)
-        except Exception as exc:  # the GL backends raise their own types (no display, no EGL device)
-            raise UnsupportedError(
-                f"MuJoCo cannot render off screen ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''}); "
-                "without a display set MUJOCO_GL=egl or MUJOCO_GL=osmesa"
-            ) from exc
-        try:
-            renderer.update_scene(d, camera=cam)
-            self.images[name] = png_bytes(renderer.render())
-        finally:
-            renderer.close()
+        self.images[name] = png_bytes(_render(m, d, cam, self.size, gl=self.gl))
 
     def snapshot(self, snapshot) -> None:
         """Nothing: the report draws grasps only."""

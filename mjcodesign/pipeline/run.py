@@ -30,6 +30,7 @@ import numpy as np
 
 from mjcodesign.codesign import Mode, OptimizeConfig, PoseSet, optimize
 from mjcodesign.codesign.report import design_text, write_design, write_json, write_pose
+from mjcodesign.codesign.run import dataset_masses
 from mjcodesign.codesign.verify import pick_poses, predicted_success
 from mjcodesign.design.stiffness import PRESETS, Stiffness
 from mjcodesign.errors import DesignError
@@ -47,13 +48,13 @@ from mjcodesign.evaluation.candidates import CLOUD_POINTS
 from mjcodesign.fabrication import Calibration, plan_print, write_print_files
 from mjcodesign.jobs import GraspJob, load_grasp_object, run_jobs
 from mjcodesign.models.types import FingerModel
-from mjcodesign.objects import YCB_IN_DOMAIN, parse_density
+from mjcodesign.objects import YCB_IN_DOMAIN, published_mass_or_none
 from mjcodesign.outputs import OutputKind, check_output, staged
 from mjcodesign.pipeline.adapt import adapt_surrogate, summary_line
 from mjcodesign.pipeline.report import GraspImages, write_report
 from mjcodesign.pipeline.specs import DEFAULT_DENSITY, ObjectSpec
 from mjcodesign.scenarios import TendonForce, TendonPosition
-from mjcodesign.scenarios.grasp import GraspScenario, paper_impulse
+from mjcodesign.scenarios.grasp import GraspScenario, at_paper_disturbance
 from mjcodesign.sim.mujoco_c import MujocoBackend
 
 __all__ = ["ADAPTED_DIR", "BASELINES", "OPTIMISED", "SWEEP_IMPULSES", "DesignOptions", "run_design"]
@@ -115,6 +116,18 @@ def _scenario(surrogate, tendon) -> tuple[GraspScenario, FingerModel]:
     return scenario, model
 
 
+def _object_density(spec: ObjectSpec, volume: float, base: float, rule: str) -> float:
+    """An object's density [kg/m³] in the checkpoint dataset's regime.
+
+    Its given mass over its volume; else, where the dataset's rule takes published masses (``real``,
+    ``auto``), its published mass; else the dataset's density ``base``.
+    """
+    if spec.mass_kg is not None:
+        return float(spec.mass_kg) / volume
+    found = published_mass_or_none(str(spec.source)) if rule in ("real", "auto") else None
+    return base if found is None else found.mass / volume
+
+
 def _pose_set(cands: list, volumes: list[float], names: list[str], sources: list[str]) -> PoseSet:
     """The candidates of every object as one :class:`~mjcodesign.codesign.PoseSet` (object order, candidate order)."""
     object_of = np.repeat(np.arange(len(cands)), [len(c) for c in cands])
@@ -143,11 +156,13 @@ def run_design(
     recorder: Callable[[Path], object] | None = None,
     progress: Progress | None = None,
     warn: Callable[[str], None] | None = None,
+    gl: str | None = None,
 ) -> dict:
     """Run the whole design (module docstring) and return the JSON record (``result.json``).
 
     ``recorder``: makes the Rerun observer for a file path (``run.rrd`` in the folder); None writes
     none. ``progress(stage, done, total)`` follows objects and stages; ``warn`` gets one line each.
+    ``gl``: the OpenGL backend of the grasp images (:class:`GraspImages`; None: MuJoCo's own choice).
     Raises the library's errors (:class:`~mjcodesign.errors.MjcodesignError`) with nothing written.
     """
     from mjcodesign.surrogate import load_surrogate
@@ -172,12 +187,11 @@ def run_design(
     # 1. objects and their candidates
     t = time.perf_counter()
     objs, rho, cands, volumes, notes = {}, {}, [], [], {}
+    base_density, mass_rule = dataset_masses(surrogate, None, None)
     for i, spec in enumerate(specs):
         obj = load_grasp_object(spec.source, DEFAULT_DENSITY, seed=options.seed, cache_dir=cache_dir)
         volume = obj.mass / obj.density  # [m³]
-        rho[spec.name] = (
-            parse_density(DEFAULT_DENSITY) if spec.mass_kg is None else float(spec.mass_kg) / volume
-        )
+        rho[spec.name] = _object_density(spec, volume, base_density, mass_rule)
         c = object_candidates(obj, options.poses_per_object, seed=options.seed, cache_dir=cache_dir)
         c = c.with_clouds(n_points, options.seed)
         if len(c) < options.poses_per_object:
@@ -276,7 +290,7 @@ def run_design(
         if adapt is not None and adapt["adapted"]:
             _save_adapted(tmp, root, surrogate, adapt)
         record["print"] = _write_print(tmp, root, result, names, options.mode)
-        images = GraspImages()
+        images = GraspImages(gl=gl)
         observers = [images]
         rrd = None
         if recorder is not None:
@@ -422,7 +436,7 @@ def _write_print(tmp: Path, root: Path, result, names, mode: Mode) -> dict:
 
 def _replay_chosen(specs, objs, poses, designs, rows, rho, scenario, model, seed, observer) -> None:
     """Each design's grasp of each object at its chosen pose, unperturbed, at the table's disturbance."""
-    at_table = dataclasses.replace(scenario, impulse=paper_impulse(SWEEP_IMPULSES[0]))
+    at_table = at_paper_disturbance(scenario, SWEEP_IMPULSES[0])
     jobs = [
         GraspJob(
             obj=objs[spec.name],
