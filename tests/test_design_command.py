@@ -134,6 +134,7 @@ def test_grasp_images_render_in_a_process_that_imported_mujoco_first(tmp_path):
             capture_output=True,
             text=True,
             env=env,
+            cwd=tmp_path,  # any MUJOCO_LOG.TXT of the failing backend lands here
             timeout=120,
         )
         assert r.returncode == 0, r.stderr[-3000:]
