@@ -34,13 +34,13 @@ from fractions import Fraction
 
 import numpy as np
 
-from mjcodesign.errors import DesignError
+from mjcodesign.errors import DesignError, MeshError
 from mjcodesign.evaluation.config import parse_design_groups
 from mjcodesign.evaluation.rollouts import SuiteRun, run_suite
 from mjcodesign.evaluation.stats import bootstrap_mean, wilson
 from mjcodesign.evaluation.suite import DEFAULT_SUITE, load_suite
 from mjcodesign.models.types import FingerModel
-from mjcodesign.objects import published_mass, published_mass_or_none
+from mjcodesign.objects import published_mass
 from mjcodesign.scenarios.grasp import REAL_REGIME
 
 __all__ = [
@@ -236,11 +236,12 @@ def bench_labels(
     FingerModel(model)
     the_suite = load_suite(suite)
     in_domain = [o for o in the_suite.objects if o.domain == "in-domain"]
-    skipped = {
-        o.name: "no published mass (the YCB object list)"
-        for o in in_domain
-        if published_mass_or_none(o.source) is None
-    }
+    skipped = {}
+    for o in in_domain:
+        try:
+            published_mass(o.source)
+        except MeshError as exc:
+            skipped[o.name] = f"{type(exc).__name__}: {exc}"
     chosen = [o for o in in_domain if o.name not in skipped][:objects]
     if not chosen:
         raise DesignError(f"suite {the_suite.name} has no in-domain object with a published mass")
