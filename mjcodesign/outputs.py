@@ -37,7 +37,7 @@ from collections.abc import Iterator, Mapping
 from dataclasses import KW_ONLY, dataclass
 from pathlib import Path
 
-from mjcodesign.errors import OutputError, UnsupportedError
+from mjcodesign.errors import MjcodesignError, OutputError, UnsupportedError
 
 __all__ = [
     "MARKER",
@@ -47,6 +47,7 @@ __all__ = [
     "check_output",
     "folder_kind",
     "new_figure",
+    "read_versioned_json",
     "save_figure",
     "staged",
     "write_atomic",
@@ -227,6 +228,46 @@ def write_atomic(path: str | os.PathLike, data: str | bytes) -> Path:
             tmp.unlink()
         raise OutputError(f"cannot write {out}: {exc.strerror or exc}") from exc
     return out
+
+
+def read_versioned_json(
+    source: str | os.PathLike | bytes,
+    *,
+    fmt: str,
+    version: object,
+    what: str,
+    where: str | os.PathLike | None = None,
+    error: type[MjcodesignError] = OutputError,
+) -> dict:
+    """The JSON object in ``source`` (a file, or its bytes) whose ``format`` is ``fmt`` and ``version`` ``version``.
+
+    ``what`` names the kind of record in the messages (``"a surrogate checkpoint"``); ``where`` is the
+    place they start with (default: the file; the folder for a record that marks one). Raises ``error``
+    (one line) for a missing or unreadable file, bytes that are not a JSON object, another format, or
+    another version.
+    """
+    if isinstance(source, bytes):
+        raw, path = source, None
+    else:
+        path = Path(source)
+        try:
+            raw = path.read_bytes()
+        except (FileNotFoundError, NotADirectoryError):
+            raise error(f"{where or path}: not {what} ({path.name} missing)") from None
+        except OSError as exc:
+            raise error(f"{path}: unreadable ({exc.strerror or type(exc).__name__})") from None
+    place = where or path
+    try:
+        record = json.loads(raw)
+    except ValueError as exc:  # not JSON, or not text
+        raise error(f"{path or place}: unreadable, not JSON ({type(exc).__name__})") from None
+    if not isinstance(record, dict) or record.get("format") != fmt:
+        raise error(f"{place}: not {what} of mjcodesign (format {fmt!r})")
+    if record.get("version") != version:
+        raise error(
+            f"{place}: {what} of another schema (version {record.get('version')!r}; this mjcodesign reads {version!r})"
+        )
+    return record
 
 
 def new_figure(figsize: tuple[float, float], *, unavailable: str):

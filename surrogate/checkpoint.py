@@ -25,7 +25,7 @@ import numpy as np
 from mjcodesign.data.config import DatagenConfig
 from mjcodesign.design.stiffness import N_LOG_E
 from mjcodesign.errors import MjcodesignError, OutputError
-from mjcodesign.outputs import write_atomic
+from mjcodesign.outputs import read_versioned_json, write_atomic
 from mjcodesign.surrogate.data import N_REGRESSION, OUTPUT_NAMES, Normalizer
 from mjcodesign.surrogate.inference import InputRange, Surrogate
 from mjcodesign.surrogate.model import GraspNet, ModelConfig
@@ -80,21 +80,16 @@ def save_checkpoint(out: str | Path, surrogate: Surrogate) -> Path:
 def read_record(path: str | Path) -> dict:
     """The checkpoint's JSON record; :class:`OutputError` if ``path`` holds no checkpoint of this version."""
     root = Path(path)
-    try:
-        record = json.loads((root / CONFIG).read_text(encoding="utf-8"))
-    except (FileNotFoundError, NotADirectoryError):
-        raise OutputError(f"{root}: not a surrogate checkpoint ({CONFIG} missing)") from None
-    except (OSError, ValueError) as exc:
-        raise OutputError(f"{root / CONFIG}: unreadable checkpoint record ({type(exc).__name__})") from exc
-    head = record if isinstance(record, dict) else {}
-    if head.get("format") != CHECKPOINT_FORMAT:
-        raise OutputError(f"{root}: not an mjcodesign surrogate checkpoint")
-    if (head.get("version"), head.get("outputs")) != (CHECKPOINT_VERSION, list(OUTPUT_NAMES)):
-        theirs = head.get("version")
+    what = "a surrogate checkpoint"
+    record = read_versioned_json(
+        root / CONFIG, fmt=CHECKPOINT_FORMAT, version=CHECKPOINT_VERSION, what=what, where=root
+    )
+    if record.get("outputs") != list(OUTPUT_NAMES):
         raise OutputError(
-            f"{root}: a surrogate checkpoint of another schema (v{theirs}; this is v{CHECKPOINT_VERSION})"
+            f"{root}: {what} of another schema (outputs {record.get('outputs')!r}; "
+            f"this mjcodesign reads {list(OUTPUT_NAMES)!r})"
         )
-    return head
+    return record
 
 
 def dataset_config(surrogate: Surrogate) -> DatagenConfig | None:

@@ -9,11 +9,11 @@ with a network that never trained on it (:meth:`FoldSurrogates.for_object`).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 from mjcodesign.errors import OutputError
+from mjcodesign.outputs import read_versioned_json
 from mjcodesign.surrogate.checkpoint import CONFIG, load_surrogate
 from mjcodesign.surrogate.inference import Surrogate
 
@@ -59,18 +59,10 @@ class FoldSurrogates:
 def load_folds(path: str | Path) -> FoldSurrogates:
     """The fold networks of a ``train --folds`` folder; :class:`OutputError` if it is not one or is broken."""
     root = Path(path)
-    try:
-        manifest = json.loads((root / FOLDS_FILE).read_text(encoding="utf-8"))
-    except (FileNotFoundError, NotADirectoryError):
-        raise OutputError(f"{root}: not a K-fold surrogate folder ({FOLDS_FILE} missing)") from None
-    except (OSError, ValueError) as exc:
-        raise OutputError(f"{root / FOLDS_FILE}: unreadable ({type(exc).__name__})") from exc
-    if not isinstance(manifest, dict) or manifest.get("format") != FOLDS_FORMAT:
-        raise OutputError(f"{root}: not an mjcodesign K-fold surrogate folder")
-    if manifest.get("version") != FOLDS_VERSION:
-        raise OutputError(
-            f"{root}: a K-fold manifest of version {manifest.get('version')!r} (this reads {FOLDS_VERSION})"
-        )
+    what = "a K-fold surrogate folder"
+    manifest = read_versioned_json(
+        root / FOLDS_FILE, fmt=FOLDS_FORMAT, version=FOLDS_VERSION, what=what, where=root
+    )
     try:
         folds = manifest["folds"]
         surrogates = tuple(load_surrogate(root / f["path"]) for f in folds)

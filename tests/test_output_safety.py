@@ -26,7 +26,7 @@ import pytest
 
 from mjcodesign.cli import main as cli_main
 from mjcodesign.errors import OutputError
-from mjcodesign.outputs import MARKER, OutputKind, check_output, folder_kind, staged
+from mjcodesign.outputs import MARKER, OutputKind, check_output, folder_kind, read_versioned_json, staged
 
 ROOT = Path(__file__).resolve().parents[1]
 _SCENARIO = '{"impulse": 0, "tighten_s": 0.1, "lift_s": 0.2, "hold_s": 0.1, "post_hold_s": 0.02}'
@@ -347,6 +347,38 @@ def test_the_dataset_constants_are_the_stores():
     from mjcodesign.data import store
 
     assert (outputs._DATASET_MANIFEST, outputs._DATASET_FORMAT) == (store.MANIFEST, store.FORMAT)
+
+
+def test_a_versioned_record_reads_back_and_each_fault_is_one_line_of_the_callers_error(tmp_path):
+    from mjcodesign.errors import MjcodesignError
+
+    class Mine(MjcodesignError):
+        pass
+
+    def read(source, **kw):
+        return read_versioned_json(source, fmt="mine", version=2, what="a record of mine", **kw)
+
+    good = {"format": "mine", "version": 2, "x": [1.5]}
+    (tmp_path / "r.json").write_text(json.dumps(good))
+    assert read(tmp_path / "r.json") == good and read(json.dumps(good).encode()) == good
+    (tmp_path / "bin.json").write_bytes(b"\xff\xfe\x00garbage")
+    (tmp_path / "list.json").write_text("[1]")
+    (tmp_path / "other.json").write_text(json.dumps({**good, "format": "theirs"}))
+    (tmp_path / "v9.json").write_text(json.dumps({**good, "version": 9}))
+    cases = {
+        "gone.json": "folder: not a record of mine (gone.json missing)",
+        "bin.json": "bin.json: unreadable, not JSON",
+        "list.json": "folder: not a record of mine of mjcodesign",
+        "other.json": "folder: not a record of mine of mjcodesign",
+        "v9.json": "folder: a record of mine of another schema (version 9; this mjcodesign reads 2)",
+        "r.json/inside": "folder: not a record of mine (inside missing)",  # a file where a folder should be
+    }
+    for name, words in cases.items():
+        with pytest.raises(Mine) as info:
+            read(tmp_path / name, where="folder", error=Mine)
+        assert words in str(info.value) and "\n" not in str(info.value), (name, info.value)
+    with pytest.raises(OutputError, match="^bytes: unreadable, not JSON"):  # the default error
+        read(b"{", where="bytes")
 
 
 # -- damaged datasets -----------------------------------------------------------------------------------

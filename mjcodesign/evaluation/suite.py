@@ -36,6 +36,7 @@ import numpy as np
 from mjcodesign.errors import DesignError, MjcodesignError
 from mjcodesign.models.types import GripperPose
 from mjcodesign.objects import YCB_IN_DOMAIN, parse_egad_index
+from mjcodesign.outputs import read_versioned_json
 from mjcodesign.scenarios.perturb import Perturbation
 
 __all__ = [
@@ -223,16 +224,14 @@ def load_suite(source: str | Path) -> Suite:
         except OSError as exc:
             raise SuiteError(f"--suite {source}: cannot read it ({exc.strerror})") from None
         where = str(path)
-    try:
-        data = json.loads(raw)
-    except (json.JSONDecodeError, UnicodeDecodeError):
-        raise SuiteError(f"{where} is not JSON") from None
-    if not isinstance(data, dict) or data.get("format") != SUITE_FORMAT:
-        raise SuiteError(f"{where} is not an evaluation suite (format {SUITE_FORMAT!r})")
-    if data.get("version") != SUITE_VERSION:
-        raise SuiteError(
-            f"{where}: suite version {data.get('version')!r} is not supported (this mjcodesign reads {SUITE_VERSION})"
-        )
+    data = read_versioned_json(
+        raw,
+        fmt=SUITE_FORMAT,
+        version=SUITE_VERSION,
+        what="an evaluation suite",
+        where=where,
+        error=SuiteError,
+    )
     try:
         objects = tuple(
             SuiteObject(
