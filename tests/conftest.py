@@ -94,16 +94,28 @@ def _cmdline(pid: int) -> str:
         return ""
 
 
-def _running_children() -> set[int]:
-    """This process's children that are running (zombies reaped), not the suite's own helpers."""
+def child_pids(pid: int | None = None) -> set[int]:
+    """The processes ``pid`` (default: this one) started that are still its children, from every thread's
+    ``/proc/PID/task/TID/children`` list (Linux); a thread that ends while read is passed over."""
     kids = set()
-    for task in Path(f"/proc/{os.getpid()}/task").glob("*"):
+    for task in Path(f"/proc/{os.getpid() if pid is None else pid}/task").glob("*"):
         try:
             kids |= {int(k) for k in (task / "children").read_text().split()}
         except OSError:
             continue
+    return kids
+
+
+@pytest.fixture
+def children():
+    """:func:`child_pids` for a test: ``children()`` this process's children, ``children(pid)`` another's."""
+    return child_pids
+
+
+def _running_children() -> set[int]:
+    """This process's children that are running (zombies reaped), not the suite's own helpers."""
     running = set()
-    for pid in kids:
+    for pid in child_pids():
         try:
             state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
         except OSError:

@@ -243,17 +243,6 @@ def test_desktop_view_binds_loopback_only(tmp_path, fake_display):
     assert not left, {pid: _cmdline(pid) for pid in _pids_holding(left)} or left
 
 
-def _children(pid: int) -> set[int]:
-    """The processes ``pid`` started that are still its children (every thread's list)."""
-    kids = set()
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            kids |= {int(k) for k in (task / "children").read_text().split()}
-        except OSError:
-            continue
-    return kids
-
-
 def _alive(pid: int) -> bool:
     """Whether ``pid`` is a running process (not gone, not a zombie)."""
     try:
@@ -263,7 +252,7 @@ def _alive(pid: int) -> bool:
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT, signal.SIGKILL])
-def test_web_view_leaves_no_viewer_behind_whatever_ends_it(tmp_path, sig):
+def test_web_view_leaves_no_viewer_behind_whatever_ends_it(tmp_path, sig, children):
     # SIGINT, SIGTERM, SIGHUP: view closes its viewer and returns 128 + the signal; SIGKILL: the kernel
     # ends the viewer with it (PR_SET_PDEATHSIG). Either way no process view started survives it.
     if not (sys.platform.startswith("linux") and Path("/proc/net/tcp").exists()):
@@ -275,7 +264,7 @@ def test_web_view_leaves_no_viewer_behind_whatever_ends_it(tmp_path, sig):
     proc = subprocess.Popen(cmd, env=_ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         _await_sockets(port, lambda: proc.poll() is None)
-        kids = _children(proc.pid)
+        kids = children(proc.pid)
         assert kids, "view started no viewer"
     finally:
         proc.send_signal(sig)

@@ -34,18 +34,8 @@ def _udp_sockets_of(pids: set[int]) -> dict[str, str]:
     return {f[9]: f[1].split(":")[0] for f in (r.split() for r in rows) if f[9] in inodes}
 
 
-def _children() -> set[int]:
-    kids = set()
-    for task in Path(f"/proc/{os.getpid()}/task").glob("*"):
-        try:
-            kids |= {int(k) for k in (task / "children").read_text().split()}
-        except OSError:
-            continue
-    return kids
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads sockets from /proc")
-def test_the_simulator_binds_its_udp_state_channel_to_loopback():
+def test_the_simulator_binds_its_udp_state_channel_to_loopback(children):
     # franky-sim binds the channel to 0.0.0.0 itself; the selftest's simulator process rebinds it.
     import franky
 
@@ -53,7 +43,7 @@ def test_the_simulator_binds_its_udp_state_channel_to_loopback():
         robot = franky.Robot(scene.host, realtime_config=franky.RealtimeConfig.Ignore)  # opens the channel
         try:
             deadline = time.monotonic() + _WAIT_S
-            while not (found := _udp_sockets_of(_children())) and time.monotonic() < deadline:
+            while not (found := _udp_sockets_of(children())) and time.monotonic() < deadline:
                 time.sleep(0.05)
             assert found, "the simulator opened no UDP socket"
             assert set(found.values()) == {_LOOPBACK_HEX}, found
