@@ -8,7 +8,7 @@ duration (`tendon.raise_on_signals`).
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -64,7 +64,9 @@ class RobotGraspJob:
     pose: str = AUTO
     cloud: Path | tuple[Path, ...] | None = None
     calibration: Path | tuple[Path, ...] | None = None
-    settings: GraspSettings = GraspSettings()
+    settings: GraspSettings = field(
+        default_factory=GraspSettings
+    )  # built when used: its lift reads the scenarios
     motors: tuple[FingerMotor, ...] = (FingerMotor(1, "A"), FingerMotor(2, "B"))
     speed_factor: float = 0.1
     grasp_force: float = 20.0
@@ -124,11 +126,15 @@ def _capture(job: RobotGraspJob) -> np.ndarray:
     Ts = [load_calibration(c) for c in calibs]
     if clouds:
         if len(Ts) not in (0, 1, len(clouds)):
-            raise HardwareError(f"{len(clouds)} clouds need one calibration each or one for all, got {len(Ts)}")
+            raise HardwareError(
+                f"{len(clouds)} clouds need one calibration each or one for all, got {len(Ts)}"
+            )
         per = Ts if len(Ts) == len(clouds) else [Ts[0] if Ts else None] * len(clouds)
         return np.concatenate([FileCamera(c, T).capture() for c, T in zip(clouds, per, strict=True)])
     if len(Ts) != 1:
-        raise HardwareError("a live capture uses one RealSense camera: give one calibration, or recorded clouds")
+        raise HardwareError(
+            "a live capture uses one RealSense camera: give one calibration, or recorded clouds"
+        )
     return RealSenseCamera(Ts[0]).capture()
 
 

@@ -41,11 +41,11 @@ __all__ = [
     "auto_candidate",
     "execute",
     "load_candidates",
+    "paper_lift",
     "plan_grasp",
     "select_candidate",
 ]
 
-PAPER_LIFT_M = 0.10  # the paper's hardware lift height [m]
 APPROACH_M = 0.10  # pre-grasp stand-off along the approach axis [m]
 # Auto opening = object width minus this: the hand closes onto the object with its force (in
 # franky-sim's PD-controlled hand the margin sets the squeeze).
@@ -54,6 +54,16 @@ AUTO_TIP_CLEARANCE_M = 0.015  # auto pose keeps the fingertips this far above th
 HELD_MARGIN_M = 0.003  # held if the hand stays this much wider than commanded after the lift
 _POSE_KEYS = ("poses", "T_pose")
 _YAW_STEP_DEG = 1.0  # resolution of the auto pose's yaw search [deg]
+
+
+def paper_lift() -> float:
+    """The paper's hardware lift [m], :data:`mjcodesign.scenarios.grasp.PAPER_HARDWARE_LIFT`.
+
+    Read when first asked for: the scenarios import MuJoCo, which ``import mjcodesign.hardware`` does not.
+    """
+    from mjcodesign.scenarios.grasp import PAPER_HARDWARE_LIFT
+
+    return PAPER_HARDWARE_LIFT
 
 
 class Arm(Protocol):
@@ -95,14 +105,14 @@ class GraspSettings:
         workspace: Box that every arm target must stay in.
         geometry: Finger and hand dimensions.
         approach_m: Pre-grasp stand-off along the approach axis [m].
-        lift_m: Lift height along world z [m].
+        lift_m: Lift height along world z [m] (default: the paper's, :func:`paper_lift`).
         tendon_ticks: Tendon pull from slack [tick of 4096 per turn].
     """
 
     workspace: Workspace = Workspace()
     geometry: GripperGeometry = GripperGeometry()
     approach_m: float = APPROACH_M
-    lift_m: float = PAPER_LIFT_M
+    lift_m: float = field(default_factory=paper_lift)
     tendon_ticks: int = PAPER_PULL_TICKS
 
     def __post_init__(self) -> None:

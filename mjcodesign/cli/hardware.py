@@ -95,7 +95,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="camera-to-base calibration (.json/.npz/.npy), or one per --cloud, comma-separated",
     )
     g.add_argument("--ticks", type=int, default=PAPER_TICKS, help="tendon pull [ticks of 4096]")
-    g.add_argument("--lift", type=float, default=0.10, help="lift height [m]")
+    g.add_argument(
+        "--lift", type=float, default=None, help="lift height [m] (default: the paper's hardware lift)"
+    )
     g.add_argument("--speed", type=float, default=0.1, help="franky speed factor (0, 1]")
     g.add_argument("--force", type=float, default=20.0, help="hand grasp force [N]")
     g.add_argument("--workspace", type=_box, help="xmin,ymin,zmin,xmax,ymax,zmax [m]")
@@ -183,7 +185,9 @@ def _grasp(args: argparse.Namespace) -> int:
         pose=args.pose,
         cloud=args.cloud,
         calibration=args.calib,
-        settings=GraspSettings(workspace=ws, lift_m=args.lift, tendon_ticks=args.ticks),
+        settings=GraspSettings(
+            workspace=ws, tendon_ticks=args.ticks, **({} if args.lift is None else {"lift_m": args.lift})
+        ),
         motors=_motors(args),
         latency_ms=args.latency_ms,
         speed_factor=args.speed,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -97,6 +98,14 @@ def test_auto_pose_closes_across_narrow_side():
     assert cand.pose[0, 0] > 0
     assert cand.s1 + cand.s2 == pytest.approx(0.04 - 0.02, abs=2e-3)
     np.testing.assert_allclose(cand.pose[:2, 3], BOX_CENTRE[:2], atol=3e-3)
+
+
+def test_the_default_lift_is_the_papers_hardware_lift_of_the_real_regime():
+    from mjcodesign.scenarios.grasp import PAPER_HARDWARE_LIFT, REAL_REGIME
+
+    assert GraspSettings().lift_m == PAPER_HARDWARE_LIFT == REAL_REGIME.lift
+    assert RobotGraspJob(None, None, cloud=Path("c.npy"), dry_run=True).settings.lift_m == PAPER_HARDWARE_LIFT
+    assert GraspSettings(lift_m=0.05).lift_m == 0.05
 
 
 def test_plan_checks_workspace_and_ticks():
