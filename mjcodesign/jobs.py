@@ -42,6 +42,7 @@ from mjcodesign.objects import (
     parse_density,
     parse_mass,
     published_mass,
+    published_mass_or_none,
 )
 from mjcodesign.poses import read_candidates, sample_poses, to_gripper_pose
 from mjcodesign.poses.checks import check_candidate_object, check_reach
@@ -340,13 +341,18 @@ def load_grasp_object(
     ``source``: a YCB name, ``egad-like:N`` or a mesh file; ``density``: kg/m³ or a preset name.
     ``mass`` overrides the density: ``"real"`` places a YCB object at its published mass
     (:func:`~mjcodesign.objects.published_mass`; :class:`MeshError` for any other object or a YCB
-    object without one), a number at that mass [kg]. Either way the density becomes mass / volume,
-    uniform, and the inertia is the uniformly filled mesh's (:func:`~mjcodesign.objects.at_mass`).
+    object without one), ``"auto"`` the published mass where there is one and ``density`` otherwise,
+    a number that mass [kg]. Either way the density becomes mass / volume, uniform, and the inertia is
+    the uniformly filled mesh's (:func:`~mjcodesign.objects.at_mass`).
     """
     if Path(source).is_dir():
         raise MeshError(f"{source} is a folder: give one object")
     mass = parse_mass(mass)
-    target = published_mass(str(source)).mass if mass == "real" else mass  # refused before any loading
+    if mass == "auto":
+        found = published_mass_or_none(str(source))
+        target = None if found is None else found.mass
+    else:
+        target = published_mass(str(source)).mass if mass == "real" else mass  # refused before any loading
     obj = load_object(source, parse_density(density), allow_open=allow_open, seed=seed)
     if target is not None:
         obj = at_mass(obj, target)

@@ -19,7 +19,7 @@ from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError
 from mjcodesign.jobs import resolve_pose
 from mjcodesign.models.types import GripperPose
-from mjcodesign.objects import load_object
+from mjcodesign.objects import at_mass, load_object, published_mass_or_none
 from mjcodesign.poses import scene_offset
 from mjcodesign.surrogate.checkpoint import load_surrogate
 from mjcodesign.surrogate.inference import GraspBatch, Poses, Surrogate
@@ -50,7 +50,9 @@ def predict_grasp(
 ) -> dict:
     """The surrogate's outputs for ``design`` grasping object ``source`` at ``pose``, JSON-ready.
 
-    ``density`` [kg/m³] defaults to :func:`training_density`; ``seed`` draws the cloud's points.
+    ``density`` [kg/m³] defaults to the dataset's regime: the object's published mass where the
+    dataset's mass rule takes them (``real``, ``auto``) and it has one, else :func:`training_density`.
+    ``seed`` draws the cloud's points.
     """
     sur = load_surrogate(checkpoint)
     rho = training_density(sur) if density is None else float(density)
@@ -58,6 +60,10 @@ def predict_grasp(
         raise DesignError(f"density must be a finite value > 0 kg/m³, got {rho}")
     ds = sur.meta["dataset"]
     obj = load_object(source, rho, seed=int(ds["object_seed"]), cache_dir=cache_dir)
+    published = published_mass_or_none(source) if density is None else None
+    if published is not None and ((ds.get("config") or {}).get("mass") or {}).get("mode") in ("real", "auto"):
+        obj = at_mass(obj, published.mass)
+        rho = obj.density
     gp = resolve_pose(pose, obj, FingerDesign(), seed=seed)
     T = pose_matrix(gp)
     cloud = partial_cloud(obj, T, gp.openings, np.random.default_rng(seed), n=int(ds["cloud_points"]))

@@ -127,8 +127,9 @@ FAMILIES: dict[str, list[Case]] = {
         bench calibration --reference random.json               | random.json | random.json
         bench calibration --models rubber                       | rubber
         bench poses --objects no_such_object_1,no_such_object_2 | no_such_object_1
-        bench landscape --objects 013_apple --tendons bogus:1     | bogus:1
-        bench landscape --objects 013_apple --densities medium    | density
+        bench landscape --regime paper --objects 013_apple --tendons bogus:1     | bogus:1
+        bench landscape --regime paper --objects 013_apple --densities medium    | density
+        bench landscape --objects 013_apple --tendons force:5     | paper regime's
     """),
     "crosscheck": _cases("""
         crosscheck --scenario curl --models chain --tensions 1,-1         | --tensions

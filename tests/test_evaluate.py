@@ -199,7 +199,9 @@ def test_oracle_picks_the_best_pose_then_the_first():
 
 def test_cli_writes_the_report_and_reruns_bitwise(tmp_path, suite_file):
     a, b = tmp_path / "a", tmp_path / "b"
+    # The paper's regime: its own column of Table 1 stands beside ours only there.
     args = ("--suite", str(suite_file), "--designs", "soft,semi-rigid", "--perturbations", "2", "--json")
+    args += ("--regime", "paper")
     p = _cli(*args, "--out", str(a), "--rrd", str(tmp_path / "ex.rrd"), cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     summary = json.loads(p.stdout)
@@ -239,8 +241,14 @@ def test_tendon_drive_reaches_the_rollouts(tmp_path, suite_file, monkeypatch, ca
         k for k in force if abs(force[k]["lift_margin_m"] - position[k]["lift_margin_m"]) > _LIFT_CHANGE_M
     ]
     assert moved, {k: (force[k]["lift_margin_m"], position[k]["lift_margin_m"]) for k in force}
-    assert main([*base, "--out", str(tmp_path / "default")]) == 0  # no --tendon: the scenario's own
-    assert json.loads(capsys.readouterr().out)["tendon"] == "force:10"
+    assert main([*base, "--out", str(tmp_path / "default")]) == 0  # no --tendon: the regime's own
+    default = json.loads(capsys.readouterr().out)
+    assert default["tendon"] == "position:1000" and default["regime"] == "real"
+    assert main([*base, "--regime", "paper", "--out", str(tmp_path / "paper")]) == 0
+    paper = json.loads(capsys.readouterr().out)
+    assert paper["tendon"] == "force:10" and paper["regime"] == "paper"
+    assert main([*base, "--tendon", "force:10", "--out", str(tmp_path / "mixed")]) == 0
+    assert json.loads(capsys.readouterr().out)["regime"] == "custom"
 
 
 @pytest.mark.parametrize(

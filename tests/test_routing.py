@@ -154,7 +154,18 @@ def test_grasp_routing_flag_reaches_the_model(tmp_path, monkeypatch, capsys):
     trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(box)
     outs = {}
     for routing in ("guided", "printed"):
-        args = ["grasp", "--object", str(box), "--density", "heavy", "--design", "semi-rigid", "--json"]
+        args = [
+            "grasp",
+            "--object",
+            str(box),
+            "--regime",
+            "paper",
+            "--density",
+            "heavy",
+            "--design",
+            "semi-rigid",
+            "--json",
+        ]
         assert main([*args, "--routing", routing]) == 0
         outs[routing] = json.loads(capsys.readouterr().out)
     assert outs["guided"]["success"] and outs["printed"]["success"]  # routing_compare: both hold it at 10 N

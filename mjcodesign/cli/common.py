@@ -25,6 +25,7 @@ __all__ = [
     "path_text",
     "add_out_folder",
     "add_mass_mode",
+    "add_regime",
     "port_number",
     "int_at_least",
     "finite_float",
@@ -104,13 +105,26 @@ def add_out_folder(p: argparse.ArgumentParser, what: str) -> None:
 
 
 def add_mass_mode(p: argparse.ArgumentParser, where: str) -> None:
-    """``--mass density|real`` on parser ``p``; ``where`` says what the real masses replace."""
+    """``--mass density|real|auto`` on parser ``p``; ``where`` says what the real masses replace."""
     p.add_argument(
         "--mass",
-        choices=("density", "real"),
-        default="density",
+        choices=("density", "real", "auto"),
+        default=None,
         help="real: every object at its published mass (YCB objects only; the YCB object list), uniform "
-        f"density mass / volume, {where}; density: from the density",
+        f"density mass / volume, {where}; auto: the published mass where there is one, else the density; "
+        "density: from the density (default: the regime's rule, auto in real, density in paper)",
+    )
+
+
+def add_regime(p: argparse.ArgumentParser, default: str | None = "real") -> None:
+    """``--regime real|paper`` on parser ``p``: the defaults of the grasp's physics and masses."""
+    p.add_argument(
+        "--regime",
+        choices=("real", "paper"),
+        default=default,
+        help="real: the hardware's grasp (XL330 servo at 1000 ticks, 10 cm lift, disturbance 0.51 m/s, "
+        "published YCB masses, other objects 680 kg/m³); paper: the paper's relative scale (10 N force, "
+        "3 cm lift, light density). Flags that name a setting replace the regime's",
     )
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 from mjcodesign.cli.common import (
     Parser,
     add_mass_mode,
+    add_regime,
     emit,
     int_at_least,
     quiet_warp,
@@ -63,17 +64,20 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--poses-per-object", type=int, default=50, help="poses asked of the sampler per object")
     p.add_argument("--designs-per-pose", type=int, default=35, help="stiffness designs per pose")
+    add_regime(p)
     p.add_argument(
         "--density",
-        default="light",
+        default=None,
         help="object density per pose: light (100), heavy (400), a number [kg/m³], or uniform:LO,HI (the "
-        "paper's relative scale, not real objects)",
+        "paper's relative scale, not real objects), or ycb-median (680); default: the regime's (real: "
+        "ycb-median for objects without a published mass; paper: light)",
     )
     add_mass_mode(p, "in place of --density")
     p.add_argument(
         "--tendon",
-        default="force:10",
-        help="force:N (tension per finger [N]) or position:TICKS (the XL330 servo's goal, ticks of 4096)",
+        default=None,
+        help="force:N (tension per finger [N]) or position:TICKS (the XL330 servo's goal, ticks of 4096); "
+        "default: the regime's (real: position:1000; paper: force:10)",
     )
     p.add_argument("--model", choices=_MODELS, default="chain", type=grasp_model_name)
     p.add_argument("--backend", choices=("mujoco", "mjwarp"), default="mujoco")
@@ -93,7 +97,8 @@ def add_parser(subparsers) -> None:
     p.add_argument(
         "--scenario",
         default=None,
-        help='grasp phases as JSON (text or a file), GraspScenario fields, e.g. \'{"lift": 0.05, "impulse": 0}\'',
+        help="grasp phases as JSON (text or a file), GraspScenario fields replacing the regime's, e.g. "
+        '\'{"lift": 0.05, "delta_v": 0}\'',
     )
     p.add_argument("--out", required=True, help="dataset folder (created; a rerun continues it)")
     p.add_argument("--resume", action="store_true", help="continue the dataset in --out (it must exist)")
@@ -136,13 +141,13 @@ def add_bench_parser(bench_subparsers) -> None:
     p.set_defaults(func=run_bench)
 
 
-def _scenario(text: str | None):
-    """A GraspScenario from ``--scenario`` (JSON text or a JSON file)."""
+def _scenario(text: str | None, base):
+    """``base`` (a GraspScenario) with the fields ``--scenario`` gives (JSON text or a JSON file)."""
     from mjcodesign.errors import DesignError
     from mjcodesign.scenarios.grasp import GraspScenario
 
     if text is None:
-        return GraspScenario()
+        return base
     raw = Path(text).read_text(encoding="utf-8") if Path(text).is_file() else text
     try:
         fields = json.loads(raw)
@@ -154,23 +159,33 @@ def _scenario(text: str | None):
         raise DesignError(
             f"--scenario: unknown fields {bad} (the tendon is set by --tendon); known: {sorted(names)}"
         )
+    if "impulse" in fields and "delta_v" not in fields:
+        fields["delta_v"] = None  # an impulse [N s] replaces the regime's velocity change
     try:
-        return GraspScenario(**fields)
+        return dataclasses.replace(base, **fields)
     except TypeError as exc:
         raise DesignError(f"--scenario: {exc}") from None
 
 
 def datagen_config(args: argparse.Namespace):
-    """The :class:`~mjcodesign.data.DatagenConfig` of ``datagen``'s arguments (library errors: exit 2)."""
-    from mjcodesign.data import DatagenConfig, parse_density_spec, parse_tendon, resolve_objects
+    """The :class:`~mjcodesign.data.DatagenConfig` of ``datagen``'s arguments (library errors: exit 2).
 
+    ``--regime`` gives the scenario, the tendon, the density and the mass rule; the flags that name one
+    replace it.
+    """
+    from mjcodesign.data import DatagenConfig, parse_density_spec, parse_tendon, resolve_objects
+    from mjcodesign.scenarios import get_regime
+
+    regime = get_regime(args.regime)
+    density, mass = regime.masses(args.density, args.mass)
+    scenario = _scenario(args.scenario, regime.scenario)
     same = ("poses_per_object", "designs_per_pose", "model", "backend", "sampler", "seed", "object_seed")
     return DatagenConfig(
         objects=resolve_objects(args.objects),
-        density=parse_density_spec(args.density),
-        tendon=parse_tendon(args.tendon),
-        scenario=_scenario(args.scenario),
-        mass=args.mass,
+        density=parse_density_spec(density),
+        tendon=scenario.tendon if args.tendon is None else parse_tendon(args.tendon),
+        scenario=scenario,
+        mass=mass,
         **{k: getattr(args, k) for k in same},
     )
 

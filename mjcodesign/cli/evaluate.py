@@ -12,7 +12,15 @@ import sys
 import time
 from pathlib import Path
 
-from mjcodesign.cli.common import add_mass_mode, emit, finite_float, int_at_least, path_text, user_cache_dir
+from mjcodesign.cli.common import (
+    add_mass_mode,
+    add_regime,
+    emit,
+    finite_float,
+    int_at_least,
+    path_text,
+    user_cache_dir,
+)
 from mjcodesign.cli.finger_flags import grasp_model_name
 from mjcodesign.cli.progress import StageProgress
 
@@ -100,7 +108,13 @@ def add_parser(subparsers) -> None:
         default=None,
         help="surrogate checkpoint for --pose-sampling surrogate (default: the shipped weights)",
     )
-    p.add_argument("--density", default="light", help="comma-separated densities: light, heavy or kg/m³")
+    add_regime(p)
+    p.add_argument(
+        "--density",
+        default=None,
+        help="comma-separated densities: light, heavy, ycb-median or kg/m³ (default: the regime's; real: "
+        "ycb-median for the objects without a published mass; paper: light)",
+    )
     add_mass_mode(p, "one regime 'real' in place of --density (an object without one is refused up front)")
     p.add_argument(
         "--egad-like",
@@ -173,21 +187,23 @@ def _run_config(args: argparse.Namespace):
     from mjcodesign.evaluation import parse_design_groups, parse_list
     from mjcodesign.evaluation.rollouts import SuiteRun
     from mjcodesign.objects import parse_density
-    from mjcodesign.scenarios import GraspScenario, parse_tendon
+    from mjcodesign.scenarios import get_regime, parse_tendon
 
-    densities = parse_list(args.density, "density")
-    for d in densities:
-        parse_density(d)
-    if args.mass == "real" and args.density != "light":
+    regime = get_regime(args.regime)
+    if args.mass == "real" and args.density is not None:
         from mjcodesign.errors import DesignError
 
         raise DesignError("--mass real sets each object's density from its published mass: drop --density")
-    scenario = GraspScenario()
+    density, mass = regime.masses(args.density, args.mass)
+    densities = parse_list(density, "density")
+    for d in densities:
+        parse_density(d)
+    scenario = regime.scenario
     if args.tendon is not None:
-        scenario = GraspScenario(tendon=parse_tendon(args.tendon))
+        scenario = dataclasses.replace(scenario, tendon=parse_tendon(args.tendon))
     return SuiteRun(
         scenario=scenario,
-        mass=args.mass,
+        mass=mass,
         designs=parse_design_groups(args.designs),
         perturbations=_QUICK_PERTURBATIONS if args.quick else args.perturbations,
         densities=densities,
@@ -245,6 +261,7 @@ def run(args: argparse.Namespace) -> int:
     from mjcodesign.evaluation.suite import add_objects, build_suite, egad_sources
     from mjcodesign.evaluation.suite_report import suite_header, write_suite_report
     from mjcodesign.outputs import OutputKind, check_output
+    from mjcodesign.scenarios import regime_name
 
     run_cfg = _run_config(args)
     kind, source = _suite_source(args)
@@ -323,7 +340,7 @@ def run(args: argparse.Namespace) -> int:
     meta = {
         "designs": labels,
         "perturbations": run_cfg.perturbations,
-        "densities": ["real"] if run_cfg.mass == "real" else list(run_cfg.densities),
+        "densities": ["real"] if run_cfg.mass != "density" else list(run_cfg.densities),
         "impulses_paper_ns": list(run_cfg.impulses),
         "pose_policies": list(run_cfg.pose_policies),
         "model": run_cfg.model,
@@ -332,6 +349,8 @@ def run(args: argparse.Namespace) -> int:
         "perturbation_model": suite.perturbation.as_dict(),
         "checkpoint": None if ckpt is None else str(ckpt),
         "mass": run_cfg.mass,
+        "regime": regime_name(run_cfg.scenario, run_cfg.mass),
+        "scenario": run_cfg.scenario.as_dict(),
         "command": args.command_line,
         "wall_time_s": wall,
         "rollout_wall_time_s": result["wall_time_s"],

@@ -11,9 +11,10 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import replace
 from pathlib import Path
 
-from mjcodesign.cli.common import int_at_least, path_text, user_cache_dir
+from mjcodesign.cli.common import add_regime, int_at_least, path_text, user_cache_dir
 from mjcodesign.cli.finger_flags import add_routing, grasp_model_name, routing_options
 from mjcodesign.optional import WARP_DEVICES
 
@@ -49,18 +50,22 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--model", choices=_MODELS, default="chain", type=grasp_model_name)
     add_routing(p)
+    add_regime(p)
     p.add_argument(
         "--density",
-        default="light",
-        help="object density [kg/m³] or a preset of the paper's relative scale (not real objects): light "
-        "(100), heavy (400)",
+        default=None,
+        help="object density [kg/m³] or a preset: light (100), heavy (400) (the paper's relative scale, "
+        "not real objects), ycb-median (680); default: the regime's (real: the published mass, else "
+        "ycb-median; paper: light)",
     )
     p.add_argument(
         "--mass",
         default=None,
         help="real: a YCB object at its published mass (the YCB object list; refused for objects without "
         "one); or a mass [kg] (for egad-like and mesh files too). The density becomes mass / volume, "
-        "uniform, and the inertia is the uniformly filled mesh's. Default: from --density",
+        "uniform, and the inertia is the uniformly filled mesh's; auto: real where the object has a published "
+        "mass, else --density. Default: the regime's (real: auto; paper: from --density; --density given: "
+        "from it)",
     )
     p.add_argument(
         "--pose",
@@ -75,8 +80,9 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         "--impulse",
         type=float,
         default=None,
-        help="downward disturbance impulse [N s]; default 0.0179, the paper's 0.1 N s (applied to a 5x "
-        "larger scene) mapped to real size (its 0.2 and 0.4 map to 0.036 and 0.072)",
+        help="downward disturbance impulse [N s] whatever the mass, in place of the regime's disturbance "
+        "(real: --delta-v paper; paper: 0.0179, the paper's 0.1 N s on its 5x larger scene mapped to real "
+        "size; its 0.2 and 0.4 map to 0.036 and 0.072)",
     )
     p.add_argument(
         "--delta-v",
@@ -88,7 +94,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--friction",
         default=None,
-        help="finger-object sliding friction coefficient (default: the paper's 1); 'tape-min': 0.6, the "
+        help="finger-object sliding friction coefficient (default: the regime's, 1 in both); 'tape-min': 0.6, the "
         "floor the gripping tape's maker claims (the range 0.6-1 is in the docs' regime page)",
     )
     p.add_argument("--tension", type=float, default=None, help="tendon tension per finger [N]")
@@ -97,9 +103,15 @@ def _arguments(p: argparse.ArgumentParser) -> None:
         "--tendon",
         default=None,
         help="force:N (tension per finger [N], the paper's simulator) or position:TICKS (the XL330 "
-        "servo's goal [ticks of 4096], the hardware; the paper pulls 1000); default force:10",
+        "servo's goal [ticks of 4096], the hardware; the paper pulls 1000); default: the regime's "
+        "(real: position:1000; paper: force:10)",
     )
-    p.add_argument("--lift", type=float, default=None, help="lift distance [m]")
+    p.add_argument(
+        "--lift",
+        type=float,
+        default=None,
+        help="lift distance [m] (default: the regime's, real 0.10, paper 0.03)",
+    )
     p.add_argument(
         "--backend",
         default="mujoco",
@@ -162,9 +174,10 @@ def grasp(
     source: str,
     design: str = "paper-optimized",
     model: str = "chain",
-    density: str = "light",
+    density: str | None = None,
     pose: str = "auto",
     *,
+    regime: str = "real",
     mass: str | float | None = None,
     impulse: float | None = None,
     delta_v: str | float | None = None,
@@ -184,8 +197,10 @@ def grasp(
 ) -> dict:
     """One grasp rollout (a :class:`~mjcodesign.jobs.GraspJob`); the JSON-ready outcome plus the object's facts.
 
-    ``mass``: None (from ``density``), ``"real"`` (a YCB object's published mass) or a mass [kg]
-    (:func:`mjcodesign.jobs.load_grasp_object`). ``observer`` (:mod:`mjcodesign.sim.observe`) receives
+    ``regime`` (:data:`~mjcodesign.scenarios.REGIMES`) gives the scenario and, where ``density`` and
+    ``mass`` are None, the mass rule; the other arguments replace the settings they name. ``mass``:
+    ``"density"`` (from ``density``), ``"real"`` (a YCB object's published mass), ``"auto"`` (real where
+    published, else the density) or a mass [kg] (:func:`mjcodesign.jobs.load_grasp_object`). ``observer`` (:mod:`mjcodesign.sim.observe`) receives
     the rollout as ``label``. ``prepared``: the result of :func:`prepare_object` for these ``source``,
     ``density``, ``pose`` and ``mass`` arguments, so that several designs or backends on one object
     load, decompose and pose it once. ``options``: the chain's :class:`~mjcodesign.models.types.SimOptions`
@@ -195,7 +210,7 @@ def grasp(
     from mjcodesign.errors import DesignError
     from mjcodesign.jobs import GraspJob, run_jobs
     from mjcodesign.models.types import FingerModel
-    from mjcodesign.scenarios.grasp import GraspScenario
+    from mjcodesign.scenarios import get_regime, regime_name
     from mjcodesign.sim.protocol import get_backend
 
     stiffness = Stiffness.parse(design)
@@ -206,8 +221,6 @@ def grasp(
             raise DesignError("--model fem routes its tendon itself: leave --routing at guided")
         if backend != "mujoco":
             raise DesignError("--model fem is a simulator of its own: leave --backend at mujoco")
-        from dataclasses import replace
-
         from mjcodesign.sim.fem import GRASP_OPTIONS
 
         # --device: the FEM's Warp device too (auto: CUDA when present, else the CPU)
@@ -217,12 +230,16 @@ def grasp(
         sim = get_backend(backend, device=_warp_device(device, FingerModel(model)))
     else:
         sim = get_backend(backend)
+    the_regime = get_regime(regime)
+    density, mass = the_regime.masses(density, mass)
     if prepared is None:
         prepared = prepare_object(
             source, density, pose, mass=mass, seed=seed, allow_open=allow_open, cache_dir=cache_dir
         )
     obj, rho, gripper_pose = prepared
     kwargs = {k: v for k, v in (("lift", lift), ("impulse", impulse)) if v is not None}
+    if impulse is not None:
+        kwargs["delta_v"] = None  # an impulse [N s] replaces the regime's velocity change
     kwargs.update(_physics(delta_v, friction))
     if tendon is not None:  # --tendon
         from mjcodesign.scenarios import parse_tendon
@@ -234,7 +251,7 @@ def grasp(
         from mjcodesign.scenarios import TendonForce
 
         kwargs["tendon"] = TendonForce(tension=tension)
-    scenario = GraspScenario(**kwargs)
+    scenario = replace(the_regime.scenario, **kwargs)
     job = GraspJob(
         obj=obj,
         pose=gripper_pose,
@@ -250,6 +267,7 @@ def grasp(
         object=obj.name,
         mass_kg=obj.mass,
         density_kg_m3=rho,
+        regime=regime_name(scenario, "density" if mass is None else str(mass)),
         **_mass_facts(source, mass),
         impulse_ns=scenario.impulse_on(obj.mass),
         delta_v_m_s=scenario.delta_v,
@@ -309,9 +327,7 @@ def prepare_object(
     from mjcodesign.jobs import load_grasp_object, resolve_pose
 
     check_pose_file(pose)
-    obj = load_grasp_object(
-        source, density, mass=mass, seed=seed, allow_open=allow_open, cache_dir=cache_dir
-    )
+    obj = load_grasp_object(source, density, mass=mass, seed=seed, allow_open=allow_open, cache_dir=cache_dir)
     return obj, obj.density, resolve_pose(pose, obj, seed=seed)
 
 
@@ -329,15 +345,23 @@ def _physics(delta_v: str | float | None, friction: str | float | None) -> dict:
             out[key] = float(names[key].get(text, text))
         except (TypeError, ValueError):
             choices = ", ".join(names[key])
-            raise DesignError(f"--{key.replace('_', '-')} must be a number or {choices}, got {text!r}") from None
+            raise DesignError(
+                f"--{key.replace('_', '-')} must be a number or {choices}, got {text!r}"
+            ) from None
     return out
 
 
 def _mass_facts(source: str, mass: str | float | None) -> dict:
-    """How the object's mass was set: ``mass_mode`` (density, real, given) and the published source."""
-    from mjcodesign.objects import parse_mass, published_mass
+    """How the object's mass was set: ``mass_mode`` (density, real, given) and the published source.
+
+    The ``auto`` rule reports what it chose for this object: ``real`` with the source, or ``density``.
+    """
+    from mjcodesign.objects import parse_mass, published_mass, published_mass_or_none
 
     mode = parse_mass(mass)
+    if mode == "auto":
+        found = published_mass_or_none(str(source))
+        mode = None if found is None else "real"
     if mode is None:
         return {"mass_mode": "density", "mass_source": None}
     if mode == "real":
@@ -456,9 +480,12 @@ class _Runner:
         self.cache = user_cache_dir()
 
     def prepare(self, source: str) -> tuple:
+        from mjcodesign.scenarios import get_regime
+
         a = self.args
+        density, mass = get_regime(a.regime).masses(a.density, a.mass)
         return prepare_object(
-            source, a.density, a.pose, mass=a.mass, seed=a.seed, allow_open=a.allow_open, cache_dir=self.cache
+            source, density, a.pose, mass=mass, seed=a.seed, allow_open=a.allow_open, cache_dir=self.cache
         )
 
     def one(self, source: str, variant: tuple, prepared: tuple, prefix: str = "") -> dict:
@@ -470,6 +497,7 @@ class _Runner:
             a.model,
             a.density,
             a.pose,
+            regime=a.regime,
             mass=a.mass,
             impulse=a.impulse,
             delta_v=a.delta_v,

@@ -133,7 +133,7 @@ def add_bench_parser(bench_subparsers) -> None:
     p.add_argument(
         "--regime",
         choices=("paper", "real"),
-        default="paper",
+        default="real",
         help="paper: blocks over densities and tendon drives (the paper's relative scale); real: the suite's "
         "in-domain objects at their real masses under the hardware's grasp, with intervals and sensitivity",
     )

@@ -59,8 +59,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--mode", choices=_MODES, default="joint", help="one design for all objects, or one each")
     p.add_argument(
         "--density",
-        default="light",
-        help="object density [kg/m³] or light (100) / heavy (400), the paper's relative scale",
+        default=None,
+        help="object density [kg/m³] or light (100) / heavy (400), the paper's relative scale, or ycb-median "
+        "(680); default: the checkpoint dataset's (its one density; light for a range)",
     )
     add_mass_mode(p, "in the surrogate's input and the re-simulation, in place of --density")
     p.add_argument("--seed", type=int_at_least(0), default=0, help="draws candidate clouds")
@@ -93,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     from mjcodesign.objects import parse_density
     from mjcodesign.surrogate import checkpoint_or_shipped
 
-    density = parse_density(args.density)
+    density = None if args.density is None else parse_density(args.density)
     objects, meshes = _objects(args.objects, resolve_objects)
     if args.rrd:
         check_output_link(args.rrd, "--rrd", overwrite=args.overwrite)

@@ -22,7 +22,7 @@ import numpy as np
 from mjcodesign.data import CLOUD_POINTS, PoseRows, open_dataset, partial_cloud, read_poses
 from mjcodesign.data.cloud import to_gripper
 from mjcodesign.errors import DesignError, MeshError, PoseError
-from mjcodesign.objects import load_object, published_mass
+from mjcodesign.objects import load_object, published_mass, published_mass_or_none
 from mjcodesign.poses import read_candidates, scene_offset
 
 __all__ = ["PoseSet", "load_pose_set", "object_key", "real_densities", "row_densities"]
@@ -104,16 +104,18 @@ def row_densities(poses: PoseRows, density) -> np.ndarray:
     return rho
 
 
-def real_densities(poses: PoseRows) -> dict[str, float]:
+def real_densities(poses: PoseRows, fallback: float | None = None) -> dict[str, float]:
     """Per object of ``poses``, the uniform density [kg/m³] at which it weighs its published mass.
 
-    The volume is the poses' own (the mesh the candidates were made on). Raises :class:`MeshError` for
-    an object without a published mass (:func:`~mjcodesign.objects.published_mass`).
+    The volume is the poses' own (the mesh the candidates were made on). An object without a published
+    mass (:func:`~mjcodesign.objects.published_mass`) gets ``fallback`` (the ``auto`` rule), or raises
+    :class:`MeshError` when it is None.
     """
     out = {}
     for k, name in enumerate(poses.objects):
         volume = float(poses.volume[poses.rows(k)[0]])
-        out[name] = published_mass(name).mass / volume
+        found = published_mass(name) if fallback is None else published_mass_or_none(name)
+        out[name] = fallback if found is None else found.mass / volume
     return out
 
 

@@ -26,6 +26,7 @@ from mjcodesign.codesign.report import (
 )
 from mjcodesign.codesign.verify import verify
 from mjcodesign.errors import MeshError
+from mjcodesign.objects import parse_density
 from mjcodesign.outputs import OutputFolder, OutputKind, check_output, staged
 
 __all__ = ["held_out_objects", "run_codesign"]
@@ -37,16 +38,34 @@ def held_out_objects(meta: dict, available: tuple[str, ...], optimised: tuple[st
     return tuple(n for n in test if n in available and n not in optimised)
 
 
+def dataset_masses(surrogate, density: float | None, mass: str | None) -> tuple[float, str]:
+    """(density [kg/m³], mass rule) of a co-design: the given ones, else the checkpoint dataset's.
+
+    The dataset's rule (``density``, ``real``, ``auto``) and its density when it is one value; a
+    dataset drawn over a range, or a checkpoint without its dataset's config, gives ``light`` (the
+    paper's protocol's table density).
+    """
+    from mjcodesign.surrogate import dataset_config
+
+    config = dataset_config(surrogate)
+    if mass is None:
+        mass = "density" if config is None else config.mass
+    if density is None:
+        fixed = config is not None and config.density.is_fixed
+        density = config.density.low if fixed else parse_density("light")
+    return float(density), mass
+
+
 def run_codesign(
     *,
     checkpoint: str | Path,
     objects: tuple[str, ...],
     poses: str | Path,
     per_object: int,
-    density: float,
+    density: float | None,
     out: str | Path,
     config: OptimizeConfig,
-    mass: str = "density",
+    mass: str | None = "density",
     overwrite: bool = False,
     seed: int = 0,
     ground_truth: bool = True,
@@ -59,6 +78,7 @@ def run_codesign(
 
     ``out`` follows the output-folder rule of :mod:`mjcodesign.outputs`, checked before any work
     (``overwrite``: write beside another writer's files, keeping them); the files land there at once.
+    ``density`` and ``mass`` None: the checkpoint dataset's (:func:`dataset_masses`).
     ``mass="real"`` puts every object at its published mass instead of ``density``
     (:func:`~mjcodesign.codesign.problem.real_densities`): an optimised object without one is refused,
     a held-out one left out and named in ``held_out_without_mass``. ``sources`` maps an object's name
@@ -77,6 +97,7 @@ def run_codesign(
     chosen_set = everything.select([object_key(o) for o in objects], per_object)
     held = held_out_objects(surrogate.meta, everything.objects, chosen_set.objects)
     no_mass: list[str] = []
+    density, mass = dataset_masses(surrogate, density, mass)
     if mass == "real":
         density = real_densities(chosen_set)  # refuses an optimised object without a published mass
         for name in held:
@@ -85,8 +106,12 @@ def run_codesign(
             except MeshError:
                 no_mass.append(name)
         held = tuple(n for n in held if n not in no_mass)
+    elif mass == "auto":
+        density = real_densities(
+            everything.select((*chosen_set.objects, *held), per_object), fallback=density
+        )
     elif mass != "density":
-        raise MeshError(f"mass must be density or real, got {mass!r}")
+        raise MeshError(f"mass must be density, real or auto, got {mass!r}")
     held_set = everything.select(held, per_object) if held else None
     root = Path(out)
     say(f"optimising {len(chosen_set.objects)} objects ({config.mode.value})")

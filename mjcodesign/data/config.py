@@ -32,6 +32,7 @@ from mjcodesign.objects import (
 from mjcodesign.scenarios.drive import TendonForce, TendonPosition
 from mjcodesign.scenarios.drive import parse_tendon as _parse_tendon
 from mjcodesign.scenarios.grasp import GraspScenario, scene_options
+from mjcodesign.scenarios.regime import regime_name
 
 __all__ = [
     "BACKENDS",
@@ -179,7 +180,8 @@ class DatagenConfig:
     """How each object's mass is set (:data:`~mjcodesign.objects.MASS_MODES`): ``density``, drawn per
     pose from :attr:`density` (the paper's relative scale), or ``real``, every object at its published
     mass (:func:`~mjcodesign.objects.published_mass`; uniform density mass / volume, :attr:`density`
-    unused), refused for an object without one."""
+    unused), refused for an object without one, or ``auto``, the published mass where there is one and
+    :attr:`density` otherwise (the real regime's rule)."""
 
     def __post_init__(self) -> None:
         if not self.objects:
@@ -212,6 +214,15 @@ class DatagenConfig:
         object.__setattr__(self, "tendon", tendon)
         object.__setattr__(self, "tension", tendon.tension if isinstance(tendon, TendonForce) else None)
         object.__setattr__(self, "scenario", dataclasses.replace(self.scenario, tendon=tendon))
+
+    @property
+    def regime(self) -> str:
+        """The regime the rows are simulated in: ``real``, ``paper`` or ``custom``.
+
+        :func:`~mjcodesign.scenarios.regime_name` of the scenario and mass rule; not hashed into the
+        fingerprint (it follows from what is).
+        """
+        return regime_name(self.scenario, self.mass)
 
     @property
     def coacd(self) -> CoacdSettings:
@@ -288,8 +299,10 @@ class DatagenConfig:
 
 
 def _scenario_dict(scenario: GraspScenario) -> dict:
-    """The manifest's ``scenario``; ``delta_v`` and ``friction`` only when set, so that a dataset made
-    before the scenario had them keeps its fingerprint."""
+    """The manifest's ``scenario``; ``delta_v`` and ``friction`` only when set.
+
+    A dataset made before the scenario had them keeps its fingerprint.
+    """
     d = dataclasses.asdict(scenario)
     for key in ("delta_v", "friction"):
         if d[key] is None:

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from mjcodesign.data.config import DatagenConfig
 from mjcodesign.data.integrity import Integrity, listed_files, read_table, verify
 from mjcodesign.data.schema import TABLES
 from mjcodesign.data.store import FORMAT, MANIFEST
@@ -162,6 +163,7 @@ def summarize(ds: Dataset) -> dict:
         "schema_version": m.get("schema_version"),
         "project_version": m.get("project_version"),
         "backend": m["config"]["backend"],
+        "regime": m.get("regime") or DatagenConfig.from_dict(m["config"]).regime,
         "objects": len(m["objects"]),
         "objects_ready": sum(o["status"] == "ready" for o in m["objects"]),
         "objects_failed": sum(o["status"] == "failed" for o in m["objects"]),

@@ -267,6 +267,7 @@ def _new_manifest(config: DatagenConfig) -> dict:
         "fingerprint": config.fingerprint(),
         "created": _now(),
         "project_version": project_version(),
+        "regime": config.regime,
         "config": config.as_dict(),
         "tables": {"poses": "poses/", "samples": "samples/", "rejected": "rejected/"},
         "columns": COLUMNS,

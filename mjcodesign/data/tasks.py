@@ -29,7 +29,13 @@ from mjcodesign.design.stiffness import N_LOG_E, Stiffness
 from mjcodesign.errors import MeshError, PoseError, UnsupportedError
 from mjcodesign.jobs import GraspJob, SceneCache, load_grasp_object, run_jobs
 from mjcodesign.models.types import GripperPose
-from mjcodesign.objects import DENSITY_PRESETS, GraspObject, published_mass, real_density
+from mjcodesign.objects import (
+    DENSITY_PRESETS,
+    GraspObject,
+    published_mass,
+    published_mass_or_none,
+    real_density,
+)
 from mjcodesign.poses import sample_poses, scene_offset
 from mjcodesign.scenarios.grasp import scene_at_pose
 from mjcodesign.scenarios.outcome import Failure, Outcome, failed_outcome
@@ -181,14 +187,14 @@ class Worker:
         )
         t_pose = time.perf_counter() - t0
         # sample_poses raises PoseError (every reason counted) when it accepts no candidate.
-        real = real_density(obj, published_mass(c.objects[task.index]).mass) if c.mass == "real" else None
+        real = _real_density(obj, c.objects[task.index], c.mass)
         cols = empty_columns(POSES)
         dropped: dict[str, str] = {}
         t0 = time.perf_counter()
         for p in range(len(cands)):
             T = cands.matrices[p]
             streams = PoseStreams(c.seed, task.index, p)
-            rho = real if c.mass == "real" else c.density.draw(streams.density)
+            rho = real if real is not None else c.density.draw(streams.density)
             try:
                 cloud = partial_cloud(
                     obj, T, cands.openings[p], streams.cloud, n=c.cloud_points, geometry=c.geometry
@@ -343,3 +349,14 @@ def _result(t: ShardTask, name: str, outs: list[Outcome], wall: float) -> ShardR
         }
         tables[table] = build_table(cols, schema)
     return ShardResult(t.key, tables["samples"], tables["rejected"], wall)
+
+
+def _real_density(obj: GraspObject, source: str, mode: str) -> float | None:
+    """The density [kg/m³] at which ``obj`` weighs its published mass under the mass rule ``mode``.
+
+    None when its poses draw one from the config's density (``density``; ``auto`` without a mass).
+    """
+    if mode == "real":
+        return real_density(obj, published_mass(source).mass)
+    found = published_mass_or_none(source) if mode == "auto" else None
+    return None if found is None else real_density(obj, found.mass)

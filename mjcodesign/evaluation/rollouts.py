@@ -11,7 +11,6 @@ surrogate only scores poses for the ``surrogate`` pose policy.
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -25,9 +24,9 @@ from mjcodesign.evaluation.config import DesignGroup
 from mjcodesign.evaluation.suite import Suite, SuiteObject
 from mjcodesign.jobs import GraspJob, SceneCache, load_grasp_object, run_jobs
 from mjcodesign.models.types import FingerModel
-from mjcodesign.objects import MASS_MODES, parse_density, published_mass
+from mjcodesign.objects import MASS_MODES, parse_density, published_mass, published_mass_or_none
 from mjcodesign.poses.candidates import MAX_PENETRATION
-from mjcodesign.scenarios.grasp import GraspScenario, paper_impulse, scene_at_pose
+from mjcodesign.scenarios.grasp import GraspScenario, at_paper_disturbance, scene_at_pose
 from mjcodesign.scenarios.outcome import Outcome
 from mjcodesign.scenarios.perturb import Perturbation, perturbed_scene, start_penetration
 from mjcodesign.sim.protocol import get_backend
@@ -65,7 +64,8 @@ class SuiteRun:
     pose_policies: tuple[str, ...] = ("fixed",)
     mass: str = "density"
     """``density``: each object at every density of ``densities``; ``real``: each object at its
-    published mass instead (one regime, ``real``; objects without one are refused)."""
+    published mass instead (one regime, ``real``; objects without one are refused); ``auto``: as
+    ``real``, objects without a published mass at the one density of ``densities``."""
     model: str = "chain"
     seed: int = 0
     """Seed of the perturbation draws."""
@@ -88,6 +88,8 @@ class SuiteRun:
                 raise DesignError(f"pose sampling {p!r}: choose from {', '.join(POSE_POLICIES)}")
         if self.mass not in MASS_MODES:
             raise DesignError(f"mass {self.mass!r}: choose from {', '.join(MASS_MODES)}")
+        if self.mass != "density" and len(self.densities) != 1:
+            raise DesignError(f"--mass {self.mass} is one regime: give at most one --density")
         if isinstance(self.seed, bool) or int(self.seed) < 0:
             raise DesignError(f"seed must be >= 0, got {self.seed}")
         FingerModel(self.model)
@@ -115,10 +117,17 @@ def check_real_masses(sources) -> None:
 
 
 def _regimes(run: SuiteRun, so: SuiteObject, obj, densities: list) -> list[tuple[str, float]]:
-    """(label, density [kg/m³]) of each regime of one object: ``run``'s densities, or its published mass."""
-    if run.mass != "real":
+    """(label, density [kg/m³]) of each regime of one object: ``run``'s densities, or its published mass.
+
+    Under ``auto`` an object without a published mass is at the one density, still labelled ``real``
+    (the regime's label, so that every object is in one table); its rows record the density used.
+    """
+    if run.mass == "density":
         return densities
-    return [("real", published_mass(so.source).mass * obj.density / obj.mass)]  # mass / volume
+    found = published_mass(so.source) if run.mass == "real" else published_mass_or_none(so.source)
+    if found is None:
+        return [("real", densities[0][1])]
+    return [("real", found.mass * obj.density / obj.mass)]  # mass / volume
 
 
 def _draws(
@@ -260,7 +269,7 @@ def run_suite(
                     surrogate, obj, so, run, rho, n_points
                 )
             for imp in run.impulses:
-                scenario = dataclasses.replace(run.scenario, impulse=paper_impulse(imp))
+                scenario = at_paper_disturbance(run.scenario, imp)
                 for k, pose in enumerate(so.poses):
                     for j, p in enumerate(draws[k]):
                         if p is None:
@@ -346,7 +355,7 @@ def record_suite_examples(
         so = by_name[r["object"]]
         if so.name not in loaded:
             loaded[so.name] = load_grasp_object(so.source, "light", seed=suite.seed, cache_dir=cache_dir)
-        scenario = dataclasses.replace(run.scenario, impulse=paper_impulse(r["impulse_paper_ns"]))
+        scenario = at_paper_disturbance(run.scenario, r["impulse_paper_ns"])
         jobs.append(
             GraspJob(
                 obj=loaded[so.name],

@@ -64,6 +64,8 @@ def table_markdown(analysis: dict, designs: list[str], header: dict) -> str:
         "published figures (its simulator and objects), only for designs it measured; they are not",
         "comparable with ours cell by cell.",
     ]
+    if header.get("regime"):
+        lines += ["", f"Grasp regime: {header['regime']} (docs/regime.md)."]
     for reg in analysis["regimes"]:
         lines += [
             "",
@@ -230,6 +232,9 @@ def write_suite_report(
                 "model",
                 "seed",
                 "tendon",
+                "regime",
+                "scenario",
+                "mass",
             )
             if k in meta
         },
@@ -241,7 +246,8 @@ def write_suite_report(
             json.dumps(results, indent=None, sort_keys=True) + "\n", encoding="utf-8"
         )
         (tmp / "summary.json").write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
-        (tmp / "table.md").write_text(table_markdown(analysis, designs, header), encoding="utf-8")
+        table_header = {**header, "regime": meta.get("regime")}
+        (tmp / "table.md").write_text(table_markdown(analysis, designs, table_header), encoding="utf-8")
         (tmp / "paired.md").write_text(paired_markdown(analysis, header), encoding="utf-8")
         (tmp / "per_object.csv").write_text(per_object_csv(analysis), encoding="utf-8")
         if len({r["impulse_paper_ns"] for r in analysis["regimes"]}) > 1:

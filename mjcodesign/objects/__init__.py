@@ -21,11 +21,13 @@ from mjcodesign.objects.masses import (
     mass_table,
     parse_mass,
     published_mass,
+    published_mass_or_none,
     real_density,
 )
 from mjcodesign.objects.mesh import (
     DENSITY_PRESETS,
     MESH_SUFFIXES,
+    YCB_MEDIAN_DENSITY,
     GraspObject,
     box_object,
     egad_like,
@@ -64,6 +66,7 @@ from mjcodesign.objects.sweep import (
 
 __all__ = [
     "DENSITY_PRESETS",
+    "YCB_MEDIAN_DENSITY",
     "MASS_MODES",
     "MASS_TABLE",
     "MAX_MASS",
@@ -96,6 +99,7 @@ __all__ = [
     "parse_egad_index",
     "parse_mass",
     "published_mass",
+    "published_mass_or_none",
     "real_density",
     "repair_deviation",
     "repair_mesh",

@@ -34,14 +34,17 @@ __all__ = [
     "mass_table",
     "parse_mass",
     "published_mass",
+    "published_mass_or_none",
     "real_density",
 ]
 
 MASS_TABLE = "ycb_masses.json"
 """File name of the published-mass table in this package."""
-MASS_MODES = ("density", "real")
-"""How an object's mass is set: from a density [kg/m³] (the paper's relative scale), or ``real``, the
-published mass of a YCB object. A number is a given mass [kg]."""
+MASS_MODES = ("density", "real", "auto")
+"""How an object's mass is set: from a density [kg/m³] (the paper's relative scale); ``real``, the
+published mass of a YCB object (refused for any object without one); or ``auto``, the published mass
+where the YCB object list gives one and the density otherwise (the real regime's rule for user meshes,
+generated shapes and the YCB objects without a published mass). A number is a given mass [kg]."""
 MAX_MASS = 20.0
 """Largest given mass [kg]: far above anything the 60-mm gripper could lift (the heaviest YCB object
 of the splits, the nine-hole peg test, weighs 1.4 kg)."""
@@ -94,19 +97,31 @@ def published_mass(name: str) -> PublishedMass:
     return PublishedMass(text, float(row["mass_kg"]), table["citation"], row.get("note"))
 
 
+def published_mass_or_none(name: str) -> PublishedMass | None:
+    """:func:`published_mass` of ``name``, or None when it has none (the ``auto`` rule).
+
+    None for any object the table cannot give a mass: a mesh file, ``egad-like:N``, a YCB object
+    without a published mass.
+    """
+    try:
+        return published_mass(name)
+    except MeshError:
+        return None
+
+
 def parse_mass(text: str | float | None) -> str | float | None:
-    """``--mass``: None or ``density`` (mass from the density), ``real``, or a mass in kg (a float).
+    """``--mass``: None or ``density`` (mass from the density), ``real``, ``auto``, or a mass in kg.
 
     Raises :class:`MeshError` for anything else or a mass outside (0, :data:`MAX_MASS`].
     """
     if text is None or text == "density":
         return None
-    if text == "real":
-        return "real"
+    if text in ("real", "auto"):
+        return text
     try:
         mass = float(text)
     except (TypeError, ValueError):
-        raise MeshError(f"--mass must be density, real or a mass in kg, got {text!r}") from None
+        raise MeshError(f"--mass must be density, real, auto or a mass in kg, got {text!r}") from None
     if not (math.isfinite(mass) and 0.0 < mass <= MAX_MASS):
         raise MeshError(f"--mass {text}: a mass must be in (0, {MAX_MASS:g}] kg")
     return mass

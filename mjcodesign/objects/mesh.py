@@ -20,6 +20,7 @@ from mjcodesign.objects.repair import REPAIR_CHAIN, repair_mesh, watertight
 from mjcodesign.objects.sets import check_seed, egad_like_mesh, parse_egad_index
 
 __all__ = [
+    "YCB_MEDIAN_DENSITY",
     "DENSITY_PRESETS",
     "MESH_SUFFIXES",
     "GraspObject",
@@ -32,9 +33,17 @@ __all__ = [
     "parse_density",
 ]
 
-DENSITY_PRESETS: dict[str, float] = {"light": 100.0, "heavy": 400.0}
-"""Object densities [kg/m³]: the paper's relative scale (its protocol's light and heavy objects), not the
-masses of real objects; real YCB masses are :func:`~mjcodesign.objects.published_mass`.
+YCB_MEDIAN_DENSITY = 680.0
+"""Median uniform density [kg/m³] of the 63 YCB objects of the paper's two splits that have a published
+mass (published mass / mesh volume; 10th–90th percentile 260–2510 kg/m³): the density the real regime
+gives an object without a published mass (a user's mesh, ``egad-like:N``, the marbles, the LEGO Duplo
+pieces). An assumption about a typical household object, not a measurement of that object;
+``tests/test_masses.py`` recomputes it from the table and the meshes."""
+
+DENSITY_PRESETS: dict[str, float] = {"light": 100.0, "heavy": 400.0, "ycb-median": YCB_MEDIAN_DENSITY}
+"""Object densities [kg/m³]. ``light`` and ``heavy`` are the paper's relative scale (its protocol's light
+and heavy objects), not the masses of real objects; real YCB masses are
+:func:`~mjcodesign.objects.published_mass`. ``ycb-median`` is :data:`YCB_MEDIAN_DENSITY`.
 
 The paper writes "2 and 8" (kg/m³ in its text, g/cm³ in its appendix) while its real objects weigh
 15–180 g. Neither unit is realistic for a solid YCB-sized mesh: 2 kg/m³ makes 010_potted_meat_can
@@ -91,7 +100,7 @@ class GraspObject:
 
 
 def parse_density(text: str | float) -> float:
-    """A density [kg/m³] from a number or a preset name (``light``, ``heavy``)."""
+    """A density [kg/m³] from a number or a preset name (``light``, ``heavy``, ``ycb-median``)."""
     if isinstance(text, str) and text in DENSITY_PRESETS:
         return DENSITY_PRESETS[text]
     try:

@@ -4,7 +4,8 @@ An object is a YCB name, ``egad-like:N``, a mesh file (STL/OBJ/PLY) or a folder 
 its files an object), optionally with a mass after ``@``: ``box.stl@120g``, ``013_apple@0.197kg``.
 A masses file (CSV, ``--masses``) gives masses by object name in two columns, ``object,mass``, with an
 optional header row; a mass there takes the same units (``120g``, ``0.12kg``). An object without a
-mass is simulated at the default density (:data:`~mjcodesign.pipeline.DEFAULT_DENSITY`).
+given mass is simulated in the checkpoint dataset's regime: at its published mass where that regime
+takes them (``real``), else at the dataset's density.
 """
 
 from __future__ import annotations
@@ -22,8 +23,7 @@ from mjcodesign.objects import MAX_MASS, MESH_SUFFIXES, object_name
 __all__ = ["DEFAULT_DENSITY", "ObjectSpec", "parse_mass_text", "parse_objects", "read_masses"]
 
 DEFAULT_DENSITY = "light"
-"""Density of an object without a given mass: the paper's relative scale (100 kg/m³), the default of
-every command that simulates objects."""
+"""Density an object is loaded at before its mass is set (the mass then sets the density)."""
 _MASS = re.compile(r"^\s*([0-9]*\.?[0-9]+(?:[eE][-+]?[0-9]+)?)\s*(g|kg)\s*$")
 _TO_KG = {"g": 1e-3, "kg": 1.0}
 

@@ -20,6 +20,7 @@ from mjcodesign.scenarios.grasp import (
     TAPE_FRICTION_RANGE,
     GraspScenario,
     GraspScene,
+    at_paper_disturbance,
     auto_pose,
     build_scene,
     compile_scene,
@@ -35,6 +36,7 @@ from mjcodesign.scenarios.grasp import (
 )
 from mjcodesign.scenarios.outcome import Failure, Outcome, failed_outcome, outcome_from_states, outcome_steps
 from mjcodesign.scenarios.perturb import NOMINAL, Perturbation, perturbed_pose, perturbed_scene
+from mjcodesign.scenarios.regime import DEFAULT_REGIME, REGIMES, Regime, get_regime, regime_name
 
 __all__ = [
     "DEFAULT_IMPULSE",
@@ -63,6 +65,12 @@ __all__ = [
     "PAPER_DELTA_V",
     "PAPER_FRICTION",
     "REAL_REGIME",
+    "at_paper_disturbance",
+    "DEFAULT_REGIME",
+    "REGIMES",
+    "Regime",
+    "get_regime",
+    "regime_name",
     "TAPE_FRICTION_FLOOR",
     "TAPE_FRICTION_RANGE",
     "phase_controls",

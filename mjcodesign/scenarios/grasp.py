@@ -63,6 +63,7 @@ __all__ = [
     "TAPE_FRICTION_FLOOR",
     "TAPE_FRICTION_RANGE",
     "REAL_REGIME",
+    "at_paper_disturbance",
     "REAL_LIFT_S",
     "PAPER_HARDWARE_LIFT",
     "REST_GAP",
@@ -232,6 +233,15 @@ class GraspScenario:
         """Tension per finger of the force-mode tendon [N]; None in position mode."""
         return self.tendon.tension if isinstance(self.tendon, TendonForce) else None
 
+    def as_dict(self) -> dict:
+        """JSON-ready fields, the tendon drive as its text (``force:10``, ``position:1000``).
+
+        ``impulse`` is left out when ``delta_v`` replaces it.
+        """
+        skip = {"tendon"} | ({"impulse"} if self.delta_v is not None else set())
+        d = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name not in skip}
+        return {"tendon": self.tendon.text(), **d}
+
     def impulse_on(self, mass: float) -> float:
         """The disturbance impulse [N s] on an object of ``mass`` [kg]: m·``delta_v``, or ``impulse``."""
         return float(self.impulse if self.delta_v is None else mass * self.delta_v)
@@ -269,9 +279,23 @@ REAL_REGIME = GraspScenario(
 """The grasp as the hardware runs it, where the code can: the XL330 servo on the authors' 8 mm horn at
 the paper's 1000 ticks (:class:`~mjcodesign.scenarios.drive.TendonPosition`), the paper's 10 cm lift at
 the arm's speed, the paper's disturbance relative to the object (:data:`PAPER_DELTA_V`), the
-finger–object friction at the top of :data:`TAPE_FRICTION_RANGE`. With real object masses (``--mass
-real``, :func:`mjcodesign.objects.published_mass`) it is the regime of a real grasp; it is not the
-default of any command."""
+finger–object friction at the top of :data:`TAPE_FRICTION_RANGE`. With real object masses
+(:func:`mjcodesign.objects.published_mass`) it is the scenario of the ``real`` regime
+(:data:`mjcodesign.scenarios.regime.REGIMES`), the commands' default."""
+
+
+def at_paper_disturbance(scenario: GraspScenario, paper_ns: float) -> GraspScenario:
+    """``scenario`` disturbed by the paper's ``paper_ns`` [N s] (its 0.1, 0.2, 0.4 sweep).
+
+    A scenario whose disturbance is a velocity change (``delta_v``, the real regime's) takes it as the
+    paper's 0.1 N s and scales it in proportion (0.2 N s: twice the Δv); one with an impulse takes
+    :func:`paper_impulse` of ``paper_ns``.
+    """
+    if not (np.isfinite(paper_ns) and paper_ns >= 0):
+        raise DesignError(f"a disturbance must be a finite value >= 0 (paper N s), got {paper_ns}")
+    if scenario.delta_v is None:
+        return dataclasses.replace(scenario, impulse=paper_impulse(paper_ns))
+    return dataclasses.replace(scenario, delta_v=scenario.delta_v * paper_ns / _PAPER_IMPULSE)
 
 
 @dataclass
