@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
@@ -28,7 +28,7 @@ from mjcodesign.errors import HardwareError, MjcodesignError, PoseError
 
 from .arm import Workspace, check_transform
 from .camera import ARRAY_FILE_ERRORS, GripperGeometry, crop_to_gripper
-from .tendon import PAPER_PULL_TICKS, TendonConfig
+from .tendon import PAPER_PULL_TICKS, MotorPull, TendonConfig
 
 __all__ = [
     "Arm",
@@ -80,7 +80,7 @@ class Arm(Protocol):
 class Tendons(Protocol):
     """What the pipeline needs from the tendon motors (see `tendon.TendonMotors`)."""
 
-    def pull(self, ticks: int) -> dict[int, int]: ...  # noqa: D102
+    def pull_report(self, ticks: int) -> Mapping[int, MotorPull]: ...  # noqa: D102
 
 
 @dataclass(frozen=True)
@@ -170,6 +170,9 @@ class GraspReport:
     candidates: list[dict] = field(default_factory=list)
     """The plan's ranking (:attr:`GraspPlan.ranking`); empty when only one candidate was planned."""
     selected: int | None = None
+    pulls: list[dict] = field(default_factory=list)
+    """How each tendon motor's pull ended (:meth:`~mjcodesign.hardware.tendon.MotorPull.as_dict`): goal
+    and final displacement [tick], whether it stalled, its current [mA] and estimated tension [N]."""
 
     def as_dict(self) -> dict:
         """JSON-ready summary."""
@@ -180,6 +183,7 @@ class GraspReport:
             "tendon_ticks": self.tendon_ticks,
             "width_m": round(self.width_m, 5),
             "steps": self.steps,
+            "pulls": self.pulls,
         }
         if self.candidates:
             out.update(candidates=self.candidates, selected=self.selected)
@@ -348,7 +352,7 @@ def execute(
     selftest measures the object's height there).
     """
     records: list[dict] = []
-    pulled: dict[int, int] = {}
+    pulled: dict[int, MotorPull] = {}
 
     def run(step: Step, fn: Callable[[], object]) -> None:
         log(f"{len(records) + 1}. {step.action}: {step.detail}")
@@ -361,7 +365,7 @@ def execute(
     run(pre, lambda: arm.move_to(plan.pre_pose, "pre-grasp pose"))
     run(approach, lambda: arm.move_to(plan.hand_pose, "grasp pose"))
     run(close, lambda: arm.grasp(plan.width))
-    run(pull, lambda: pulled.update(tendons.pull(plan.tendon_ticks)))
+    run(pull, lambda: pulled.update(tendons.pull_report(plan.tendon_ticks)))
     z0 = arm.pose()[2, 3]
     run(lift, lambda: arm.move_to(plan.lift_pose, "lift target"))
     lift_m = float(arm.pose()[2, 3] - z0)
@@ -371,8 +375,11 @@ def execute(
         after_lift()
     run(check, lambda: None)
     records[-1]["held"] = held
-    ticks = round(float(np.mean(list(pulled.values())))) if pulled else 0
+    ticks = round(float(np.mean([r.displacement_ticks for r in pulled.values()]))) if pulled else 0
     if abs(lift_m - plan.lift_m) > 0.01:
         raise HardwareError(f"arm lifted {lift_m:.3f} m instead of {plan.lift_m:.3f} m")
     ranked = list(plan.ranking)
-    return GraspReport(held, held, lift_m, ticks, width, records, ranked, plan.index if ranked else None)
+    pulls = [pulled[i].as_dict() for i in sorted(pulled)]
+    return GraspReport(
+        held, held, lift_m, ticks, width, records, ranked, plan.index if ranked else None, pulls
+    )

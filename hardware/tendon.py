@@ -26,7 +26,13 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any, TypeVar
 
-from mjcodesign.design.servo import PAPER_TICKS, TICKS_PER_TURN, XL330_OPERATING_MODE, TendonPosition
+from mjcodesign.design.servo import (
+    PAPER_TICKS,
+    TICKS_PER_TURN,
+    XL330_CURRENT_UNIT,
+    XL330_OPERATING_MODE,
+    TendonPosition,
+)
 from mjcodesign.errors import HardwareError
 
 from .xl330 import ADDR, XL330_MODEL_NUMBER
@@ -178,6 +184,8 @@ class MotorPull:
         displacement_ticks: Final displacement from the slack position [tick].
         goal_ticks: Commanded displacement [tick].
         current_ma: Present current at the end [mA], signed as the motor reports it.
+        tension_n: Tendon tension at that current [N], estimated by the drive's torque model
+            (`TendonPosition.tension_at`: torque ∝ current, no gear friction).
     """
 
     dxl_id: int
@@ -185,14 +193,18 @@ class MotorPull:
     displacement_ticks: int
     goal_ticks: int
     current_ma: int
+    tension_n: float
 
     def as_dict(self) -> dict:
-        """JSON-ready fields; the outcome as its text."""
+        """JSON-ready fields; the outcome as its text, and whether it stalled."""
         return {
+            "dxl_id": self.dxl_id,
             "outcome": self.outcome.value,
+            "stalled": self.outcome is PullOutcome.STALLED,
             "displacement_ticks": self.displacement_ticks,
             "goal_ticks": self.goal_ticks,
             "current_ma": self.current_ma,
+            "tension_n": round(self.tension_n, 2),
         }
 
 
@@ -427,9 +439,7 @@ class TendonMotors:
                 reached = abs(position - goal) <= cfg.tolerance_ticks
                 ends[i] = PullOutcome.REACHED if reached else PullOutcome.STALLED if stalled else None
             if all(ends.values()):
-                return {
-                    i: MotorPull(i, ends[i], state[i][0] - self._slack[i], ticks, state[i][1]) for i in goals
-                }
+                return {i: self._ended(i, ends[i], ticks, *state[i]) for i in goals}
             if now > deadline:
                 late = ", ".join(
                     f"{m.label} at {state[m.dxl_id][0] - self._slack[m.dxl_id]} ticks, "
@@ -443,6 +453,12 @@ class TendonMotors:
                     f"{cfg.drive.current_limit_register} mA; a jam or a cut tendon?)"
                 )
             time.sleep(cfg.poll_s)
+
+    def _ended(
+        self, dxl_id: int, outcome: PullOutcome, ticks: int, position: int, current_ma: int
+    ) -> MotorPull:
+        tension = self.config.drive.tension_at(current_ma * XL330_CURRENT_UNIT)
+        return MotorPull(dxl_id, outcome, position - self._slack[dxl_id], ticks, current_ma, tension)
 
     def displacement(self) -> dict[int, int]:
         """Present displacement from the slack position by ID [tick]."""

@@ -80,6 +80,11 @@ _MAX_TENSION = 200.0
 """Largest tension limit [N] a servo may have: far above any hobby servo on a spool of a few mm."""
 
 
+def _torque_at(current: float) -> float:
+    """XL330 output torque [N·m] at current [A] >= 0: proportional to it up to the 5 V stall current."""
+    return XL330_STALL_TORQUE * min(current, XL330_STALL_CURRENT) / XL330_STALL_CURRENT
+
+
 @dataclass(frozen=True, kw_only=True)
 class TendonPosition:
     """The XL330 in current-based position mode winding the tendon on a spool (the hardware's drive).
@@ -131,12 +136,16 @@ class TendonPosition:
     @property
     def torque_limit(self) -> float:
         """Motor torque limit [N·m]: torque ∝ current up to the 5 V stall current."""
-        return XL330_STALL_TORQUE * min(self.current_limit, XL330_STALL_CURRENT) / XL330_STALL_CURRENT
+        return _torque_at(self.current_limit)
 
     @property
     def max_tension(self) -> float:
         """Tension limit [N]: the torque limit over the spool radius (65 N at the defaults)."""
         return self.torque_limit / self.spool_radius
+
+    def tension_at(self, current: float) -> float:
+        """Tendon tension [N] at motor current ``current`` [A] of either sign (static: no gear friction)."""
+        return _torque_at(abs(current)) / self.spool_radius
 
     @property
     def pull(self) -> float:

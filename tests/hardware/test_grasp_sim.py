@@ -71,6 +71,8 @@ def test_pick_and_lift(scene, cloud_files):
         # The box follows the hand to within 2.5 cm (slip in the PD hand and settling).
         assert lifted[0] > 0.075
         assert report.tendon_ticks == pytest.approx(1000, abs=10)
+        pulls = report.as_dict()["pulls"]  # what hw grasp --json prints per motor
+        assert [r["dxl_id"] for r in pulls] == list(IDS) and {r["goal_ticks"] for r in pulls} == {1000}
         assert not any(torque_over_bus(port, IDS).values())
 
 

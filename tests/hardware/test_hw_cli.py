@@ -179,6 +179,7 @@ def test_selftest_json(tiny_checkpoint):
     assert {"ok", "lift_m", "tendon_ticks", "steps"} <= result.keys()
     assert result["ok"] is True
     assert result["lift_m"] > 0.075 and result["tendon_ticks"] == pytest.approx(1000, abs=10)
+    assert [(r["dxl_id"], r["goal_ticks"]) for r in result["pulls"]] == [(1, 1000), (2, 1000)]
     rows = result["candidates"]
     assert len(rows) == 3 and all(r["feasible"] and np.isfinite(r["success_score"]) for r in rows)
     assert result["selected"] == max(rows, key=lambda r: r["success_score"])["index"]
