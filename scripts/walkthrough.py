@@ -34,6 +34,7 @@ def page_commands(text: str) -> tuple[str, list[str]]:
 
 
 def main() -> int:
+    """Run the page's commands and write the record; exit 1 when a step failed."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--work", required=True, help="folder to run in (work/ is made inside it)")
     parser.add_argument("--out", required=True, help="the record (JSON)")
