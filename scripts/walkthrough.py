@@ -2,7 +2,7 @@
 
     python3 scripts/walkthrough.py --work DIR --out benchmarks/records/DATE_walkthrough.json
 
-The commands are read from the page's first ``bash`` block (its ``OBJECTS=`` line and the five
+The commands are read from the page's workflow ``bash`` block (its ``OBJECTS=`` line and the five
 ``mjcodesign`` lines) and run in order in one shell under ``nice -n 5``, from ``DIR`` (``work/`` is
 made inside it). The record holds the commands, their exit codes and wall times, the dataset's counts,
 the evaluation's table, and the provenance of the installed code (:func:`mjcodesign.bench.record.provenance`).
@@ -24,11 +24,14 @@ PAGE = Path(__file__).resolve().parents[1] / "docs" / "getting-started.md"
 
 
 def page_commands(text: str) -> tuple[str, list[str]]:
-    """(the ``OBJECTS=`` assignment, the ``mjcodesign`` command lines) of the page's first bash block."""
-    block = re.search(r"```bash\n(.*?)```", text, re.S)
-    if block is None:
-        raise SystemExit(f"{PAGE}: no bash block")
-    lines = [ln.strip() for ln in block.group(1).splitlines() if ln.strip() and not ln.startswith("#")]
+    """(the ``OBJECTS=`` assignment, the ``mjcodesign`` command lines) of the page's workflow block.
+
+    The workflow block is the first ``bash`` block that sets ``OBJECTS``.
+    """
+    blocks = [b for b in re.findall(r"```bash\n(.*?)```", text, re.S) if "OBJECTS=" in b]
+    if not blocks:
+        raise SystemExit(f"{PAGE}: no bash block sets OBJECTS")
+    lines = [ln.strip() for ln in blocks[0].splitlines() if ln.strip() and not ln.startswith("#")]
     objects = next(ln for ln in lines if ln.startswith("OBJECTS="))
     return objects, [ln for ln in lines if ln.startswith("mjcodesign ")]
 
