@@ -56,7 +56,8 @@ class RobotGraspJob:
         surrogate: A surrogate checkpoint folder: score every candidate for ``design`` and run the
             feasible one with the best predicted success (`surrogate_select`); None: most points.
         design: The printed fingers' design (a `Stiffness`), needed with ``surrogate``.
-        density: Object density the surrogate assumes [kg/m³].
+        density: Object density the surrogate assumes [kg/m³]; None: the real regime's density of an
+            object without a published mass (`mjcodesign.objects.YCB_MEDIAN_DENSITY`, 680).
     """
 
     robot: str | None
@@ -78,9 +79,13 @@ class RobotGraspJob:
     dry_run: bool = False
     surrogate: Path | None = None
     design: object | None = None
-    density: float = 100.0
+    density: float | None = None
 
     def __post_init__(self) -> None:
+        if self.density is None:
+            from mjcodesign.objects.mesh import YCB_MEDIAN_DENSITY  # here: the objects import trimesh
+
+            object.__setattr__(self, "density", YCB_MEDIAN_DENSITY)
         if not self.dry_run and not (self.robot and self.dxl):
             raise HardwareError("a grasp needs --robot and --dxl (or --dry-run)")
         if self.surrogate is not None and self.design is None:

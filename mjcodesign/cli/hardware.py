@@ -116,8 +116,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     g.add_argument(
         "--density",
         type=finite_float(0.0, strict=True),
-        default=100.0,
-        help="object density the surrogate assumes [kg/m³]",
+        default=None,
+        help="object density the surrogate assumes [kg/m³] (default: 680, the real regime's for an object "
+        "without a published mass, the median of the YCB objects')",
     )
     g.add_argument("--json", action="store_true", help="print the report as JSON")
     _add_motor_args(g)

@@ -78,6 +78,7 @@ def test_scores_pick_the_best_feasible_candidate(tiny_checkpoint, tmp_path, caps
         [
             "hw", "grasp", "--dry-run", "--json", "--cloud", str(tmp_path / "cloud.ply"),
             "--pose", str(tmp_path / "cands.npz"), "--surrogate", str(tiny_checkpoint), "--design", "soft",
+            "--density", "100",  # the tiny checkpoint's training density (the default, 680, is outside it)
         ]
     )  # fmt: skip
     out = json.loads(capsys.readouterr().out)
@@ -88,6 +89,14 @@ def test_scores_pick_the_best_feasible_candidate(tiny_checkpoint, tmp_path, caps
     best = max(feasible, key=lambda i: rows[i]["success_score"])
     assert out["selected"] == best
     assert rows[best]["success_score"] == pytest.approx(scores[best].success_score)
+    # Without --density the surrogate assumes the real regime's 680 kg/m³: outside this checkpoint's range.
+    args = ["hw", "grasp", "--dry-run", "--json", "--cloud", str(tmp_path / "cloud.ply"), "--pose"]
+    assert (
+        main([*args, str(tmp_path / "cands.npz"), "--surrogate", str(tiny_checkpoint), "--design", "soft"])
+        == 2
+    )
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "680" in err[0], err
 
 
 def test_surrogate_needs_a_design(tmp_path, capsys):
