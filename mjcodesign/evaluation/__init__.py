@@ -38,7 +38,6 @@ from mjcodesign.evaluation.suite import (
     DEFAULT_SUITE,
     SUITE_FORMAT,
     SUITE_VERSION,
-    PerturbationModel,
     Suite,
     SuiteError,
     SuiteObject,
@@ -50,6 +49,7 @@ from mjcodesign.evaluation.suite import (
     suite_folds,
 )
 from mjcodesign.evaluation.suite_report import PAPER_MEASURED, suite_header, write_suite_report
+from mjcodesign.scenarios.perturb import PerturbationModel
 
 __all__ = [
     "ALL_POSES",

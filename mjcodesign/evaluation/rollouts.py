@@ -28,7 +28,7 @@ from mjcodesign.objects import MASS_MODES, parse_density, published_mass, publis
 from mjcodesign.poses.candidates import MAX_PENETRATION
 from mjcodesign.scenarios.grasp import GraspScenario, at_paper_disturbance, scene_at_pose
 from mjcodesign.scenarios.outcome import Outcome
-from mjcodesign.scenarios.perturb import Perturbation, perturbed_scene, start_penetration
+from mjcodesign.scenarios.perturb import MAX_REDRAWS, Perturbation, draw_perturbations
 from mjcodesign.sim.protocol import get_backend
 
 __all__ = [
@@ -44,8 +44,6 @@ POSE_POLICIES = ("fixed", "surrogate", "oracle")
 """``fixed``: each object's first pose; ``surrogate``: the surrogate's best pose for the design;
 ``oracle``: the simulator's best pose for the design (measured on the same draws: an upper bound of any
 pose selector, optimistic by the winner's curse). Every report also gives ``all``: every pose."""
-MAX_REDRAWS = 50
-"""Draws tried per perturbation before the pose's draw is given up (counted in ``draws_given_up``)."""
 
 Progress = Callable[[str, int, int], None]
 
@@ -134,23 +132,15 @@ def _draws(
     suite: Suite, run: SuiteRun, so: SuiteObject, base, k: int
 ) -> tuple[list[Perturbation | None], int]:
     """The ``run.perturbations`` draws of pose ``k`` (None where given up) and how many were redrawn."""
-    rng = suite.perturbation.stream(run.seed, so.name, k)
-    pose = so.poses[k]
-    out: list[Perturbation | None] = []
-    redrawn = 0
-    for _ in range(run.perturbations):
-        for _attempt in range(MAX_REDRAWS):
-            p = suite.perturbation.draw(rng)
-            try:
-                if start_penetration(perturbed_scene(base, run.scenario, p, pose=pose)) <= MAX_PENETRATION:
-                    out.append(p)
-                    break
-            except PoseError:
-                pass
-            redrawn += 1
-        else:
-            out.append(None)
-    return out, redrawn
+    return draw_perturbations(
+        suite.perturbation,
+        suite.perturbation.stream(run.seed, so.name, k),
+        run.perturbations,
+        base,
+        run.scenario,
+        so.poses[k],
+        max_penetration=MAX_PENETRATION,
+    )
 
 
 def _outcome_row(o: Outcome, scenario: GraspScenario) -> dict:

@@ -5,18 +5,8 @@ object with its domain, fold and source, the palm poses sampled once for it (4x4
 openings, with the seed that sampled them), and the perturbation model whose draws every design shares.
 Results name the suite by ``name`` and by the SHA-256 of its file (:attr:`Suite.digest`).
 
-The perturbation ranges (uniform, independent, each ± its value) and where each comes from:
-
-- palm position ±2 mm per axis and rotation ±2° per axis: the Franka arm's pose repeatability
-  (±0.1 mm, its datasheet) is small beside a wrist or fixed camera's hand–eye calibration error, which
-  is of the order of millimetres and a degree or two; ±2 mm and ±2° stand for the two together;
-- object mass ±10 %: a household object's mass varies with its filling and the scale's error;
-- finger–object friction ±20 %: the spread of friction coefficients of a rubbery gripping surface
-  against common object materials (paper, plastic, fruit skin, metal);
-- tendon drive ±5 %: the XL330's torque constant and current sensing vary from unit to unit, and the
-  spool radius with the print.
-
-All ranges are options (:class:`PerturbationModel`).
+The perturbation model and its ranges (each with where it comes from) are
+:class:`~mjcodesign.scenarios.perturb.PerturbationModel`'s.
 """
 
 from __future__ import annotations
@@ -24,10 +14,8 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import json
-import math
-import zlib
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 
@@ -37,13 +25,12 @@ from mjcodesign.errors import DesignError, MjcodesignError
 from mjcodesign.models.types import GripperPose
 from mjcodesign.objects import YCB_IN_DOMAIN, parse_egad_index
 from mjcodesign.outputs import read_versioned_json
-from mjcodesign.scenarios.perturb import Perturbation
+from mjcodesign.scenarios.perturb import PerturbationModel
 
 __all__ = [
     "DEFAULT_SUITE",
     "SUITE_FORMAT",
     "SUITE_VERSION",
-    "PerturbationModel",
     "Suite",
     "SuiteError",
     "SuiteObject",
@@ -63,57 +50,11 @@ DEFAULT_SUITE = "default-v1"
 ``ood`` set, 10 poses each."""
 DEFAULT_FOLDS = 5
 """Object-level folds of the in-domain objects (``fold``), for K-fold held-out surrogates."""
-_PERTURB_STREAM = 0x5E7  # the perturbation draws' own random stream, apart from the suite's pose seed
 _FOLD_STREAM = 0xF01D  # the folds' own random stream
 
 
 class SuiteError(MjcodesignError):
     """A suite file that cannot be used: unknown format or version, missing or malformed fields."""
-
-
-@dataclass(frozen=True, kw_only=True)
-class PerturbationModel:
-    """Uniform ranges (± each value) of what a real robot does differently on each execution."""
-
-    palm_position_m: float = 0.002
-    """Palm position error per world axis [m]."""
-    palm_rotation_deg: float = 2.0
-    """Palm rotation error per world axis [deg] (a rotation vector's components)."""
-    mass: float = 0.10
-    """Object mass error, relative [-]."""
-    friction: float = 0.20
-    """Finger–object friction error, relative [-]."""
-    tendon: float = 0.05
-    """Tendon tension or servo gain error, relative [-]."""
-
-    def __post_init__(self) -> None:
-        for name, value in asdict(self).items():
-            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
-                raise DesignError(f"perturbation range {name} must be a finite value >= 0, got {value!r}")
-        for name in ("mass", "friction", "tendon"):
-            if getattr(self, name) >= 1:
-                raise DesignError(
-                    f"perturbation range {name} must be < 1 (a factor 1 ± it), got {getattr(self, name)}"
-                )
-
-    def draw(self, rng: np.random.Generator) -> Perturbation:
-        """One draw (nine uniform numbers from ``rng``, in a fixed order)."""
-        u = rng.uniform(-1.0, 1.0, size=9)
-        return Perturbation(
-            palm_offset=tuple(self.palm_position_m * u[0:3]),
-            palm_rotation=tuple(np.deg2rad(self.palm_rotation_deg) * u[3:6]),
-            mass_scale=1.0 + self.mass * u[6],
-            friction_scale=1.0 + self.friction * u[7],
-            tendon_scale=1.0 + self.tendon * u[8],
-        )
-
-    def stream(self, seed: int, obj: str, pose: int) -> np.random.Generator:
-        """The draws' generator of one (object, pose): shared by every design (common random numbers)."""
-        return np.random.default_rng([int(seed), _PERTURB_STREAM, zlib.crc32(obj.encode()), int(pose)])
-
-    def as_dict(self) -> dict:
-        """JSON-ready fields."""
-        return asdict(self)
 
 
 @dataclass(frozen=True)

@@ -6,24 +6,52 @@ pair's) and
 the tendon drive (the force mode's tension, or the position servo's gain and tension limit).
 :func:`perturbed_scene` writes one into a copy of a compiled scene without recompiling, so a batch of
 perturbed scenes shares one model structure and runs through one ``mujoco.rollout`` call.
+
+A :class:`PerturbationModel` holds the ranges draws come from (uniform, independent, each ± its value);
+:func:`draw_perturbations` draws a pose's perturbations from a seeded stream, drawing again where a
+draw's start overlaps the object or the ground. The ranges and where each comes from:
+
+- palm position ±2 mm per axis and rotation ±2° per axis: the Franka arm's pose repeatability
+  (±0.1 mm, its datasheet) is small beside a wrist or fixed camera's hand–eye calibration error, which
+  is of the order of millimetres and a degree or two; ±2 mm and ±2° stand for the two together;
+- object mass ±10 %: a household object's mass varies with its filling and the scale's error;
+- finger–object friction ±20 %: the spread of friction coefficients of a rubbery gripping surface
+  against common object materials (paper, plastic, fruit skin, metal);
+- tendon drive ±5 %: the XL330's torque constant and current sensing vary from unit to unit, and the
+  spool radius with the print.
 """
 
 from __future__ import annotations
 
 import copy
 import dataclasses
-from dataclasses import dataclass
+import math
+import zlib
+from dataclasses import asdict, dataclass
 
 import mujoco
 import numpy as np
 
-from mjcodesign.errors import DesignError
+from mjcodesign.errors import DesignError, PoseError
 from mjcodesign.models.builder import make_data
 from mjcodesign.models.types import GripperPose
 from mjcodesign.scenarios.drive import TendonForce
 from mjcodesign.scenarios.grasp import GraspScenario, GraspScene, drive_scene, scene_at_pose
 
-__all__ = ["NOMINAL", "Perturbation", "perturbed_pose", "perturbed_scene", "start_penetration"]
+__all__ = [
+    "MAX_REDRAWS",
+    "NOMINAL",
+    "Perturbation",
+    "PerturbationModel",
+    "draw_perturbations",
+    "perturbed_pose",
+    "perturbed_scene",
+    "start_penetration",
+]
+
+MAX_REDRAWS = 50
+"""Draws tried per perturbation before it is given up (:func:`draw_perturbations` returns None for it)."""
+_PERTURB_STREAM = 0x5E7  # the perturbation draws' own random stream, apart from the suite's pose seed
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -62,9 +90,95 @@ class Perturbation:
         """JSON-ready fields."""
         return dataclasses.asdict(self)
 
+    def as_array(self) -> np.ndarray:
+        """The nine numbers, shape (9,): palm offset [m] (3), rotation [rad] (3), mass, friction, tendon [-]."""
+        return np.array(
+            [*self.palm_offset, *self.palm_rotation, self.mass_scale, self.friction_scale, self.tendon_scale]
+        )
+
 
 NOMINAL = Perturbation()
 """The draw that changes nothing."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class PerturbationModel:
+    """Uniform ranges (± each value) of what a real robot does differently on each execution."""
+
+    palm_position_m: float = 0.002
+    """Palm position error per world axis [m]."""
+    palm_rotation_deg: float = 2.0
+    """Palm rotation error per world axis [deg] (a rotation vector's components)."""
+    mass: float = 0.10
+    """Object mass error, relative [-]."""
+    friction: float = 0.20
+    """Finger–object friction error, relative [-]."""
+    tendon: float = 0.05
+    """Tendon tension or servo gain error, relative [-]."""
+
+    def __post_init__(self) -> None:
+        for name, value in asdict(self).items():
+            if not (isinstance(value, int | float) and math.isfinite(value) and value >= 0):
+                raise DesignError(f"perturbation range {name} must be a finite value >= 0, got {value!r}")
+        for name in ("mass", "friction", "tendon"):
+            if getattr(self, name) >= 1:
+                raise DesignError(
+                    f"perturbation range {name} must be < 1 (a factor 1 ± it), got {getattr(self, name)}"
+                )
+
+    def draw(self, rng: np.random.Generator) -> Perturbation:
+        """One draw (nine uniform numbers from ``rng``, in a fixed order)."""
+        u = rng.uniform(-1.0, 1.0, size=9)
+        return Perturbation(
+            palm_offset=tuple(self.palm_position_m * u[0:3]),
+            palm_rotation=tuple(np.deg2rad(self.palm_rotation_deg) * u[3:6]),
+            mass_scale=1.0 + self.mass * u[6],
+            friction_scale=1.0 + self.friction * u[7],
+            tendon_scale=1.0 + self.tendon * u[8],
+        )
+
+    def stream(self, seed: int, obj: str, pose: int) -> np.random.Generator:
+        """The draws' generator of one (object, pose): shared by every design (common random numbers)."""
+        return np.random.default_rng([int(seed), _PERTURB_STREAM, zlib.crc32(obj.encode()), int(pose)])
+
+    def as_dict(self) -> dict:
+        """JSON-ready fields."""
+        return asdict(self)
+
+
+def draw_perturbations(
+    model: PerturbationModel,
+    rng: np.random.Generator,
+    n: int,
+    scene: GraspScene,
+    scenario: GraspScenario,
+    pose: GripperPose,
+    *,
+    max_penetration: float,
+    max_redraws: int = MAX_REDRAWS,
+) -> tuple[list[Perturbation | None], int]:
+    """``n`` draws of ``model`` from ``rng`` for ``scene`` at ``pose``, and how many were drawn again.
+
+    A draw whose start penetrates deeper than ``max_penetration`` [m] (:func:`start_penetration`), or
+    whose pose cannot be simulated, is drawn again, at most ``max_redraws`` times; then that draw is
+    None (given up). The draws come from ``rng`` in order, so ``n`` draws and then ``m`` more from the
+    same generator are the first ``n + m`` draws of one call.
+    """
+    out: list[Perturbation | None] = []
+    redrawn = 0
+    for _ in range(n):
+        for _attempt in range(max_redraws):
+            p = model.draw(rng)
+            try:
+                if start_penetration(perturbed_scene(scene, scenario, p, pose=pose)) <= max_penetration:
+                    out.append(p)
+                    break
+            except PoseError:
+                pass
+            redrawn += 1
+        else:
+            out.append(None)
+    return out, redrawn
 
 
 def perturbed_pose(pose: GripperPose, p: Perturbation) -> GripperPose:
