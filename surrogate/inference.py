@@ -128,6 +128,22 @@ class InputRange:
         low, high = float(density["low_kg_m3"]), float(density["high_kg_m3"])
         return cls(np.full(N_LOG_E, LOG_E_MIN), np.full(N_LOG_E, LOG_E_MAX), low, high)
 
+    @classmethod
+    def of_dataset(cls, density: np.ndarray) -> InputRange:
+        """A datagen dataset's range: ln E printable, the density over its rows ``density`` [kg/m³].
+
+        ln E spans the printable range (datagen draws every block over it). The density is the rows',
+        not the configured ``--density``: a dataset at published masses (mass rule ``real``
+        or ``auto``) holds each object at its own density, whatever the configured one.
+        """
+        density = np.asarray(density, dtype=float)
+        return cls(
+            np.full(N_LOG_E, LOG_E_MIN),
+            np.full(N_LOG_E, LOG_E_MAX),
+            float(density.min()),
+            float(density.max()),
+        )
+
     def as_dict(self) -> dict:
         """JSON-ready."""
         return {

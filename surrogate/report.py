@@ -36,7 +36,7 @@ from mjcodesign.surrogate.data import (
     subsample,
 )
 from mjcodesign.surrogate.folds import FOLDS_FILE, FOLDS_FORMAT, FOLDS_VERSION
-from mjcodesign.surrogate.inference import GraspBatch, Poses, Surrogate
+from mjcodesign.surrogate.inference import GraspBatch, InputRange, Poses, Surrogate
 from mjcodesign.surrogate.metrics import mean_baseline, score_outputs, success_scores, tree_baseline
 from mjcodesign.surrogate.model import ModelConfig
 from mjcodesign.surrogate.plots import plot_calibration, plot_curves, plot_lines
@@ -237,7 +237,13 @@ def train_and_report(
                           on_epoch=on_epoch and (lambda log: on_epoch("full", log)))}  # fmt: skip
     res = runs["full"]
     dataset = _dataset_record(data)
-    sur = Surrogate(res.model, res.normalizer, lift=data.lift, lifted_fraction=data.lifted_fraction)
+    sur = Surrogate(
+        res.model,
+        res.normalizer,
+        lift=data.lift,
+        lifted_fraction=data.lifted_fraction,
+        input_range=InputRange.of_dataset(data.density),
+    )
     test_set = GraspDataset(data, parts.test, res.normalizer, frame=mcfg.frame_inputs)
     net = _measure(
         "surrogate",
@@ -258,7 +264,13 @@ def train_and_report(
         small = train(data, subsample(parts, efficiency, seed=cfg.seed), cfg, None if start else mcfg, init=start,
                       on_epoch=on_epoch and (lambda log: on_epoch("efficiency", log)))  # fmt: skip
         runs["efficiency"] = small
-        s_sur = Surrogate(small.model, small.normalizer, lift=data.lift, lifted_fraction=data.lifted_fraction)
+        s_sur = Surrogate(
+            small.model,
+            small.normalizer,
+            lift=data.lift,
+            lifted_fraction=data.lifted_fraction,
+            input_range=InputRange.of_dataset(data.density),
+        )
         s_pred = predict_rows(s_sur, data, parts.test), predict_rows(s_sur, data, parts.val)
         metrics["efficiency"] = {"fraction": efficiency, "training": small.summary(),
                                  "test": _measure(f"surrogate on {efficiency:.0%}", *s_pred, data, parts, small.normalizer)}  # fmt: skip
@@ -386,7 +398,13 @@ def train_folds(
         name = parts.mode
         res = train(data, parts, cfg, None if start else mcfg, init=start,
                     on_epoch=on_epoch and (lambda log, name=name: on_epoch(name, log)))  # fmt: skip
-        sur = Surrogate(res.model, res.normalizer, lift=data.lift, lifted_fraction=data.lifted_fraction)
+        sur = Surrogate(
+            res.model,
+            res.normalizer,
+            lift=data.lift,
+            lifted_fraction=data.lifted_fraction,
+            input_range=InputRange.of_dataset(data.density),
+        )
         pooled[parts.test] = predict_rows(sur, data, parts.test)
         m = _measure(
             "surrogate", pooled[parts.test], predict_rows(sur, data, parts.val), data, parts, res.normalizer
