@@ -105,8 +105,8 @@ class DatasetSchema(_Generated):
         from mjcodesign.data import schema
 
         out = []
-        for table, sch in schema.TABLES.items():
-            out += [f"**{table}/**", ""]
+        for table, sch in schema.DOCUMENTED.items():
+            out += [f"**{table}**", ""]
             rows = [[f"``{f.name}``", f"``{f.type}``", schema.COLUMNS[f.name]] for f in sch]
             out += _rst_table(["column", "type", "meaning"], rows, "20 25 55")
         return out

@@ -88,6 +88,14 @@ def add_parser(subparsers) -> None:
         help="mjwarp: Warp device (auto: CUDA if any)",
     )
     p.add_argument("--sampler", choices=("uniform", "sobol"), default="uniform", help="design sampler")
+    p.add_argument(
+        "--perturbations",
+        default="1",
+        help="K: perturbed rollouts per (pose, design) cell under the evaluation's perturbation model "
+        "(palm, mass, friction, tendon), a row storing success_p and the outputs' means and spreads, "
+        "every rollout in rollouts/; K:M: K, extended to M where the K disagree (e.g. 4:16); "
+        "1: one nominal rollout (default)",
+    )
     p.add_argument("--workers", type=int, default=1, help="processes (1: this one, MuJoCo on every core)")
     p.add_argument(
         "--ray", default=None, help="run the shards on Ray: 'local' (this machine) or a cluster address"
@@ -173,9 +181,16 @@ def datagen_config(args: argparse.Namespace):
     ``--regime`` gives the scenario, the tendon, the density and the mass rule; the flags that name one
     replace it.
     """
-    from mjcodesign.data import DatagenConfig, parse_density_spec, parse_tendon, resolve_objects
+    from mjcodesign.data import (
+        DatagenConfig,
+        parse_density_spec,
+        parse_perturbations,
+        parse_tendon,
+        resolve_objects,
+    )
     from mjcodesign.scenarios import get_regime
 
+    draws, extend_to = parse_perturbations(args.perturbations)
     regime = get_regime(args.regime)
     density, mass = regime.masses(args.density, args.mass)
     scenario = _scenario(args.scenario, regime.scenario)
@@ -186,6 +201,8 @@ def datagen_config(args: argparse.Namespace):
         tendon=scenario.tendon if args.tendon is None else parse_tendon(args.tendon),
         scenario=scenario,
         mass=mass,
+        perturbations=draws,
+        perturbations_max=extend_to,
         **{k: getattr(args, k) for k in same},
     )
 
@@ -350,6 +367,8 @@ def run_info(args: argparse.Namespace) -> int:
         )
     for key in ("by_density", "by_design_group"):
         emit([{key[3:]: k, **v} for k, v in res[key].items()] or [{key[3:]: "-"}], False)
+    if "labels" in res:
+        emit({f"labels: {k}": v for k, v in res["labels"].items()}, False)
     for key in ("failures", "rejected_by_kind", "rejected_top_reasons"):
         if res[key]:
             emit({f"{key}: {k}": v for k, v in res[key].items()}, False)

@@ -7,6 +7,7 @@ Import from here (``from mjcodesign.data import generate``): each name has this 
 - :mod:`~mjcodesign.data.cloud`: the partial point cloud in the fingers' bounding box;
 - :mod:`~mjcodesign.data.schema`: the tables' Arrow schemas and column meanings;
 - :mod:`~mjcodesign.data.tasks`: preparing an object, running a shard (:class:`Worker`);
+- :mod:`~mjcodesign.data.cells`: cells of K perturbed rollouts (``--perturbations``) and their labels;
 - :mod:`~mjcodesign.data.executors`: in-process, process-pool and Ray execution;
 - :mod:`~mjcodesign.data.store`: the dataset folder, its manifest and crash-safe writes;
 - :mod:`~mjcodesign.data.generate`: :func:`generate`, the resumable driver;
@@ -23,14 +24,23 @@ from mjcodesign.data.config import (
     DatagenConfig,
     DensitySpec,
     parse_density_spec,
+    parse_perturbations,
     parse_tendon,
     resolve_objects,
 )
 from mjcodesign.data.generate import Event, generate
-from mjcodesign.data.reader import DESIGN_GROUPS, Dataset, design_group, open_dataset, plot_success, summarize
+from mjcodesign.data.reader import (
+    DESIGN_GROUPS,
+    Dataset,
+    design_group,
+    label_spread,
+    open_dataset,
+    plot_success,
+    summarize,
+)
 from mjcodesign.data.rows import PoseRows, StoredPoses, read_poses
 from mjcodesign.data.sampling import PoseStreams, object_pose_seed, sample_designs
-from mjcodesign.data.schema import COLUMNS, POSES, REJECTED, SAMPLES
+from mjcodesign.data.schema import COLUMNS, POSES, REJECTED, ROLLOUTS, SAMPLES, SAMPLES_P
 from mjcodesign.data.store import MANIFEST, DatasetDir, project_version
 from mjcodesign.data.tasks import ObjectTask, ShardTask, Worker, shard_key
 
@@ -42,8 +52,10 @@ __all__ = [
     "MANIFEST",
     "POSES",
     "REJECTED",
+    "ROLLOUTS",
     "SAMPLERS",
     "SAMPLES",
+    "SAMPLES_P",
     "SCHEMA_VERSION",
     "Dataset",
     "DatasetDir",
@@ -61,9 +73,11 @@ __all__ = [
     "fingers_box",
     "generate",
     "gripper_up",
+    "label_spread",
     "object_pose_seed",
     "open_dataset",
     "parse_density_spec",
+    "parse_perturbations",
     "parse_tendon",
     "partial_cloud",
     "plot_success",

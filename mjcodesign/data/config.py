@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from mjcodesign.design.finger import FingerDesign
-from mjcodesign.errors import DesignError, MeshError, OutputError
+from mjcodesign.errors import DesignError, MeshError, OutputError, UnsupportedError
 from mjcodesign.models.types import FingerModel, SimOptions
 from mjcodesign.objects import (
     MASS_MODES,
@@ -32,6 +32,7 @@ from mjcodesign.objects import (
 from mjcodesign.scenarios.drive import TendonForce, TendonPosition
 from mjcodesign.scenarios.drive import parse_tendon as _parse_tendon
 from mjcodesign.scenarios.grasp import GraspScenario, scene_options
+from mjcodesign.scenarios.perturb import PerturbationModel
 from mjcodesign.scenarios.regime import regime_name
 
 __all__ = [
@@ -42,6 +43,7 @@ __all__ = [
     "DatagenConfig",
     "DensitySpec",
     "parse_density_spec",
+    "parse_perturbations",
     "parse_tendon",
     "resolve_objects",
 ]
@@ -103,6 +105,31 @@ def parse_tendon(text: str) -> TendonForce | TendonPosition:
     `mjcodesign.scenarios.parse_tendon`; raises its :class:`~mjcodesign.scenarios.TendonSpecError`.
     """
     return _parse_tendon(text)
+
+
+def parse_perturbations(text: str) -> tuple[int, int | None]:
+    """``--perturbations``: ``K`` (draws per cell) or ``K:M`` (K, extended to M where the K disagree).
+
+    Returns ``(K, M)``, M None without an extension. Raises :class:`DesignError` unless K >= 1, and for
+    ``K:M`` unless 2 <= K < M.
+    """
+    text = str(text).strip()
+    parts = text.split(":")
+    if len(parts) > 2 or not all(x.strip().isdigit() for x in parts):
+        raise DesignError(f"--perturbations {text}: write K or K:M with integers (e.g. 4 or 4:16)")
+    k = int(parts[0])
+    m = int(parts[1]) if len(parts) == 2 else None
+    _check_perturbations(k, m)
+    return k, m
+
+
+def _check_perturbations(k, m) -> None:
+    if isinstance(k, bool) or not isinstance(k, int | np.integer) or k < 1:
+        raise DesignError(f"--perturbations must be an integer >= 1, got {k!r}")
+    if m is None:
+        return
+    if isinstance(m, bool) or not isinstance(m, int | np.integer) or k < 2 or m <= k:
+        raise DesignError(f"--perturbations {k}:{m}: K:M extends K >= 2 draws to M > K where they disagree")
 
 
 def resolve_objects(text: str) -> tuple[str, ...]:
@@ -182,6 +209,13 @@ class DatagenConfig:
     mass (:func:`~mjcodesign.objects.published_mass`; uniform density mass / volume, :attr:`density`
     unused), refused for an object without one, or ``auto``, the published mass where there is one and
     :attr:`density` otherwise (the real regime's rule)."""
+    perturbations: int = 1
+    """Perturbed rollouts per (pose, design) cell (``K``); 1: one nominal rollout, no perturbation."""
+    perturbations_max: int | None = None
+    """Where a cell's first :attr:`perturbations` usable rollouts disagree, it runs this many (``M``);
+    None: never extended."""
+    perturbation: PerturbationModel = field(default_factory=PerturbationModel)
+    """The ranges the draws come from; with :attr:`perturbations` 1, unused and set to the default."""
 
     def __post_init__(self) -> None:
         if not self.objects:
@@ -202,6 +236,16 @@ class DatagenConfig:
         object.__setattr__(self, "model", FingerModel(self.model))
         if self.backend not in BACKENDS:
             raise DesignError(f"unknown backend {self.backend!r}: choose from {', '.join(BACKENDS)}")
+        _check_perturbations(self.perturbations, self.perturbations_max)
+        if not isinstance(self.perturbation, PerturbationModel):
+            raise DesignError(f"perturbation must be a PerturbationModel, got {self.perturbation!r}")
+        if not self.perturbed:  # unused: the default, so that equal rows mean equal configs
+            object.__setattr__(self, "perturbation", PerturbationModel())
+        if self.perturbed and self.backend != "mujoco":
+            raise UnsupportedError(
+                "--perturbations > 1 runs on --backend mujoco (MJWarp shares mass, friction and drive "
+                "across worlds)"
+            )
         if self.sampler not in SAMPLERS:
             raise DesignError(f"unknown sampler {self.sampler!r}: choose from {', '.join(SAMPLERS)}")
         tendon = self.tendon
@@ -225,15 +269,29 @@ class DatagenConfig:
         return regime_name(self.scenario, self.mass)
 
     @property
+    def perturbed(self) -> bool:
+        """Whether a cell is several perturbed rollouts (:attr:`perturbations` > 1)."""
+        return self.perturbations > 1
+
+    @property
+    def max_draws(self) -> int:
+        """The most rollouts a cell runs: M, or K without an extension."""
+        return self.perturbations_max or self.perturbations
+
+    @property
     def coacd(self) -> CoacdSettings:
         """The convex decomposition settings the objects are loaded with."""
         return CoacdSettings(seed=self.object_seed)
 
     def as_dict(self) -> dict:
-        """JSON-ready parameters (scenario, finger geometry, simulation options, tendon, model, backend)."""
+        """JSON-ready parameters (scenario, finger geometry, simulation options, tendon, model, backend).
+
+        ``perturbations`` (K, M and the model's ranges) only when K > 1: a dataset of one rollout per
+        cell keeps the dict, and the fingerprint, it had before datasets could have more.
+        """
         geometry = dataclasses.asdict(self.geometry)
         geometry["routing"] = self.geometry.routing.value
-        return {
+        d = {
             "objects": list(self.objects),
             "poses_per_object": int(self.poses_per_object),
             "designs_per_pose": int(self.designs_per_pose),
@@ -255,6 +313,13 @@ class DatagenConfig:
             "coacd": dataclasses.asdict(self.coacd),
             "mass": _mass_dict(self.mass),
         }
+        if self.perturbed:
+            d["perturbations"] = {
+                "draws": int(self.perturbations),
+                "extend_to": int(self.max_draws),
+                "model": self.perturbation.as_dict(),
+            }
+        return d
 
     @classmethod
     def from_dict(cls, d: dict) -> DatagenConfig:
@@ -268,6 +333,16 @@ class DatagenConfig:
             density = d["density"]
             finger = dict(d["finger"])
             scenario = {k: v for k, v in d["scenario"].items() if k != "tendon"}
+            perturb = d.get("perturbations")
+            if perturb is None:
+                draws = {}
+            else:
+                k, m = int(perturb["draws"]), int(perturb["extend_to"])
+                draws = {
+                    "perturbations": k,
+                    "perturbations_max": m if m > k else None,
+                    "perturbation": PerturbationModel(**perturb["model"]),
+                }
             return cls(
                 objects=tuple(str(o) for o in d["objects"]),
                 poses_per_object=int(d["poses_per_object"]),
@@ -285,6 +360,7 @@ class DatagenConfig:
                 scenario=GraspScenario(**scenario),
                 geometry=FingerDesign(**finger),
                 mass=str(d.get("mass", {"mode": "density"})["mode"]),
+                **draws,
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise OutputError(f"not a dataset config ({type(exc).__name__}: {exc})") from exc

@@ -10,7 +10,8 @@ flight, and the next run into the same folder skips everything the manifest list
 Determinism: a shard's designs, density and point cloud come from seeds keyed by its (object, pose)
 (:mod:`mjcodesign.data.sampling`), and MuJoCo C gives the same bits whatever batch or thread a rollout
 runs in, so the rows do not depend on ``workers``, on Ray, or on how often the run was interrupted
-(only ``wall_time_s`` does).
+(only ``wall_time_s`` does). With K > 1 perturbed rollouts per cell, the draws come from a stream keyed
+by (object, pose) too (:mod:`mjcodesign.data.cells`).
 """
 
 from __future__ import annotations
@@ -98,7 +99,8 @@ def generate(
         ds.close()
     wall = time.perf_counter() - t0
     counts = ds.manifest["counts"]
-    rollouts = computed["samples"] + computed["rejected"]
+    # K > 1: every perturbed rollout; else one rollout per sample or rejected row.
+    rollouts = computed.get("rollouts", computed["samples"] + computed["rejected"])
     return {
         "out": str(out),
         "complete": ds.manifest["complete"],
@@ -169,6 +171,8 @@ class _Scheduler:
         self.queue: deque[list[ShardTask]] = deque()
         self.in_flight: dict = {}
         self.computed = {"objects": 0, "shards": 0, "samples": 0, "rejected": 0}
+        if config.perturbed:
+            self.computed["rollouts"] = 0
 
     def run(self) -> dict:
         done = self.ds.done_shards()
@@ -253,4 +257,6 @@ class _Scheduler:
             self.computed["shards"] += 1
             self.computed["samples"] += n
             self.computed["rejected"] += k
+            if r.rollouts is not None:
+                self.computed["rollouts"] += r.rollouts.num_rows
             self.emit(Event("shard", keys=(t.key,), samples=n, rejected=k))

@@ -21,7 +21,7 @@ import pyarrow as pa
 
 from mjcodesign.data.config import DatagenConfig
 from mjcodesign.data.integrity import Integrity, listed_files, read_table, verify
-from mjcodesign.data.schema import TABLES
+from mjcodesign.data.schema import tables
 from mjcodesign.data.store import FORMAT, MANIFEST
 from mjcodesign.design.stiffness import N_LOG_E
 from mjcodesign.errors import OutputError
@@ -33,6 +33,7 @@ __all__ = [
     "STIFF_ABOVE",
     "Dataset",
     "design_group",
+    "label_spread",
     "open_dataset",
     "plot_success",
     "summarize",
@@ -43,7 +44,11 @@ SOFT_BELOW = 15.0
 STIFF_ABOVE = 15.5
 """A design whose mean ln(E / Pa) is above this is stiff-like (semi-rigid preset: 16.5)."""
 DESIGN_GROUPS = ("soft-like", "mixed", "stiff-like")
-_KEYS = {"poses": ["object_index", "pose_index"], "samples": ["object_index", "pose_index", "design_index"]}
+_KEYS = {
+    "poses": ["object_index", "pose_index"],
+    "samples": ["object_index", "pose_index", "design_index"],
+    "rollouts": ["object_index", "pose_index", "design_index", "draw"],
+}
 _EXACT_DENSITIES = 6  # up to this many distinct densities are listed one by one, more are binned
 _DENSITY_BINS = 4
 _PLOT_BINS = 8  # mean-ln-E bins of the success plot
@@ -70,16 +75,29 @@ class Dataset:
         self.root = root
         self.manifest = manifest
 
+    @property
+    def perturbed(self) -> bool:
+        """Whether a cell is K > 1 perturbed rollouts (``datagen --perturbations``)."""
+        return "perturbations" in self.manifest.get("config", {})
+
     def files(self, table: str) -> list[Path]:
         """Files of ``table`` (poses, samples, rejected) that the manifest lists."""
         return [self.root / it.rel for it in listed_files(self.root, self.manifest, table)]
 
     def table(self, table: str) -> pa.Table:
-        """All rows of ``table``, sorted by object, pose (and design); :class:`DatasetError` if a file is damaged."""
-        schema = TABLES[table]
+        """All rows of ``table``, sorted by object, pose (design, draw); :class:`DatasetError` if a file is damaged.
+
+        ``rollouts`` exists in a dataset of K > 1 perturbed rollouts per cell only (:class:`OutputError`).
+        """
+        schemas = tables(self.perturbed)
+        if table not in schemas:
+            raise OutputError(
+                f"{self.root}: no {table} table (a dataset made with --perturbations K > 1 has one)"
+            )
+        schema = schemas[table]
         parts = [read_table(self.root, it, schema) for it in listed_files(self.root, self.manifest, table)]
         t = pa.concat_tables(parts) if parts else schema.empty_table()
-        keys = _KEYS["poses" if table == "poses" else "samples"]
+        keys = _KEYS["samples" if table == "rejected" else table]
         return t.sort_by([(k, "ascending") for k in keys])
 
     def samples(self) -> pa.Table:
@@ -93,6 +111,10 @@ class Dataset:
     def rejected(self) -> pa.Table:
         """The sample errors (diverged, implausible, bad pose)."""
         return self.table("rejected")
+
+    def rollouts(self) -> pa.Table:
+        """Every perturbed rollout of every cell (K > 1 only)."""
+        return self.table("rollouts")
 
     def verify(self) -> Integrity:
         """Every listed file checked against the manifest (the damaged ones listed, none raised)."""
@@ -180,6 +202,34 @@ def summarize(ds: Dataset) -> dict:
         "design_groups": {"soft_like_below": SOFT_BELOW, "stiff_like_above": STIFF_ABOVE},
         "rejected_by_kind": {k: kinds.count(k) for k in sorted(set(kinds))},
         "rejected_top_reasons": dict(top[:_TOP_REASONS]),
+        **({"labels": label_spread(ds)} if ds.perturbed else {}),
+    }
+
+
+def label_spread(ds: Dataset) -> dict:
+    """How the cells' labels of a K > 1 dataset spread: draws asked, cells with 0 < p < 1, rollouts a cell.
+
+    ``mean_rollouts_per_cell`` counts every rollout run (usable or not) over every cell (samples and
+    rejected); ``extended`` is the share of cells that ran more than K.
+    """
+    s, rej = ds.samples(), ds.rejected()
+    p = s.column("success_p").to_numpy()
+    run = np.concatenate(
+        [
+            s.column("rollouts").to_numpy() + s.column("unusable").to_numpy(),
+            rej.column("rollouts").to_numpy() + rej.column("unusable").to_numpy(),
+        ]
+    )
+    cfg = ds.manifest["config"]["perturbations"]
+    cells = len(run)
+    return {
+        "draws": cfg["draws"],
+        "extend_to": cfg["extend_to"],
+        "cells": cells,
+        "varying_share": float(np.mean((p > 0) & (p < 1))) if len(p) else 0.0,
+        "mean_rollouts_per_cell": float(run.mean()) if cells else 0.0,
+        "extended_share": float(np.mean(run > cfg["draws"])) if cells else 0.0,
+        "mean_success_p": float(p.mean()) if len(p) else 0.0,
     }
 
 

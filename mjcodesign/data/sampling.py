@@ -2,8 +2,8 @@
 
 Every random draw comes from ``SeedSequence(seed, spawn_key=key)`` (what ``SeedSequence(seed).spawn``
 hands out) with a key made of the object's and the pose's index in the dataset: the pose sampler of
-object ``o`` from key ``(o,)``; the density, designs and point cloud of pose ``p`` from the three
-children of key ``(o, p)``. So a shard's numbers are the same whichever worker, process or Ray node
+object ``o`` from key ``(o,)``; the density, designs, point cloud and perturbation draws of pose ``p``
+from the four children of key ``(o, p)``. So a shard's numbers are the same whichever worker, process or Ray node
 draws them, in any order, and a resumed run draws them again identically.
 """
 
@@ -25,17 +25,19 @@ def object_pose_seed(seed: int, object_index: int) -> int:
 
 
 class PoseStreams:
-    """Independent generators of one (object, pose): ``density``, ``designs`` and ``cloud``.
+    """Independent generators of one (object, pose): ``density``, ``designs``, ``cloud``, ``perturbations``.
 
-    A new instance draws the same numbers again.
+    A new instance draws the same numbers again. ``perturbations`` (the fourth child) feeds the draws
+    every design of the pose shares; the first three children are those of a pose before it existed.
     """
 
     def __init__(self, seed: int, object_index: int, pose_index: int):
         ss = np.random.SeedSequence(seed, spawn_key=(object_index, pose_index))
-        density, designs, cloud = ss.spawn(3)
+        density, designs, cloud, perturbations = ss.spawn(4)
         self.density = np.random.default_rng(density)
         self.designs = np.random.default_rng(designs)
         self.cloud = np.random.default_rng(cloud)
+        self.perturbations = np.random.default_rng(perturbations)
 
 
 def sample_designs(rng: np.random.Generator, n: int, sampler: str = "uniform") -> np.ndarray:

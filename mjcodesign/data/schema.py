@@ -8,6 +8,12 @@ Three tables, each a folder of Parquet files (one file per object or shard):
 * ``rejected/``: rollouts that are sample errors (:attr:`Failure.is_sample_error`: diverged,
   implausible, bad pose), with the same columns; they never appear in ``samples/``.
 
+A dataset of K > 1 perturbed rollouts per (pose, design) cell (``datagen --perturbations K``) has one
+``samples/`` row per cell with at least one usable rollout (:data:`SAMPLES_P`: the outputs' means over
+the cell's usable rollouts in the columns above, then the success probability, the counts and the
+spreads), a ``rejected/`` row per cell without one, and a fourth table, ``rollouts/``
+(:data:`ROLLOUTS`), one row per rollout of every cell, usable or not.
+
 Vectors are fixed-size lists. Frames: "world" is the grasp scene's (object COM at x = y = 0, resting on
 the ground at z = 0); "gripper" is the palm frame of the pose (``-z`` approach, ``y`` closing axis).
 No float column may hold NaN or inf (:func:`build_table` refuses it).
@@ -20,7 +26,19 @@ import pyarrow as pa
 
 from mjcodesign.design.stiffness import N_LOG_E
 
-__all__ = ["COLUMNS", "POSES", "REJECTED", "SAMPLES", "TABLES", "build_table", "empty_columns"]
+__all__ = [
+    "COLUMNS",
+    "DOCUMENTED",
+    "POSES",
+    "REJECTED",
+    "ROLLOUTS",
+    "SAMPLES",
+    "SAMPLES_P",
+    "TABLES",
+    "build_table",
+    "empty_columns",
+    "tables",
+]
 
 _F64 = pa.float64()
 _F32 = pa.float32()
@@ -70,6 +88,27 @@ _COLUMNS: dict[str, tuple[pa.DataType, str]] = {
     "backend": (pa.string(), "simulator: mujoco or mjwarp"),
     "wall_time_s": (_F64, "wall time of the rollout (its batch's share) [s]"),
     "seed": (pa.int64(), "the dataset seed"),
+    "success_p": (_F64, "share of the cell's usable rollouts that succeed (success = success_p >= 0.5)"),
+    "rollouts": (pa.int32(), "usable rollouts of the cell (K, or M where the first K disagree)"),
+    "unusable": (
+        pa.int32(),
+        "rollouts of the cell that are sample errors (diverged, implausible, bad pose), in no mean",
+    ),
+    "body_force_std": (_vec(6), "standard deviation (ddof 0) of body_force over the usable rollouts"),
+    "displacement_std": (_vec(3), "standard deviation (ddof 0) of displacement over the usable rollouts [m]"),
+    "lift_height_std": (_F64, "standard deviation (ddof 0) of lift_height over the usable rollouts [m]"),
+    "ground_contact_p": (_F64, "share of the usable rollouts ending on the ground (ground_contact: >= 0.5)"),
+    "finger_contact_p": (
+        _F64,
+        "share of the usable rollouts ending in finger contact (finger_contact: >= 0.5)",
+    ),
+    "draw": (pa.int32(), "perturbed draw of the cell, in the (object, pose)'s stream shared by its designs"),
+    "perturbation": (
+        _vec(9),
+        "the draw: palm offset, world frame [m] (3), palm rotation vector [rad] (3), mass, friction and "
+        "tendon factors [-]",
+    ),
+    "sample_error": (pa.bool_(), "the rollout is a sample error (diverged, implausible, bad pose)"),
 }
 
 
@@ -90,8 +129,37 @@ SAMPLES = _schema(
 """One row per rollout; ``rejected/`` has the same columns."""
 REJECTED = SAMPLES
 
+_CELL = (
+    " success_p rollouts unusable body_force_std displacement_std lift_height_std ground_contact_p"
+    " finger_contact_p"
+)
+SAMPLES_P = _schema(" ".join(SAMPLES.names) + _CELL)
+"""One row per (pose, design) cell of K > 1 rollouts: the columns of :data:`SAMPLES` (the outputs'
+means over the usable rollouts), then the cell's success probability, counts and spreads."""
+ROLLOUTS = _schema(
+    "object_index object pose_index design_index draw perturbation body_force displacement ground_contact"
+    " finger_contact lift_height success sample_error failure failures reason wall_time_s seed"
+)
+"""One row per perturbed rollout of a cell (K > 1), usable or not."""
+
 TABLES = {"poses": POSES, "samples": SAMPLES, "rejected": REJECTED}
-"""Table (folder) name -> schema."""
+"""Table (folder) name -> schema, one rollout per cell."""
+
+
+def tables(perturbed: bool) -> dict[str, pa.Schema]:
+    """Table (folder) name -> schema: :data:`TABLES`, or with K > 1 rollouts per cell its four tables."""
+    if not perturbed:
+        return TABLES
+    return {"poses": POSES, "samples": SAMPLES_P, "rejected": SAMPLES_P, "rollouts": ROLLOUTS}
+
+
+DOCUMENTED = {
+    "poses/": POSES,
+    "samples/ and rejected/": SAMPLES,
+    "samples/ and rejected/ with --perturbations K > 1 (after the columns above)": _schema(_CELL.strip()),
+    "rollouts/ (--perturbations K > 1)": ROLLOUTS,
+}
+"""The tables as the docs list them (heading -> schema)."""
 
 COLUMNS = {name: doc for name, (_, doc) in _COLUMNS.items()}
 """Meaning and unit of every column (also written into the manifest)."""

@@ -6,6 +6,7 @@ Layout::
     DIR/poses/o0000.parquet    the poses rows of object 0 (one file per object)
     DIR/samples/o0000-p000.parquet, DIR/rejected/o0000-p000.parquet   one file per shard
                                (a rejected file only when the shard has sample errors)
+    DIR/rollouts/o0000-p000.parquet   with K > 1 perturbed rollouts per cell: every rollout
 
 Every file is written under a temporary name in its folder and renamed into place, and the manifest
 (itself replaced by a rename) lists a file only after its rename, with its size and SHA-256, so a reader
@@ -32,7 +33,7 @@ import pyarrow.parquet as pq
 
 from mjcodesign.data.config import SCHEMA_VERSION, DatagenConfig
 from mjcodesign.data.integrity import listed_files, record, verify
-from mjcodesign.data.schema import COLUMNS
+from mjcodesign.data.schema import COLUMNS, tables
 from mjcodesign.data.tasks import ObjectResult, ShardResult, ShardTask
 from mjcodesign.errors import OutputError
 from mjcodesign.outputs import TMP_SUFFIX, OutputKind, check_output, write_atomic
@@ -198,6 +199,11 @@ class DatasetDir:
         if result.rejected.num_rows:
             files["rejected"] = f"rejected/{result.key}.parquet"
             checks["rejected"] = self._write_table(result.rejected, files["rejected"])
+        extra = {}
+        if result.rollouts is not None:
+            files["rollouts"] = f"rollouts/{result.key}.parquet"
+            checks["rollouts"] = self._write_table(result.rollouts, files["rollouts"])
+            extra["rollouts"] = result.rollouts.num_rows
         self.manifest["shards"][result.key] = {
             "object_index": object_index,
             "pose_index": pose_index,
@@ -208,6 +214,7 @@ class DatasetDir:
             "checks": checks,
             "run": self.run,
             "wall_time_s": result.wall_time_s,
+            **extra,
         }
         self.write_manifest()
 
@@ -241,6 +248,8 @@ class DatasetDir:
             "successes": sum(s.get("successes", 0) for s in shards),
             "rejected": sum(s["rejected"] for s in shards),
         }
+        if "perturbations" in m["config"]:
+            m["counts"]["rollouts"] = sum(s.get("rollouts", 0) for s in shards)
         c = m["counts"]
         m["complete"] = all(o["status"] != "pending" for o in objs) and c["shards_done"] == c["poses"]
         m["updated"] = _now()
@@ -261,6 +270,8 @@ class DatasetDir:
 
 
 def _new_manifest(config: DatagenConfig) -> dict:
+    schemas = tables(config.perturbed)
+    names = {n for sch in schemas.values() for n in sch.names}
     return {
         "format": FORMAT,
         "schema_version": SCHEMA_VERSION,
@@ -269,8 +280,8 @@ def _new_manifest(config: DatagenConfig) -> dict:
         "project_version": project_version(),
         "regime": config.regime,
         "config": config.as_dict(),
-        "tables": {"poses": "poses/", "samples": "samples/", "rejected": "rejected/"},
-        "columns": COLUMNS,
+        "tables": {t: f"{t}/" for t in schemas},
+        "columns": {n: doc for n, doc in COLUMNS.items() if n in names},
         "objects": [{"index": i, "source": s, "status": "pending"} for i, s in enumerate(config.objects)],
         "shards": {},
         "runs": [],
@@ -289,7 +300,7 @@ def _read_manifest(path: Path) -> dict:
 
 def _remove_temporaries(root: Path) -> None:
     """Temporary files of a killed writer (the lock is held, so no writer is alive)."""
-    for folder in (root, *(root / t for t in ("poses", "samples", "rejected"))):
+    for folder in (root, *(root / t for t in ("poses", "samples", "rejected", "rollouts"))):
         if folder.is_dir():
             for p in folder.iterdir():
                 if p.name.startswith(".") and p.name.endswith(TMP_SUFFIX):

@@ -4,7 +4,8 @@
   density and partial point cloud: the ``poses`` rows of one object.
 * :class:`ShardTask`: one scene (object, pose, density) with its designs, run through one
   :func:`mjcodesign.jobs.run_jobs` call (one ``mujoco.rollout`` batch): its ``samples`` and
-  ``rejected`` rows.
+  ``rejected`` rows; with K > 1 perturbed rollouts per design, its cells
+  (:mod:`mjcodesign.data.cells`) and their ``rollouts`` rows too.
 
 A :class:`Worker` runs them and keeps what is worth keeping between tasks: loaded objects, compiled
 scenes (:class:`~mjcodesign.jobs.SceneCache`) and the simulator. Tasks carry everything they need,
@@ -21,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import pyarrow as pa
 
+from mjcodesign.data.cells import cell_tables, run_cells
 from mjcodesign.data.cloud import partial_cloud, to_gripper
 from mjcodesign.data.config import DatagenConfig
 from mjcodesign.data.sampling import PoseStreams, object_pose_seed, sample_designs
@@ -139,6 +141,8 @@ class ShardResult:
     samples: pa.Table
     rejected: pa.Table
     wall_time_s: float
+    rollouts: pa.Table | None = None
+    """Every perturbed rollout of the shard's cells (K > 1), else None."""
 
 
 class Worker:
@@ -266,10 +270,24 @@ class Worker:
         out = []
         for t in tasks:
             t0 = time.perf_counter()
+            if c.perturbed:
+                out.append(self._run_cells(obj, t))
+                continue
             jobs = _jobs(obj, t)
             outs = run_jobs(jobs, self.backend(c.backend), scenes=self.scenes)
             out.append(_result(t, obj.name, outs, time.perf_counter() - t0))
         return out
+
+    def _run_cells(self, obj: GraspObject, t: ShardTask) -> ShardResult:
+        """One shard of K > 1 perturbed rollouts per design (:mod:`mjcodesign.data.cells`)."""
+        t0 = time.perf_counter()
+        where = {"object_index": t.object_index, "pose_index": t.pose_index}
+        cells = run_cells(
+            _jobs(obj, t), config=t.config, backend=self.backend("mujoco"), scenes=self.scenes, **where
+        )
+        tables = cell_tables(cells, t.designs(), name=obj.name, config=t.config, density=t.density, **where)
+        wall = time.perf_counter() - t0
+        return ShardResult(t.key, tables.samples, tables.rejected, wall, tables.rollouts)
 
     def _run_worlds(self, obj: GraspObject, tasks: list[ShardTask]) -> list[ShardResult]:
         """(pose, design) pairs of one object and density as the worlds of one MJWarp batch."""
