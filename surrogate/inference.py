@@ -129,20 +129,17 @@ class InputRange:
         return cls(np.full(N_LOG_E, LOG_E_MIN), np.full(N_LOG_E, LOG_E_MAX), low, high)
 
     @classmethod
-    def of_dataset(cls, density: np.ndarray) -> InputRange:
-        """A datagen dataset's range: ln E printable, the density over its rows ``density`` [kg/m³].
+    def of_dataset(cls, density: np.ndarray, configured: tuple[float, float]) -> InputRange:
+        """A datagen dataset's range: ln E printable, the density its configuration and rows span [kg/m³].
 
-        ln E spans the printable range (datagen draws every block over it). The density is the rows',
-        not the configured ``--density``: a dataset at published masses (mass rule ``real``
-        or ``auto``) holds each object at its own density, whatever the configured one.
+        ln E spans the printable range (datagen draws every block over it). The density spans the
+        configured ``--density`` range ``configured`` (low, high: what the rows were drawn over) and the
+        rows' ``density`` (one value per row): a dataset at published masses (mass rule ``real`` or
+        ``auto``) holds each object at its own density, whatever the configured one.
         """
         density = np.asarray(density, dtype=float)
-        return cls(
-            np.full(N_LOG_E, LOG_E_MIN),
-            np.full(N_LOG_E, LOG_E_MAX),
-            float(density.min()),
-            float(density.max()),
-        )
+        low, high = min(float(density.min()), configured[0]), max(float(density.max()), configured[1])
+        return cls(np.full(N_LOG_E, LOG_E_MIN), np.full(N_LOG_E, LOG_E_MAX), low, high)
 
     def as_dict(self) -> dict:
         """JSON-ready."""

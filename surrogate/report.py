@@ -242,7 +242,7 @@ def train_and_report(
         res.normalizer,
         lift=data.lift,
         lifted_fraction=data.lifted_fraction,
-        input_range=InputRange.of_dataset(data.density),
+        input_range=_trained_range(data),
     )
     test_set = GraspDataset(data, parts.test, res.normalizer, frame=mcfg.frame_inputs)
     net = _measure(
@@ -269,7 +269,7 @@ def train_and_report(
             small.normalizer,
             lift=data.lift,
             lifted_fraction=data.lifted_fraction,
-            input_range=InputRange.of_dataset(data.density),
+            input_range=_trained_range(data),
         )
         s_pred = predict_rows(s_sur, data, parts.test), predict_rows(s_sur, data, parts.val)
         metrics["efficiency"] = {"fraction": efficiency, "training": small.summary(),
@@ -299,6 +299,12 @@ def train_and_report(
         write_atomic(root / "metrics.json", json.dumps(metrics, indent=1, allow_nan=False))
         write_atomic(root / "summary.md", summary_markdown(metrics))
     return metrics
+
+
+def _trained_range(data: GraspData) -> InputRange:
+    """The inputs' range of a checkpoint trained on ``data`` (:meth:`InputRange.of_dataset`)."""
+    d = data.manifest["config"]["density"]
+    return InputRange.of_dataset(data.density, (float(d["low_kg_m3"]), float(d["high_kg_m3"])))
 
 
 def _dataset_record(data: GraspData) -> dict:
@@ -403,7 +409,7 @@ def train_folds(
             res.normalizer,
             lift=data.lift,
             lifted_fraction=data.lifted_fraction,
-            input_range=InputRange.of_dataset(data.density),
+            input_range=_trained_range(data),
         )
         pooled[parts.test] = predict_rows(sur, data, parts.test)
         m = _measure(

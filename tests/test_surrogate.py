@@ -390,10 +390,13 @@ def test_train_command_writes_checkpoint_and_report(dataset, work, cli):
     assert 0.0 <= med["slope_sign_agreement"] <= 1.0
     assert "Verdict" in (out / "summary.md").read_text()
     assert load_surrogate(out).meta["dataset"]["manifest_sha256"] == m["dataset"]["manifest_sha256"]
-    # The density range is the rows' (a dataset at published masses has one density per object).
-    rows = load_grasp_data(dataset).density
+    # The density range spans the configured one and the rows' (a dataset at published masses has one
+    # density per object, whatever the configured one).
+    data = load_grasp_data(dataset)
+    configured = data.manifest["config"]["density"]
     trained = load_surrogate(out).input_range
-    assert (trained.density_low, trained.density_high) == (float(rows.min()), float(rows.max()))
+    assert trained.density_low == min(float(data.density.min()), configured["low_kg_m3"])
+    assert trained.density_high == max(float(data.density.max()), configured["high_kg_m3"])
     # The checkpoint's smoothness re-measured later: the same lines, the same numbers.
     lines_file = work / "smooth.json"
     code, stdout, err = cli("smoothness", "--ckpt", str(out), "--data", str(dataset), "--poses", "1",

@@ -84,3 +84,15 @@ def test_a_broken_normalisation_is_refused_at_load(tiny_checkpoint, tmp_path, fi
 
     with pytest.raises(OutputError, match=words.replace("nan", "(?i:nan)")):
         load_surrogate(_edited(tiny_checkpoint, tmp_path, broken))
+
+
+def test_a_dataset_at_published_masses_is_trained_over_its_rows_densities():
+    from mjcodesign.surrogate.inference import InputRange
+
+    # A real-regime dataset: configured at ycb-median (680) for objects without a published mass, its
+    # rows at each object's own density (the apple 276, the potted-meat can 1045).
+    r = InputRange.of_dataset(np.array([276.0, 680.0, 1045.0]), (680.0, 680.0))
+    assert (r.density_low, r.density_high) == (276.0, 1045.0)
+    # A uniform:100,400 dataset whose draws fell inside the range keeps the configured ends.
+    r = InputRange.of_dataset(np.array([131.0, 377.0]), (100.0, 400.0))
+    assert (r.density_low, r.density_high) == (100.0, 400.0)
