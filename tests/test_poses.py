@@ -623,3 +623,23 @@ def test_the_plate_is_refused_with_every_reason(sdf_cache):
     msg = str(err.value)
     assert "no grasp candidate accepted" in msg and "friction cone" in msg and "closing axis too steep" in msg
     assert "grasped part wider than the stroke" in msg
+
+
+@pytest.mark.parametrize(
+    "key, command",
+    [
+        ("T_pose", ["poses", "--object", "013_apple", "--import"]),
+        ("matrices", ["grasp", "--object", "013_apple", "--pose"]),
+    ],
+)
+def test_an_npz_with_an_object_array_is_refused_in_one_line(tmp_path, capsys, key, command):
+    from mjcodesign.cli.main import main
+
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, **{key: np.array([np.eye(4), "x"], dtype=object), "openings": np.zeros((2, 2))})
+    out = tmp_path / "out.npz"
+    args = [*command, str(bad)] + (["--out", str(out)] if command[0] == "poses" else [])
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "object array" in err[0] and key in err[0], err
+    assert not out.exists()

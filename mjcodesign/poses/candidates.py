@@ -198,6 +198,20 @@ def load_numpy(path: str | Path, what: str):
         data = np.load(path, allow_pickle=False)
     except Exception as exc:  # numpy raises ValueError, EOFError, BadZipFile, OSError... on bad bytes
         raise PoseError(f"{path}: not a {what} (not a NumPy .npy/.npz file: {type(exc).__name__})") from exc
+    if isinstance(data, np.lib.npyio.NpzFile):
+        # An .npz reads its members lazily: one of object dtype (pickled) or damaged would fail at first
+        # access, wherever the caller reads it. Read each once here, so that every reader refuses it alike.
+        for key in data.files:
+            try:
+                data[key]
+            except Exception as exc:  # ValueError (object arrays: pickles refused), BadZipFile, EOFError...
+                data.close()
+                reason = (
+                    "an object array: pickled data is refused"
+                    if isinstance(exc, ValueError)
+                    else type(exc).__name__
+                )
+                raise PoseError(f"{path}: not a {what} (its array {key!r} is {reason})") from exc
     return data
 
 
