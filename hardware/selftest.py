@@ -223,12 +223,17 @@ def run_selftest(
     *,
     surrogate: Path | None = None,
     design: Any = None,
+    density: float | None = None,
 ) -> dict:
     """The whole grasp against franky-sim and the XL330 emulator; a JSON-ready result.
 
     With ``surrogate`` (a checkpoint folder) and ``design`` (a Stiffness), the surrogate scores
-    :func:`surrogate_candidates` for the design and the best predicted one runs, as on the robot.
+    :func:`surrogate_candidates` for the design and the best predicted one runs, as on the robot,
+    assuming the object's density ``density`` [kg/m³] (None: the box's own, :data:`BOX_MASS` over its
+    volume).
     """
+    if density is None:
+        density = BOX_MASS / float(np.prod(BOX_SIZE))
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="mjcodesign-selftest-") as tmp:
         cloud_base = sample_box_surface(BOX_SIZE, BOX_CENTRE, _CLOUD_POINTS)
@@ -243,6 +248,7 @@ def run_selftest(
                 pose=pose,
                 surrogate=surrogate,
                 design=design,
+                density=density,
                 cloud=cloud_path,
                 calibration=calib_path,
                 speed_factor=SIM_SPEED_FACTOR,

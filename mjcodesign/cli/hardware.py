@@ -158,6 +158,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     st.add_argument(
         "--design", default=None, help="the design the surrogate scores (preset, 22 ln E or a file)"
     )
+    st.add_argument(
+        "--density",
+        type=finite_float(0.0, strict=True),
+        default=None,
+        help="object density the surrogate assumes [kg/m³] (default: the selftest box's own, 417)",
+    )
 
     hw.set_defaults(func=run)
     return hw
@@ -291,6 +297,7 @@ def _selftest(args: argparse.Namespace) -> int:
             log=(lambda line: None) if args.json else print,
             surrogate=args.surrogate,
             design=None if args.design is None else parse_design(args.design),
+            density=args.density,
         )
     finally:
         faulthandler.cancel_dump_traceback_later()
