@@ -235,3 +235,70 @@ def test_a_stiffer_finger_meets_a_higher_tension_at_the_same_goal(box):
         end[design] = float(tension[starts["lift"] - 1].mean())
     assert end["soft"] < end["paper-optimized"] < end["semi-rigid"] < drive.max_tension
     assert end["semi-rigid"] > 2 * end["soft"]
+
+
+def _object_contact_forces(rollout, step: int) -> dict[str, np.ndarray]:
+    """World force [N] on the object at ``step`` from the fingers, the palm (and mount) and the ground."""
+    m, sc = rollout.model, rollout.scene
+    d = mujoco.MjData(m)
+    mujoco.mj_setState(m, d, rollout.states[step], STATE_SPEC)
+    mujoco.mj_setState(m, d, rollout.ctrl[step + 1], control_spec())  # the controls of the next step
+    mujoco.mj_forward(m, d)
+    out = {"fingers": np.zeros(3), "palm": np.zeros(3), "ground": np.zeros(3)}
+    f6 = np.zeros(6)
+    for i in range(d.ncon):
+        c = d.contact[i]
+        b1, b2 = (int(m.geom_bodyid[g]) if g >= 0 else -1 for g in (c.geom1, c.geom2))
+        if sc.object_body not in (b1, b2):
+            continue
+        mujoco.mj_contactForce(m, d, i, f6)  # geom1 on geom2, in the contact frame
+        force = (1.0 if b2 == sc.object_body else -1.0) * (c.frame.reshape(3, 3).T @ f6[:3])
+        other = b1 if b2 == sc.object_body else b2
+        key = (
+            "ground"
+            if sc.ground_geom in (c.geom1, c.geom2)
+            else "fingers"
+            if sc.finger_mask[other]
+            else "palm"
+        )
+        out[key] += force
+    return out
+
+
+class _KeepRollout:
+    """An observer that keeps the last rollout it is handed (in ``kept``)."""
+
+    def __init__(self) -> None:
+        self.kept = None
+
+    def rollout(self, r) -> None:
+        self.kept = r
+
+    def snapshot(self, s) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def test_in_the_real_regime_fingers_and_palm_together_carry_the_weight():
+    # The servo pulls the can into the palm: the fingers' wrench (Outcome.body_force) then exceeds m g,
+    # and the palm pushes back; fingers and palm together carry the weight during the hold.
+    from mjcodesign.cli.common import user_cache_dir
+    from mjcodesign.jobs import GraspJob, load_grasp_object, resolve_pose, run_jobs
+    from mjcodesign.scenarios import REGIMES
+
+    real = REGIMES["real"]
+    can = load_grasp_object("010_potted_meat_can", real.density, mass=real.mass, cache_dir=user_cache_dir())
+    pose = resolve_pose("best", can, cache_dir=user_cache_dir())
+    job = GraspJob(obj=can, pose=pose, design=Stiffness.preset("semi-rigid"), scenario=real.scenario)
+    keep = _KeepRollout()
+    out = run_jobs([job], MujocoBackend(), keep)[0]
+    assert out.success, out.reason
+    r = keep.kept
+    forces = _object_contact_forces(r, r.starts["impulse"] - 5)  # the end of the hold
+    weight = can.mass * _G
+    assert np.linalg.norm(forces["ground"]) == 0.0
+    assert forces["fingers"][2] + forces["palm"][2] == pytest.approx(weight, rel=_TOL_HOLD)
+    assert forces["palm"][2] < -0.1 * weight  # the palm pushes down: the fingers pull the can up into it
+    assert out.body_force[5] > 2 * weight  # so the fingers' wrench alone is not the hold force here
