@@ -39,10 +39,9 @@ from mjcodesign.objects import (
     at_mass,
     convex_decomposition,
     load_object,
+    mass_by_rule,
     parse_density,
     parse_mass,
-    published_mass,
-    published_mass_or_none,
 )
 from mjcodesign.poses import read_candidates, sample_poses, to_gripper_pose
 from mjcodesign.poses.checks import check_candidate_object, check_reach
@@ -348,11 +347,11 @@ def load_grasp_object(
     if Path(source).is_dir():
         raise MeshError(f"{source} is a folder: give one object")
     mass = parse_mass(mass)
-    if mass == "auto":
-        found = published_mass_or_none(str(source))
+    if mass in ("real", "auto"):  # a YCB object without a published mass is refused before any loading
+        found = mass_by_rule(str(source), mass)
         target = None if found is None else found.mass
     else:
-        target = published_mass(str(source)).mass if mass == "real" else mass  # refused before any loading
+        target = mass
     obj = load_object(source, parse_density(density), allow_open=allow_open, seed=seed)
     if target is not None:
         obj = at_mass(obj, target)

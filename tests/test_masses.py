@@ -230,3 +230,15 @@ class _RecordingSurrogate:
 
         n = len(batch.pose)
         return SimpleNamespace(rows=np.ones(n), grad=np.zeros(22), total=float(n))
+
+
+def test_mass_by_rule_names_what_each_rule_gives():
+    from mjcodesign.objects import mass_by_rule
+
+    assert mass_by_rule("013_apple", "real").mass == pytest.approx(0.068)
+    assert mass_by_rule("013_apple", "auto").mass == pytest.approx(0.068)
+    assert mass_by_rule("063-a_marbles", "auto") is None and mass_by_rule("013_apple", "density") is None
+    with pytest.raises(MeshError, match="no published mass"):
+        mass_by_rule("063-a_marbles", "real")
+    with pytest.raises(MeshError, match="mass rule"):
+        mass_by_rule("013_apple", "heavy")

@@ -356,16 +356,14 @@ def _mass_facts(source: str, mass: str | float | None) -> dict:
 
     The ``auto`` rule reports what it chose for this object: ``real`` with the source, or ``density``.
     """
-    from mjcodesign.objects import parse_mass, published_mass, published_mass_or_none
+    from mjcodesign.objects import mass_by_rule, parse_mass
 
     mode = parse_mass(mass)
-    if mode == "auto":
-        found = published_mass_or_none(str(source))
-        mode = None if found is None else "real"
-    if mode is None:
-        return {"mass_mode": "density", "mass_source": None}
-    if mode == "real":
-        return {"mass_mode": "real", "mass_source": published_mass(str(source)).source}
+    if mode is None or mode in ("real", "auto"):
+        found = None if mode is None else mass_by_rule(str(source), mode)
+        if found is None:
+            return {"mass_mode": "density", "mass_source": None}
+        return {"mass_mode": "real", "mass_source": found.source}
     return {"mass_mode": "given", "mass_source": None}
 
 

@@ -34,8 +34,7 @@ from mjcodesign.models.types import GripperPose
 from mjcodesign.objects import (
     DENSITY_PRESETS,
     GraspObject,
-    published_mass,
-    published_mass_or_none,
+    mass_by_rule,
     real_density,
 )
 from mjcodesign.poses import sample_poses, scene_offset
@@ -374,7 +373,5 @@ def _real_density(obj: GraspObject, source: str, mode: str) -> float | None:
 
     None when its poses draw one from the config's density (``density``; ``auto`` without a mass).
     """
-    if mode == "real":
-        return real_density(obj, published_mass(source).mass)
-    found = published_mass_or_none(source) if mode == "auto" else None
+    found = mass_by_rule(source, mode)
     return None if found is None else real_density(obj, found.mass)

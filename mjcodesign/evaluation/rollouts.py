@@ -24,7 +24,7 @@ from mjcodesign.evaluation.config import DesignGroup
 from mjcodesign.evaluation.suite import Suite, SuiteObject
 from mjcodesign.jobs import GraspJob, SceneCache, load_grasp_object, run_jobs
 from mjcodesign.models.types import FingerModel
-from mjcodesign.objects import MASS_MODES, parse_density, published_mass, published_mass_or_none
+from mjcodesign.objects import MASS_MODES, mass_by_rule, parse_density, published_mass
 from mjcodesign.poses.candidates import MAX_PENETRATION
 from mjcodesign.scenarios.grasp import GraspScenario, at_paper_disturbance, scene_at_pose
 from mjcodesign.scenarios.outcome import Outcome
@@ -122,7 +122,7 @@ def _regimes(run: SuiteRun, so: SuiteObject, obj, densities: list) -> list[tuple
     """
     if run.mass == "density":
         return densities
-    found = published_mass(so.source) if run.mass == "real" else published_mass_or_none(so.source)
+    found = mass_by_rule(so.source, run.mass)
     if found is None:
         return [("real", densities[0][1])]
     return [("real", found.mass * obj.density / obj.mass)]  # mass / volume

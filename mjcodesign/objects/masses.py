@@ -31,6 +31,7 @@ __all__ = [
     "MAX_MASS",
     "PublishedMass",
     "at_mass",
+    "mass_by_rule",
     "mass_table",
     "parse_mass",
     "published_mass",
@@ -107,6 +108,21 @@ def published_mass_or_none(name: str) -> PublishedMass | None:
         return published_mass(name)
     except MeshError:
         return None
+
+
+def mass_by_rule(name: str, rule: str) -> PublishedMass | None:
+    """The published mass the mass rule ``rule`` (:data:`MASS_MODES`) gives object ``name``, or None.
+
+    ``real``: :func:`published_mass` (:class:`MeshError` without one); ``auto``:
+    :func:`published_mass_or_none`; ``density``: None (the mass comes from a density).
+    """
+    if rule == "real":
+        return published_mass(name)
+    if rule == "auto":
+        return published_mass_or_none(name)
+    if rule == "density":
+        return None
+    raise MeshError(f"mass rule must be one of {', '.join(MASS_MODES)}, got {rule!r}")
 
 
 def parse_mass(text: str | float | None) -> str | float | None:
