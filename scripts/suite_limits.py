@@ -25,7 +25,13 @@ def limits(rows: list[dict], compare: tuple[str, str] | None) -> dict:
         by[r["object"]][r["design"]].append(r)
         domain[r["object"]] = r["domain"]
     rate = {o: {d: sum(x["success"] for x in v) / len(v) for d, v in ds.items()} for o, ds in by.items()}
-    out: dict = {"designs": sorted({r["design"] for r in rows}), "splits": {}}
+    out: dict = {
+        "designs": sorted({r["design"] for r in rows}),
+        "regimes": sorted(
+            {r["density"] for r in rows}
+        ),  # the evaluation's regime labels (``real``, or densities)
+        "splits": {},
+    }
     for split in sorted(set(domain.values())):
         objs = sorted(o for o in by if domain[o] == split)
         never = [o for o in objs if max(rate[o].values()) == 0.0]
