@@ -12,7 +12,7 @@ surrogate only scores poses for the ``surrogate`` pose policy.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,8 +34,12 @@ from mjcodesign.sim.protocol import get_backend
 __all__ = [
     "MAX_REDRAWS",
     "POSE_POLICIES",
+    "PreparedObject",
     "SuiteRun",
     "check_real_masses",
+    "object_jobs",
+    "outcome_rows",
+    "prepare_object",
     "record_suite_examples",
     "run_suite",
 ]
@@ -190,6 +194,113 @@ def _surrogate_choice(surrogate, obj, so: SuiteObject, run: SuiteRun, rho: float
     return out
 
 
+@dataclass
+class PreparedObject:
+    """One suite object made ready to roll out: loaded, its regimes, compiled scenes and draws."""
+
+    obj: object
+    """The :class:`~mjcodesign.objects.GraspObject` (loaded at ``light``; each job sets its density)."""
+    regimes: list[tuple[str, float]]
+    """(label, density [kg/m³]) of each regime (:func:`_regimes`)."""
+    scenes: SceneCache
+    draws: list[list[Perturbation | None]]
+    """Per pose, the run's perturbation draws (None: given up, or the pose itself cannot be simulated)."""
+    redrawn: int = 0
+    given_up: int = 0
+
+
+def prepare_object(
+    suite: Suite, run: SuiteRun, so: SuiteObject, obj, densities: list[tuple[str, float]]
+) -> PreparedObject:
+    """Compile ``so``'s first scene and draw every pose's perturbations (common to all designs).
+
+    ``obj``: ``so`` loaded (:func:`~mjcodesign.jobs.load_grasp_object` at ``light``, the suite's seed).
+    """
+    regimes = _regimes(run, so, obj, densities)
+    scenes = SceneCache(size=len(regimes) * len(run.impulses) + 1)
+    first = GraspJob(
+        obj=obj,
+        pose=so.poses[0],
+        design=next(
+            (g.for_object(so.name) for g in run.designs if g.for_object(so.name)),
+            Stiffness.preset("soft"),
+        ),
+        finger_model=run.model,
+        scenario=run.scenario,
+        density=regimes[0][1],
+    )
+    base = scenes.scene(first)
+    prep = PreparedObject(obj=obj, regimes=regimes, scenes=scenes, draws=[])
+    for k in range(len(so.poses)):
+        try:
+            scene_at_pose(base, so.poses[k])
+        except PoseError:  # the frozen pose itself cannot be simulated: every draw of it is given up
+            prep.draws.append([None] * run.perturbations)
+            prep.given_up += run.perturbations
+            continue
+        d, r = _draws(suite, run, so, base, k)
+        prep.draws.append(d)
+        prep.redrawn += r
+        prep.given_up += sum(x is None for x in d)
+    return prep
+
+
+def object_jobs(
+    prep: PreparedObject, so: SuiteObject, run: SuiteRun, designs: Sequence[DesignGroup]
+) -> tuple[list[GraspJob], list[tuple]]:
+    """Every rollout of one object for ``designs``: the jobs, and each job's (regime, draw) key.
+
+    Order: regime, impulse, pose, draw, design; a design that does not grasp ``so`` is skipped.
+    """
+    jobs, meta = [], []
+    for dens, rho in prep.regimes:
+        for imp in run.impulses:
+            scenario = at_paper_disturbance(run.scenario, imp)
+            for k, pose in enumerate(so.poses):
+                for j, p in enumerate(prep.draws[k]):
+                    if p is None:
+                        continue
+                    for g in designs:
+                        design = g.for_object(so.name)
+                        if design is None:  # an individual design exists for its own objects only
+                            continue
+                        jobs.append(
+                            GraspJob(
+                                obj=prep.obj,
+                                pose=pose,
+                                design=design,
+                                finger_model=run.model,
+                                scenario=scenario,
+                                density=rho,
+                                seed=run.seed,
+                                perturbation=p,
+                                label=f"{g.label}/{so.name}/{dens}/{imp}/{k}/{j}",
+                            )
+                        )
+                        meta.append((dens, rho, imp, k, j, g, p, scenario))
+    return jobs, meta
+
+
+def outcome_rows(so: SuiteObject, meta: list[tuple], outs: Sequence[Outcome]) -> list[dict]:
+    """The result rows of :func:`object_jobs`' jobs (``meta``) and their outcomes."""
+    return [
+        {
+            "object": so.name,
+            "domain": so.domain,
+            "fold": so.fold,
+            "density": dens,
+            "density_kg_m3": rho,
+            "impulse_paper_ns": float(imp),
+            "pose": k,
+            "draw": j,
+            "design": g.label,
+            "perturbation": p.as_dict(),
+            **_outcome_row(o, scenario),
+        }
+        for (dens, rho, imp, k, j, g, p, scenario), o in zip(meta, outs, strict=True)
+    ]
+
+
 def run_suite(
     suite: Suite,
     run: SuiteRun,
@@ -226,87 +337,23 @@ def run_suite(
             if warn:
                 warn(f"{so.name}: left out ({type(exc).__name__}: {exc})")
             continue
-        regimes = _regimes(run, so, obj, densities)
-        scenes = SceneCache(size=len(regimes) * len(run.impulses) + 1)
-        first = GraspJob(
-            obj=obj,
-            pose=so.poses[0],
-            design=next(
-                (g.for_object(so.name) for g in run.designs if g.for_object(so.name)),
-                Stiffness.preset("soft"),
-            ),
-            finger_model=run.model,
-            scenario=run.scenario,
-            density=regimes[0][1],
-        )
-        base = scenes.scene(first)
-        draws, redrawn, given_up = [], 0, 0
-        for k in range(len(so.poses)):
-            try:
-                scene_at_pose(base, so.poses[k])
-            except PoseError:  # the frozen pose itself cannot be simulated: every draw of it is given up
-                draws.append([None] * run.perturbations)
-                given_up += run.perturbations
-                continue
-            d, r = _draws(suite, run, so, base, k)
-            draws.append(d)
-            redrawn += r
-            given_up += sum(x is None for x in d)
-        jobs, meta = [], []
-        for dens, rho in regimes:
-            if surrogate is not None:
+        prep = prepare_object(suite, run, so, obj, densities)
+        if surrogate is not None:
+            for dens, rho in prep.regimes:
                 choice.setdefault(so.name, {})[dens] = _surrogate_choice(
-                    surrogate, obj, so, run, rho, n_points
+                    surrogate, prep.obj, so, run, rho, n_points
                 )
-            for imp in run.impulses:
-                scenario = at_paper_disturbance(run.scenario, imp)
-                for k, pose in enumerate(so.poses):
-                    for j, p in enumerate(draws[k]):
-                        if p is None:
-                            continue
-                        for g in run.designs:
-                            design = g.for_object(so.name)
-                            if design is None:  # an individual design exists for its own objects only
-                                continue
-                            jobs.append(
-                                GraspJob(
-                                    obj=obj,
-                                    pose=pose,
-                                    design=design,
-                                    finger_model=run.model,
-                                    scenario=scenario,
-                                    density=rho,
-                                    seed=run.seed,
-                                    perturbation=p,
-                                    label=f"{g.label}/{so.name}/{dens}/{imp}/{k}/{j}",
-                                )
-                            )
-                            meta.append((dens, rho, imp, k, j, g, p, scenario))
-        outs = run_jobs(jobs, backend, scenes=scenes)
-        for (dens, rho, imp, k, j, g, p, scenario), o in zip(meta, outs, strict=True):
-            rows.append(
-                {
-                    "object": so.name,
-                    "domain": so.domain,
-                    "fold": so.fold,
-                    "density": dens,
-                    "density_kg_m3": rho,
-                    "impulse_paper_ns": float(imp),
-                    "pose": k,
-                    "draw": j,
-                    "design": g.label,
-                    "perturbation": p.as_dict(),
-                    **_outcome_row(o, scenario),
-                }
-            )
+        jobs, meta = object_jobs(prep, so, run, run.designs)
+        outs = run_jobs(jobs, backend, scenes=prep.scenes)
+        rows += outcome_rows(so, meta, outs)
         objects.append(
             {
                 "name": so.name,
                 "domain": so.domain,
                 "fold": so.fold,
                 "poses": len(so.poses),
-                "redrawn": redrawn,
-                "draws_given_up": given_up,
+                "redrawn": prep.redrawn,
+                "draws_given_up": prep.given_up,
                 "error": None,
             }
         )
