@@ -79,6 +79,7 @@ class OutputKind(enum.Enum):
     FINGER = "finger"
     PRINT = "print"
     DESIGN = "design"
+    ORACLE = "oracle"
 
     @property
     def command(self) -> str:
@@ -94,6 +95,7 @@ _COMMANDS = {
     OutputKind.FINGER: "finger export",
     OutputKind.PRINT: "export-print",
     OutputKind.DESIGN: "design",
+    OutputKind.ORACLE: "bench oracle",
 }
 _NO_OVERWRITE = frozenset({OutputKind.DATASET})  # datagen continues its own dataset, never writes beside
 

@@ -160,6 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
     from mjcodesign.cli import labels as cli_labels
     from mjcodesign.cli import landscape as cli_landscape
     from mjcodesign.cli import optimize as cli_optimize
+    from mjcodesign.cli import oracle as cli_oracle
     from mjcodesign.cli import poses as cli_poses
     from mjcodesign.cli import surrogate as cli_surrogate
     from mjcodesign.cli import viz as cli_viz
@@ -174,6 +175,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_landscape.add_bench_parser(bsub)
     cli_evaluate.add_bench_parser(bsub)
     cli_labels.add_bench_parser(bsub)
+    cli_oracle.add_bench_parser(bsub)
     cli_viz.add_parser(sub)
     cli_grasp.add_parser(sub)
     cli_crosscheck.add_parser(sub)

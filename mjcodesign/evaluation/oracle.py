@@ -1,0 +1,244 @@
+"""The oracle: CMA-ES on the simulator alone, on the evaluation's own objective.
+
+No surrogate: each candidate design is rolled out on a suite's objects at every suite pose and the
+first ``perturbations`` draws of each pose (the draws :func:`~mjcodesign.evaluation.run_suite` gives
+every design: common random numbers), and scored as the evaluation scores a design
+(:func:`~mjcodesign.evaluation.analysis.per_object_cells`): per object the share of its usable rollouts
+that succeed under the pose policy (``all``: every pose; ``oracle``: the simulator's best pose for
+that design), and the mean of those shares over objects. An object whose rollouts were all unusable
+(diverged, implausible) counts 0, so a design cannot gain by breaking the simulator. The best design
+is the upper bound of what one design reaches on these objects, within the budget and up to the
+winner's curse of its draws (re-evaluate it on fresh draws or more of them: ``evaluate``).
+
+The search variable is Algorithm 1's (z, ``ln E = 13.5 + 3.5 · sigmoid(z)``); the first generation is
+centred on ``start`` (a preset or design file) and ``start`` itself is scored first, so the result is
+never below it on the search's own draws. A generation's designs go through the simulator together, one
+object at a time (one compiled scene per object). ``cmaes`` is imported inside :func:`oracle_search`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from mjcodesign.codesign.optimize import LOG_E_MAX, LOG_E_MIN, log_e_of, z_of
+from mjcodesign.design.stiffness import N_LOG_E, Stiffness
+from mjcodesign.errors import DesignError, MjcodesignError, UnsupportedError
+from mjcodesign.evaluation.analysis import ALL_POSES, per_object_cells, select_policy
+from mjcodesign.evaluation.config import DesignGroup
+from mjcodesign.evaluation.rollouts import (
+    SuiteRun,
+    object_jobs,
+    outcome_rows,
+    prepare_object,
+)
+from mjcodesign.evaluation.suite import Suite
+from mjcodesign.jobs import load_grasp_object, run_jobs
+from mjcodesign.objects import parse_density
+from mjcodesign.sim.protocol import get_backend
+
+__all__ = ["ORACLE_POLICIES", "OracleConfig", "OracleResult", "oracle_search", "score_designs"]
+
+ORACLE_POLICIES = (ALL_POSES, "oracle")
+"""``all``: success over every suite pose (the table's "every pose"); ``oracle``: each object's best pose
+for the design."""
+
+_INSIDE = 1e-3
+"""How far inside the printable range a start at its bound is moved to have a z (ln Pa)."""
+
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True, kw_only=True)
+class OracleConfig:
+    """CMA-ES settings of the oracle; the budget is in rollouts."""
+
+    budget: int
+    """Most rollouts; a generation that would pass it is not started."""
+    policy: str = ALL_POSES
+    sigma: float = 1.0
+    """Initial step size in z (sigmoid's slope is 1/4 at 0: about 0.9 ln E)."""
+    population: int | None = None
+    """Designs per generation (None: CMA-ES's 4 + 3 ln 22 = 13)."""
+    seed: int = 0
+    """Seed of CMA-ES's own sampling (the draws are the suite run's)."""
+
+    def __post_init__(self) -> None:
+        if isinstance(self.budget, bool) or not isinstance(self.budget, int) or self.budget < 1:
+            raise DesignError(f"budget must be an integer >= 1 rollouts, got {self.budget!r}")
+        if self.policy not in ORACLE_POLICIES:
+            raise DesignError(f"oracle policy {self.policy!r}: choose from {', '.join(ORACLE_POLICIES)}")
+        if not (np.isfinite(self.sigma) and self.sigma > 0):
+            raise DesignError(f"sigma must be > 0, got {self.sigma}")
+        if self.population is not None and (isinstance(self.population, bool) or self.population < 2):
+            raise DesignError(f"population must be >= 2 designs, got {self.population!r}")
+
+
+@dataclass
+class OracleResult:
+    """The best design found, its score per object, and the search's history."""
+
+    objects: tuple[str, ...]
+    design: np.ndarray
+    """ln E of the best design, shape (22,)."""
+    success: float
+    """Mean over objects of the best design's success share (the objective)."""
+    per_object: dict[str, float]
+    start: str
+    start_success: float
+    rollouts: int = 0
+    evaluations: int = 0
+    generations: int = 0
+    curve: list[dict] = field(default_factory=list)
+    """Per generation: rollouts so far, the generation's best and mean score, the best so far."""
+    wall_s: float = 0.0
+
+    def summary(self) -> dict:
+        """JSON-ready."""
+        return {
+            "objects": list(self.objects),
+            "design": self.design.tolist(),
+            "success": self.success,
+            "per_object": self.per_object,
+            "start": self.start,
+            "start_success": self.start_success,
+            "gain_over_start": self.success - self.start_success,
+            "rollouts": self.rollouts,
+            "evaluations": self.evaluations,
+            "generations": self.generations,
+            "curve": self.curve,
+            "wall_s": self.wall_s,
+        }
+
+
+class _Scorer:
+    """Rolls designs out on the prepared objects and scores them; counts rollouts."""
+
+    def __init__(self, suite: Suite, run: SuiteRun, policy: str, *, cache_dir=None, progress=None):
+        self.suite, self.run, self.policy = suite, run, policy
+        densities = [(str(d), parse_density(d)) for d in run.densities]
+        self.prepared = []
+        for i, so in enumerate(suite.objects):
+            obj = load_grasp_object(so.source, "light", seed=suite.seed, cache_dir=cache_dir)
+            self.prepared.append((so, prepare_object(suite, run, so, obj, densities)))
+            if progress:
+                progress("preparing objects", i + 1, len(suite.objects))
+        self.backend = get_backend("mujoco")
+        self.rollouts = 0
+
+    def __call__(self, designs: Sequence[Stiffness]) -> list[dict[str, float]]:
+        """Per design, each object's success share (0 where no rollout was usable)."""
+        groups = [DesignGroup(f"candidate{i}", "oracle", d) for i, d in enumerate(designs)]
+        rows: list[dict] = []
+        for so, prep in self.prepared:
+            jobs, meta = object_jobs(prep, so, self.run, groups)
+            rows += outcome_rows(so, meta, run_jobs(jobs, self.backend, scenes=prep.scenes))
+            self.rollouts += len(jobs)
+        cells = per_object_cells(select_policy(rows, self.policy))
+        rate = {g.label: dict.fromkeys((so.name for so, _ in self.prepared), 0.0) for g in groups}
+        for c in cells.values():
+            if c["valid"]:
+                rate[c["design"]][c["object"]] = c["successes"] / c["valid"]
+        return [rate[g.label] for g in groups]
+
+    def per_design(self) -> int:
+        """Rollouts one design costs (usable draws × regimes × impulses)."""
+        draws = sum(sum(p is not None for p in d) for _, prep in self.prepared for d in prep.draws)
+        regimes = len(self.prepared[0][1].regimes) if self.prepared else 0
+        return draws * max(regimes, 1) * len(self.run.impulses)
+
+
+def score_designs(
+    suite: Suite, run: SuiteRun, designs: Sequence[Stiffness], *, policy: str = ALL_POSES, cache_dir=None
+) -> list[dict[str, float]]:
+    """Each design's success share per object of ``suite``, as the oracle scores it."""
+    return _Scorer(suite, run, policy, cache_dir=cache_dir)(designs)
+
+
+def oracle_search(
+    suite: Suite,
+    run: SuiteRun,
+    config: OracleConfig,
+    *,
+    start: DesignGroup,
+    cache_dir=None,
+    progress: Progress | None = None,
+    on_generation: Callable[[OracleResult], None] | None = None,
+) -> OracleResult:
+    """CMA-ES over one design for every object of ``suite`` (module docstring).
+
+    ``run`` gives the regime, scenario, draws per pose (``perturbations``), impulse (the first of
+    ``impulses``) and seed; its ``designs`` are not used. ``on_generation`` gets the result so far.
+    """
+    try:
+        from cmaes import CMA
+    except ImportError:
+        raise UnsupportedError("the oracle needs cmaes (pip install 'mjcodesign[codesign]')") from None
+    if start.design is None:
+        raise DesignError("the oracle starts from one design for every object (a preset or joint:FILE)")
+    t0 = time.perf_counter()
+    run = replace(run, designs=(start,), impulses=run.impulses[:1], pose_policies=("fixed",))
+    try:
+        scorer = _Scorer(suite, run, config.policy, cache_dir=cache_dir, progress=progress)
+    except MjcodesignError as exc:
+        raise DesignError(f"the oracle needs every suite object: {exc}") from exc
+    names = tuple(so.name for so, _ in scorer.prepared)
+    per_gen = scorer.per_design()
+    population = config.population or 4 + int(3 * np.log(N_LOG_E))
+    if per_gen * (population + 1) > config.budget:
+        raise DesignError(
+            f"a budget of {config.budget} rollouts does not cover the start and one generation "
+            f"({population + 1} designs x {per_gen} rollouts)"
+        )
+    start_design = np.asarray(start.design.log_e, dtype=float).ravel()
+    (start_rate,) = scorer([start.design])
+    start_score = float(np.mean(list(start_rate.values())))
+    best = (start_score, start_design, start_rate)
+    opt = CMA(
+        mean=z_of(np.clip(start_design, LOG_E_MIN + _INSIDE, LOG_E_MAX - _INSIDE)),
+        sigma=config.sigma,
+        seed=config.seed,
+        population_size=population,
+    )
+    result = OracleResult(
+        objects=names,
+        design=start_design,
+        success=start_score,
+        per_object=start_rate,
+        start=start.label,
+        start_success=start_score,
+        rollouts=scorer.rollouts,
+        evaluations=1,
+    )
+    while scorer.rollouts + opt.population_size * per_gen <= config.budget:
+        zs = [opt.ask() for _ in range(opt.population_size)]
+        designs = [Stiffness(log_e_of(z)) for z in zs]
+        rates = scorer(designs)
+        scores = [float(np.mean(list(r.values()))) for r in rates]
+        opt.tell([(z, -s) for z, s in zip(zs, scores, strict=True)])
+        i = int(np.argmax(scores))
+        if scores[i] > best[0]:
+            best = (scores[i], np.asarray(designs[i].log_e, dtype=float).ravel(), rates[i])
+        result.generations += 1
+        result.evaluations += len(designs)
+        result.rollouts = scorer.rollouts
+        result.success, result.design, result.per_object = best
+        result.wall_s = time.perf_counter() - t0
+        result.curve.append(
+            {
+                "generation": result.generations,
+                "rollouts": scorer.rollouts,
+                "best": scores[i],
+                "mean": float(np.mean(scores)),
+                "best_so_far": best[0],
+            }
+        )
+        if on_generation is not None:
+            on_generation(result)
+        if progress:
+            progress("generations", scorer.rollouts, config.budget)
+    result.wall_s = time.perf_counter() - t0
+    return result
