@@ -44,6 +44,7 @@ from mjcodesign.surrogate.inference import (
     GraspBatch,
     Poses,
     Prediction,
+    SuccessLoss,
     Surrogate,
     success_score,
 )
@@ -77,6 +78,7 @@ __all__ = [
     "Poses",
     "Prediction",
     "Split",
+    "SuccessLoss",
     "Surrogate",
     "TensorBoardLog",
     "TrainConfig",

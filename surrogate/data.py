@@ -97,6 +97,8 @@ class GraspData:
     manifest: dict
     manifest_sha256: str
     root: Path
+    success_p: np.ndarray | None = None
+    """Share of the cell's perturbed rollouts that succeed, shape (S,); None for one rollout per cell."""
 
     @property
     def poses(self) -> PoseRows:
@@ -204,6 +206,7 @@ def load_grasp_data(source: str | Path | Dataset) -> GraspData:
         manifest=ds.manifest,
         manifest_sha256=sha,
         root=ds.root,
+        success_p=samples.column("success_p").to_numpy() if "success_p" in samples.column_names else None,
     )
 
 

@@ -19,6 +19,11 @@ the object, and a non-zero finger force during the hold. From the predicted outp
 :func:`success_score` is the smallest of the three margins, each scaled to O(1): success is a score
 above 0. The same rule on the simulator's own outputs shows how far it agrees with the simulator's
 flag (the train report gives that ceiling).
+
+**Success from the head.** A network with a success head
+(:attr:`~mjcodesign.surrogate.model.ModelConfig.success_head`) predicts the success probability
+directly (``Prediction.success_p``), trained on the perturbed rollouts' share of successes; co-design
+can maximise it (:class:`SuccessLoss`).
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from mjcodesign.data import PoseRows
 from mjcodesign.design.stiffness import LOG_E_MAX, LOG_E_MIN, N_LOG_E
 from mjcodesign.errors import DesignError, StiffnessError
 from mjcodesign.surrogate.data import (
+    N_OUTPUTS,
     N_REGRESSION,
     Normalizer,
     frame_inputs,
@@ -42,6 +48,7 @@ from mjcodesign.surrogate.model import GraspNet
 
 __all__ = [
     "DesignLoss",
+    "SuccessLoss",
     "DesignGradient",
     "GraspBatch",
     "InputRange",
@@ -283,6 +290,8 @@ class Prediction:
     """Probability of ground contact at the end, shape (B,)."""
     success_score: np.ndarray
     """:func:`success_score`, shape (B,)."""
+    success_p: np.ndarray | None = None
+    """The success head's probability, shape (B,); None for a network without a head."""
 
     @property
     def success(self) -> np.ndarray:
@@ -312,6 +321,22 @@ class DesignLoss:
         d_up = (displacement * up).sum(dim=1)
         bad = torch.relu(-f_up) + torch.relu(-d_up) + p_contact
         return self.base_weight * base + self.penalty_weight * bad
+
+
+@dataclass(frozen=True, kw_only=True)
+class SuccessLoss:
+    """The predicted failure probability ``1 − p_success`` of each row, from the success head.
+
+    Summed over the rows it is the expected number of failed grasps; minimising it maximises the
+    mean predicted success probability. A network without a head has no ``p_success`` and is refused
+    (:meth:`Surrogate.loss_and_grad`).
+    """
+
+    needs_success_head = True
+
+    def rows(self, body_force, displacement, p_contact, up, p_success: torch.Tensor) -> torch.Tensor:
+        """Per-row loss (B,): ``1 − p_success`` (torch, differentiable)."""
+        return 1.0 - p_success
 
 
 @dataclass(frozen=True)
@@ -406,8 +431,13 @@ class Surrogate:
             return batch
         return dataclasses.replace(batch, features=self.features(batch.poses))
 
+    @property
+    def has_success_head(self) -> bool:
+        """Whether the network predicts the success probability (``Prediction.success_p``)."""
+        return bool(getattr(self.config, "success_head", False))
+
     def _outputs(self, batch: GraspBatch, log_e: torch.Tensor):
-        """Physical outputs (body force, displacement, p_contact) and ``up`` per row, torch."""
+        """Physical outputs (body force, displacement, p_contact), ``up`` and the head's p (or None) per row."""
         f = batch.features
         mean_e, std_e, mean_y, std_y = self._normalisation()
         pose = torch.from_numpy(batch.pose)
@@ -418,7 +448,8 @@ class Surrogate:
             cols.append(f.frame[pose])
         raw = self.model.head(f.features[pose], torch.cat(cols, dim=1))
         y = raw[:, :N_REGRESSION] * std_y + mean_y
-        return y[:, :6], y[:, 6:N_REGRESSION], torch.sigmoid(raw[:, N_REGRESSION]), up
+        p_success = torch.sigmoid(raw[:, N_OUTPUTS]) if self.has_success_head else None
+        return y[:, :6], y[:, 6:N_REGRESSION], torch.sigmoid(raw[:, N_REGRESSION]), up, p_success
 
     def predict(self, batch: GraspBatch) -> Prediction:
         """The outputs of every row of ``batch`` (which needs ``log_e``).
@@ -430,27 +461,39 @@ class Surrogate:
         self.check_inputs(batch.log_e, batch.density)
         batch = self.prepare(batch)
         with torch.inference_mode():
-            force, disp, p, _ = self._outputs(batch, torch.tensor(batch.log_e, dtype=self.dtype))
+            force, disp, p, _, ps = self._outputs(batch, torch.tensor(batch.log_e, dtype=self.dtype))
         force, disp, p = force.numpy().astype(float), disp.numpy().astype(float), p.numpy().astype(float)
         up = np.asarray(batch.poses.up, dtype=float)[batch.pose]
         score = success_score(force, disp, p, up, batch.mass, self.lift, self.lifted_fraction)
-        return Prediction(force, disp, p, score)
+        return Prediction(force, disp, p, score, None if ps is None else ps.numpy().astype(float))
 
-    def loss_and_grad(self, design, batch: GraspBatch, loss: DesignLoss | None = None) -> DesignGradient:
-        """L_opt (:class:`DesignLoss`) of one design (22 ln E) over every row, and d L / d ln E.
+    def loss_and_grad(
+        self, design, batch: GraspBatch, loss: DesignLoss | SuccessLoss | None = None
+    ) -> DesignGradient:
+        """A loss of one design (22 ln E) over every row, and d L / d ln E.
 
-        Raises :class:`~mjcodesign.errors.DesignError` for a density outside ``input_range`` (the design moves within
-        the printable range, which the optimiser keeps).
+        ``loss``: L_opt (:class:`DesignLoss`, the default) or the predicted failure probability
+        (:class:`SuccessLoss`, which needs a success head). Raises
+        :class:`~mjcodesign.errors.DesignError` for a density outside ``input_range`` (the design moves
+        within the printable range, which the optimiser keeps) or a :class:`SuccessLoss` on a network
+        without a head.
         """
         d = np.asarray(design, dtype=float).ravel()
         if d.shape != (N_LOG_E,) or not np.all(np.isfinite(d)):
             raise StiffnessError(f"a design is {N_LOG_E} finite values of ln E, got shape {d.shape}")
+        loss = loss or DesignLoss()
+        head = getattr(loss, "needs_success_head", False)
+        if head and not self.has_success_head:
+            raise DesignError(
+                "the success objective needs a surrogate with a success head (train one with "
+                "--success-weight > 0; this checkpoint predicts the paper's 10 outputs only)"
+            )
         self.check_inputs(None, batch.density)
         batch = self.prepare(batch)
         x = torch.tensor(d, dtype=self.dtype, requires_grad=True)
         with torch.enable_grad():
-            force, disp, p, up = self._outputs(batch, x.expand(len(batch), N_LOG_E))
-            rows = (loss or DesignLoss()).rows(force, disp, p, up)
+            force, disp, p, up, ps = self._outputs(batch, x.expand(len(batch), N_LOG_E))
+            rows = loss.rows(force, disp, p, up, ps) if head else loss.rows(force, disp, p, up)
             total = rows.sum()
             (grad,) = torch.autograd.grad(total, x)
         return DesignGradient(total.item(), grad.numpy().astype(float), rows.detach().numpy().astype(float))

@@ -7,12 +7,16 @@ Outputs are arrays (S, 10) in physical units: body force (torque [N m] 3, force 
   probability against the simulator's 0/1, with the contact's accuracy and ROC AUC;
 * success classification from the outputs (:func:`~mjcodesign.surrogate.inference.success_score`):
   accuracy of score > 0, ROC AUC of the score, and a calibration: a logistic map of the score to a
-  probability fitted on the validation rows (Platt), its Brier score and reliability bins on the test.
+  probability fitted on the validation rows (Platt), its Brier score and reliability bins on the test;
+* with a predicted success probability (a network's success head, the trees' success classifier):
+  ``success_head``, its ROC AUC, accuracy of p > 0.5, Brier score against the 0/1 success and against
+  the measured ``success_p``, and its reliability bins (no recalibration).
 
 Baselines on the same split: :func:`mean_baseline` (the training mean of each output) and
 :func:`tree_baseline` (scikit-learn's ``HistGradientBoostingRegressor`` with an absolute-error loss
 per output, and its classifier for the contact, on 22 ln E, COM, density, ``up`` and
-:func:`cloud_statistics`).
+:func:`cloud_statistics`), and for the success probability :func:`tree_success` (the classifier on
+the same features, trained with the head's cross-entropy on the soft label).
 """
 
 from __future__ import annotations
@@ -27,8 +31,10 @@ __all__ = [
     "mean_baseline",
     "score_outputs",
     "success_scores",
+    "success_head_metrics",
     "tree_baseline",
     "tree_features",
+    "tree_success",
 ]
 
 _UNITS = {"torque": ("N m", 1.0), "force": ("N", 1.0), "displacement": ("mm", 1e3)}
@@ -79,12 +85,38 @@ def _reliability(prob: np.ndarray, truth: np.ndarray) -> list[dict]:
     ]  # fmt: skip
 
 
+def success_head_metrics(prob: np.ndarray, data: GraspData, rows: np.ndarray) -> dict:
+    """Metrics of a predicted success probability ``prob`` (S,) of the samples ``rows``.
+
+    Against the 0/1 success: ROC AUC, accuracy of p > 0.5, Brier score, reliability bins; and the
+    Brier score against the measured share ``success_p`` (the 0/1 success for one rollout per cell).
+    """
+    from mjcodesign.surrogate.train import success_labels
+
+    prob = np.asarray(prob, dtype=float)
+    truth = data.success[rows]
+    return {
+        "accuracy": float(np.mean((prob > 0.5) == truth)),
+        "roc_auc": _auc(truth, prob),
+        "brier": float(np.mean((prob - truth) ** 2)),
+        "brier_p": float(np.mean((prob - success_labels(data, rows)) ** 2)),
+        "predicted_rate": float(np.mean(prob > 0.5)),
+        "calibration": _reliability(prob, truth.astype(float)),
+    }
+
+
 def score_outputs(
-    pred: np.ndarray, data: GraspData, rows: np.ndarray, val_pred: np.ndarray, val_rows: np.ndarray
+    pred: np.ndarray,
+    data: GraspData,
+    rows: np.ndarray,
+    val_pred: np.ndarray,
+    val_rows: np.ndarray,
+    success_p: np.ndarray | None = None,
 ) -> dict:
     """Metrics of predicted outputs ``pred`` (S, 10) of the test ``rows`` (module docstring).
 
-    ``val_pred`` of the ``val_rows`` fit the success calibration.
+    ``val_pred`` of the ``val_rows`` fit the success calibration. ``success_p`` (S,): a predicted
+    success probability of the same rows, scored as ``success_head`` (:func:`success_head_metrics`).
     """
     true = data.outputs[rows]
     mae = {}
@@ -112,6 +144,7 @@ def score_outputs(
             "brier": float(np.mean((prob - truth) ** 2)),
             "calibration": _reliability(prob, truth.astype(float)),
         },
+        **({"success_head": success_head_metrics(success_p, data, rows)} if success_p is not None else {}),
     }
 
 
@@ -174,3 +207,32 @@ def tree_baseline(
         for out in outs:
             out[:, N_REGRESSION] = float(contact.mean())
     return outs
+
+
+def tree_success(
+    data: GraspData, train_rows: np.ndarray, rows_list: list[np.ndarray], seed: int = 0
+) -> list[np.ndarray]:
+    """Gradient-boosted trees' success probability (S,) for each of ``rows_list``, fitted on ``train_rows``.
+
+    scikit-learn's ``HistGradientBoostingClassifier`` on :func:`tree_features`, trained on the soft label
+    (:func:`~mjcodesign.surrogate.train.success_labels`) with the head's cross-entropy: each training
+    row enters as a success of weight p and a failure of weight 1 − p.
+    """
+    from sklearn.ensemble import HistGradientBoostingClassifier
+
+    from mjcodesign.surrogate.train import success_labels
+
+    stats = cloud_statistics(data.clouds)
+    p = success_labels(data, train_rows)
+    x = tree_features(data, train_rows, stats)
+    xs = [tree_features(data, r, stats) for r in rows_list]
+    if not 0 < p.sum() < len(p):
+        return [np.full(len(r), float(p.mean())) for r in rows_list]
+    y = np.concatenate([np.ones(len(p), dtype=int), np.zeros(len(p), dtype=int)])
+    w = np.concatenate([p, 1.0 - p])
+    keep = w > 0
+    kw = {"max_iter": _TREE_ITERATIONS, "learning_rate": _TREE_LEARNING_RATE, "random_state": seed}
+    clf = HistGradientBoostingClassifier(**kw).fit(
+        np.concatenate([x, x])[keep], y[keep], sample_weight=w[keep]
+    )
+    return [clf.predict_proba(xr)[:, 1] for xr in xs]

@@ -3,7 +3,8 @@
 PointNet (the authors' ``PointNetEncoder``, no T-Net): pointwise Conv1d 3→64→128→128 with ReLU between
 them, a max-pool over the points, the feature times a learnable scalar (``pc_scale``). MLP (the
 authors' ``MLPModel``): [feature, 22 z(ln E), COM (3), z(density)(, frame (7))] → ``depth`` layers of
-``hidden`` with BatchNorm, ReLU and dropout, then ``hidden // 2`` (512) likewise, then 10 outputs.
+``hidden`` with BatchNorm, ReLU and dropout, then ``hidden // 2`` (512) likewise, then 10 outputs, and
+with :attr:`ModelConfig.success_head` an 11th: the logit of the success probability.
 
 The two halves are separate calls so that a cloud's feature is computed once per pose and shared by
 its samples (:meth:`GraspNet.forward` takes the unique clouds and an index per sample).
@@ -44,6 +45,10 @@ class ModelConfig:
     centre (3) and radius (1) that the normalisation takes out of the PointNet's input. The authors'
     data are in a y-up world frame, where gravity is implicit; ours are in the gripper frame (top and
     side grasps), and an object's weight needs its size. False: the paper's inputs (154 wide)."""
+    success_head: bool = False
+    """An 11th output: the logit of the grasp's success probability, trained on the dataset's
+    ``success_p`` (its 0/1 success without one). False: the paper's 10 outputs (``mjcodesign train``
+    adds the head unless ``--success-weight 0``; a record without the key has none)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "point_widths", tuple(int(w) for w in self.point_widths))
@@ -52,6 +57,8 @@ class ModelConfig:
             raise DesignError(f"network widths and depth must be integers >= 1, got {self}")
         if not (0.0 <= self.dropout < 1.0):
             raise DesignError(f"dropout must be in [0, 1), got {self.dropout}")
+        if not isinstance(self.success_head, bool):
+            raise DesignError(f"success_head must be True or False, got {self.success_head!r}")
 
     @property
     def feature_size(self) -> int:
@@ -63,6 +70,11 @@ class ModelConfig:
         """Inputs of the MLP besides the cloud feature."""
         return _DESIGN_INPUTS + (_FRAME_INPUTS if self.frame_inputs else 0)
 
+    @property
+    def outputs(self) -> int:
+        """Outputs of the network: the 10 of the data, and the success logit with a head."""
+        return N_OUTPUTS + int(self.success_head)
+
     def as_dict(self) -> dict:
         """JSON-ready fields."""
         d = dataclasses.asdict(self)
@@ -71,7 +83,7 @@ class ModelConfig:
 
     @classmethod
     def from_dict(cls, d: dict) -> ModelConfig:
-        """Inverse of :meth:`as_dict`; unknown keys raise :class:`DesignError`."""
+        """Inverse of :meth:`as_dict`; unknown keys raise :class:`DesignError`, missing ones take their default."""
         names = {f.name for f in dataclasses.fields(cls)}
         if set(d) - names:
             raise DesignError(f"unknown model settings {sorted(set(d) - names)}")
@@ -146,7 +158,7 @@ class GraspNet(nn.Module):
         for _ in range(c.depth - 1):
             layers += _block(c.hidden, c.hidden, c.dropout)
         layers += _block(c.hidden, c.penultimate, c.dropout)
-        layers.append(nn.Linear(c.penultimate, N_OUTPUTS))
+        layers.append(nn.Linear(c.penultimate, c.outputs))
         self.mlp = nn.Sequential(*layers)
 
     def encode(self, clouds: torch.Tensor) -> torch.Tensor:
@@ -154,9 +166,9 @@ class GraspNet(nn.Module):
         return self.pc_scale * self.pointnet(clouds)
 
     def head(self, features: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
-        """Outputs (B, 10) from per-sample features (B, F) and inputs (B, D)."""
+        """Outputs (B, 10 or 11) from per-sample features (B, F) and inputs (B, D)."""
         return self.mlp(torch.cat([features, x], dim=1))
 
     def forward(self, clouds: torch.Tensor, pose_of: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
-        """Outputs (B, 10): unique clouds (U, 3, N), each sample's cloud row (B,), inputs (B, D)."""
+        """Outputs (B, 10 or 11): unique clouds (U, 3, N), each sample's cloud row (B,), inputs (B, D)."""
         return self.head(self.encode(clouds)[pose_of], x)

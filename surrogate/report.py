@@ -4,9 +4,11 @@
 
 * the checkpoint (``model.safetensors``, ``config.json`` with the metrics: :mod:`.checkpoint`);
 * ``metrics.json``: the split, the training curve, the held-out metrics of the network, of the
-  training mean and of gradient-boosted trees on the same split (:mod:`.metrics`), the success
-  rule's agreement with the simulator on the simulator's own outputs, the 25 % data run, and the
-  smoothness lines (:mod:`.smoothness`);
+  training mean and of gradient-boosted trees on the same split (:mod:`.metrics`; with a success
+  head, its probability beside the trees' success classifier), the design-ranking fidelity of each
+  and the labels' own repeatability (:mod:`.ranking`), the success rule's agreement with the
+  simulator on the simulator's own outputs, the 25 % data run, and the smoothness lines
+  (:mod:`.smoothness`);
 * ``summary.md``: the same as tables, with a plain verdict against the baselines;
 * ``curves.png``, ``calibration.png`` and ``smoothness.png``.
 """
@@ -27,7 +29,6 @@ from mjcodesign.surrogate.data import (
     N_OUTPUTS,
     N_REGRESSION,
     GraspData,
-    GraspDataset,
     Normalizer,
     Split,
     fold_splits,
@@ -37,11 +38,25 @@ from mjcodesign.surrogate.data import (
 )
 from mjcodesign.surrogate.folds import FOLDS_FILE, FOLDS_FORMAT, FOLDS_VERSION
 from mjcodesign.surrogate.inference import GraspBatch, InputRange, Poses, Surrogate
-from mjcodesign.surrogate.metrics import mean_baseline, score_outputs, success_scores, tree_baseline
+from mjcodesign.surrogate.metrics import (
+    mean_baseline,
+    score_outputs,
+    success_scores,
+    tree_baseline,
+    tree_success,
+)
 from mjcodesign.surrogate.model import ModelConfig
 from mjcodesign.surrogate.plots import plot_calibration, plot_curves, plot_lines
+from mjcodesign.surrogate.ranking import ranking_fidelity, split_half
 from mjcodesign.surrogate.smoothness import smoothness
-from mjcodesign.surrogate.train import EpochLog, TrainConfig, evaluate_loss, train
+from mjcodesign.surrogate.train import (
+    EpochLog,
+    TrainConfig,
+    evaluate_loss,
+    success_labels,
+    train,
+    training_set,
+)
 
 __all__ = [
     "SUCCESS_RATE_WARN",
@@ -49,6 +64,7 @@ __all__ = [
     "checkpoint_smoothness",
     "dataset_warnings",
     "predict_rows",
+    "predict_success",
     "standard_loss",
     "train_and_report",
     "train_folds",
@@ -57,16 +73,18 @@ __all__ = [
 
 _PREDICT_CHUNK = 8192  # rows per predict call
 _EPS = 1e-6  # probability clip of the cross-entropy
+_RANKING_TARGET = 0.5  # median design-ranking Spearman a surrogate must reach (the co-design's need)
 SUCCESS_RATE_WARN = (0.05, 0.95)
 """A dataset whose success rate is outside this range is one outcome with a few exceptions: the
 success the surrogate learns rests on those few samples (a user's 96/96 at the light density)."""
 
 
-def predict_rows(surrogate: Surrogate, data: GraspData, rows: np.ndarray) -> np.ndarray:
-    """Outputs (S, 10) of the samples ``rows`` in physical units, contact as a probability."""
+def _predict(surrogate: Surrogate, data: GraspData, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Outputs (S, 10) of the samples ``rows`` and the success head's probability (S,) or None."""
     poses = Poses.of(data.poses)
     features = surrogate.features(poses)
     out = np.zeros((len(rows), N_REGRESSION + 1))
+    head = np.zeros(len(rows)) if surrogate.has_success_head else None
     for i in range(0, len(rows), _PREDICT_CHUNK):
         r = rows[i : i + _PREDICT_CHUNK]
         b = GraspBatch(poses, data.pose[r], data.density[r], data.log_e[r], features=features)
@@ -74,7 +92,19 @@ def predict_rows(surrogate: Surrogate, data: GraspData, rows: np.ndarray) -> np.
         out[i : i + len(r)] = np.concatenate(
             [pred.body_force, pred.displacement, pred.ground_contact[:, None]], axis=1
         )
-    return out
+        if head is not None:
+            head[i : i + len(r)] = pred.success_p
+    return out, head
+
+
+def predict_rows(surrogate: Surrogate, data: GraspData, rows: np.ndarray) -> np.ndarray:
+    """Outputs (S, 10) of the samples ``rows`` in physical units, contact as a probability."""
+    return _predict(surrogate, data, rows)[0]
+
+
+def predict_success(surrogate: Surrogate, data: GraspData, rows: np.ndarray) -> np.ndarray | None:
+    """The success head's probability (S,) of the samples ``rows``; None for a network without a head."""
+    return _predict(surrogate, data, rows)[1]
 
 
 def standard_loss(pred: np.ndarray, data: GraspData, rows: np.ndarray, norm: Normalizer) -> dict:
@@ -124,9 +154,32 @@ class TensorBoardLog:
         self.writer.close()
 
 
-def _measure(name, pred, val_pred, data, parts: Split, norm) -> dict:
+def _measure(name, pred, val_pred, data, parts: Split, norm, success_p=None) -> dict:
     return {"name": name, **standard_loss(pred, data, parts.test, norm),
-            **score_outputs(pred, data, parts.test, val_pred, parts.val)}  # fmt: skip
+            **score_outputs(pred, data, parts.test, val_pred, parts.val, success_p)}  # fmt: skip
+
+
+def _held_out(
+    sur: Surrogate, data: GraspData, parts: Split, name: str
+) -> tuple[dict, np.ndarray, np.ndarray | None]:
+    """A network's held-out metrics (:func:`_measure`), its test outputs and its head's test probability."""
+    (pred, head), (val_pred, _) = _predict(sur, data, parts.test), _predict(sur, data, parts.val)
+    return _measure(name, pred, val_pred, data, parts, sur.normalizer, head), pred, head
+
+
+def _ranking(data: GraspData, parts: Split, net: tuple, tree: tuple) -> dict:
+    """Design-ranking fidelity of the network and the trees on the test poses, and the labels' own ceiling.
+
+    ``net`` and ``tree``: (test outputs (S, 10), success probability (S,) or None).
+    """
+    rows = parts.test
+    preds = {"surrogate (score)": success_scores(net[0], data, rows),
+             "gradient-boosted trees (score)": success_scores(tree[0], data, rows)}  # fmt: skip
+    if net[1] is not None:
+        preds["surrogate (head)"] = net[1]
+    if tree[1] is not None:
+        preds["gradient-boosted trees (classifier)"] = tree[1]
+    return {**ranking_fidelity(preds, data, rows), "repeatability": split_half(data, rows)}
 
 
 def _rule_ceiling(data: GraspData, rows: np.ndarray) -> dict:
@@ -244,22 +297,18 @@ def train_and_report(
         lifted_fraction=data.lifted_fraction,
         input_range=_trained_range(data),
     )
-    test_set = GraspDataset(data, parts.test, res.normalizer, frame=mcfg.frame_inputs)
-    net = _measure(
-        "surrogate",
-        predict_rows(sur, data, parts.test),
-        predict_rows(sur, data, parts.val),
-        data,
-        parts,
-        res.normalizer,
-    )
-    net["loss_check"] = evaluate_loss(res.model, test_set)
+    test_set = training_set(data, parts.test, res.normalizer, res.model.config)
+    net, net_pred, net_head = _held_out(sur, data, parts, "surrogate")
+    net["loss_check"] = evaluate_loss(res.model, test_set, success_weight=cfg.success_weight)
     mean = mean_baseline(data, parts.train, parts.test), mean_baseline(data, parts.train, parts.val)
+    mean_p = np.full(len(parts.test), float(success_labels(data, parts.train).mean()))
     tree = tree_baseline(data, parts.train, [parts.test, parts.val], seed=cfg.seed)
-    models = {"surrogate": net, "training mean": _measure("training mean", *mean, data, parts, res.normalizer),
-              "gradient-boosted trees": _measure("gradient-boosted trees", *tree, data, parts, res.normalizer)}  # fmt: skip
+    (tree_p,) = tree_success(data, parts.train, [parts.test], seed=cfg.seed)
+    models = {"surrogate": net, "training mean": _measure("training mean", *mean, data, parts, res.normalizer, mean_p),
+              "gradient-boosted trees": _measure("gradient-boosted trees", *tree, data, parts, res.normalizer, tree_p)}  # fmt: skip
     metrics = {"dataset": dataset, "split": parts.as_dict(), "train_config": cfg.as_dict(), "model": mcfg.as_dict(),
-               "training": res.summary(), "test": models, "success_rule_on_simulator_outputs": _rule_ceiling(data, parts.test)}  # fmt: skip
+               "training": res.summary(), "test": models, "success_rule_on_simulator_outputs": _rule_ceiling(data, parts.test),
+               "ranking": _ranking(data, parts, (net_pred, net_head), (tree[0], tree_p))}  # fmt: skip
     if efficiency:
         small = train(data, subsample(parts, efficiency, seed=cfg.seed), cfg, None if start else mcfg, init=start,
                       on_epoch=on_epoch and (lambda log: on_epoch("efficiency", log)))  # fmt: skip
@@ -271,15 +320,14 @@ def train_and_report(
             lifted_fraction=data.lifted_fraction,
             input_range=_trained_range(data),
         )
-        s_pred = predict_rows(s_sur, data, parts.test), predict_rows(s_sur, data, parts.val)
         metrics["efficiency"] = {"fraction": efficiency, "training": small.summary(),
-                                 "test": _measure(f"surrogate on {efficiency:.0%}", *s_pred, data, parts, small.normalizer)}  # fmt: skip
+                                 "test": _held_out(s_sur, data, parts, f"surrogate on {efficiency:.0%}")[0]}  # fmt: skip
     if smoothness_poses:
         poses = _smoothness_poses(data, parts, smoothness_poses)
         metrics["smoothness"] = smoothness(
             sur, data, poses, lines=smoothness_lines, seed=cfg.seed, cache_dir=cache_dir
         )
-    metrics["verdict"] = verdict(models)
+    metrics["verdict"] = verdict(models, metrics["ranking"])
     sur.meta = {
         "dataset": dataset,
         "split": parts.as_dict(),
@@ -411,14 +459,12 @@ def train_folds(
             lifted_fraction=data.lifted_fraction,
             input_range=_trained_range(data),
         )
-        pooled[parts.test] = predict_rows(sur, data, parts.test)
-        m = _measure(
-            "surrogate", pooled[parts.test], predict_rows(sur, data, parts.val), data, parts, res.normalizer
-        )
+        m, pooled[parts.test], _ = _held_out(sur, data, parts, "surrogate")
         seen = sorted(set(data.objects[data.pose[np.concatenate([parts.train, parts.val])]]))
         entry = {"path": name, "held_out": list(parts.test_objects), "train_objects": seen, "split": parts.as_dict(),
                  "training": {k: v for k, v in res.summary().items() if not isinstance(v, list)},
-                 "test": {"loss": m["loss"], "success": {k: m["success"][k] for k in ("accuracy", "roc_auc", "rate")}}}  # fmt: skip
+                 "test": {"loss": m["loss"], "success": {k: m["success"][k] for k in ("accuracy", "roc_auc", "rate")},
+                          **({"success_head": {k: m["success_head"][k] for k in ("roc_auc", "brier")}} if "success_head" in m else {})}}  # fmt: skip
         sur.meta = {"dataset": dataset, "split": parts.as_dict(), "train": cfg.as_dict(), "fold": entry}
         if start is not None:
             sur.meta["init"] = _init_record(init)
@@ -443,26 +489,84 @@ def train_folds(
 
 def _brief(metrics: dict) -> dict:
     net = metrics["test"]["surrogate"]
+    head = (
+        {"success_head": {k: net["success_head"][k] for k in ("roc_auc", "brier")}}
+        if "success_head" in net
+        else {}
+    )
     return {"test_loss": net["loss"], "mae": net["mae"], "success": {k: net["success"][k] for k in ("accuracy", "roc_auc")},
-            "epochs": metrics["training"]["epochs"], "verdict": metrics["verdict"]}  # fmt: skip
+            **head, "epochs": metrics["training"]["epochs"], "verdict": metrics["verdict"]}  # fmt: skip
 
 
-def verdict(models: dict) -> dict:
-    """Whether the surrogate beats both baselines: on the test loss, per output MAE, success AUC."""
+def _success_probabilities(m: dict) -> list[dict]:
+    """A model's success predictions that have an AUC and a Brier score: the score (calibrated), the head."""
+    return [m[k] for k in ("success", "success_head") if k in m]
+
+
+def verdict(models: dict, ranking: dict | None = None) -> dict:
+    """Whether the surrogate beats both baselines: on the test loss, per output MAE, success AUC.
+
+    With a success head: whether the head's AUC is above, and its Brier score below, every baseline's
+    success prediction (score and classifier). With ``ranking`` (:func:`_ranking`): whether the head's
+    (else the score's) median design-ranking Spearman reaches :data:`_RANKING_TARGET` and beats the trees'.
+    """
     net, base = models["surrogate"], [m for k, m in models.items() if k != "surrogate"]
     per_output = {k: all(v < b["mae"][k] for b in base) for k, v in net["mae"].items()}
     auc = net["success"]["roc_auc"]
     auc_better = auc is not None and all(
         b["success"]["roc_auc"] is None or auc > b["success"]["roc_auc"] for b in base
     )
-    return {"loss": all(net["loss"] < b["loss"] for b in base), "outputs_better": sum(per_output.values()),
-            "outputs": len(per_output), "per_output": per_output, "success_auc": auc_better}  # fmt: skip
+    out = {"loss": all(net["loss"] < b["loss"] for b in base), "outputs_better": sum(per_output.values()),
+           "outputs": len(per_output), "per_output": per_output, "success_auc": auc_better}  # fmt: skip
+    if "success_head" in net:
+        head, rivals = net["success_head"], [p for b in base for p in _success_probabilities(b)]
+        out["head_auc"] = head["roc_auc"] is not None and all(
+            r["roc_auc"] is None or head["roc_auc"] > r["roc_auc"] for r in rivals
+        )
+        out["head_brier"] = all(head["brier"] < r["brier"] for r in rivals)
+    if ranking is not None:
+        ms = ranking["models"]
+        mine = ms.get("surrogate (head)", ms["surrogate (score)"])["median"]
+        trees = [
+            v["median"] for k, v in ms.items() if k.startswith("gradient-boosted") and v["median"] is not None
+        ]
+        out["ranking_median"] = mine
+        out["ranking_target"] = mine is not None and mine >= _RANKING_TARGET
+        out["ranking_beats_trees"] = mine is not None and all(mine > t for t in trees)
+    return out
 
 
 def _fmt(v) -> str:
     if v is None:
         return "–"
     return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
+def ranking_markdown(r: dict, v: dict) -> list[str]:
+    """The design-ranking section of the summary (:func:`_ranking`, the verdict's ranking keys)."""
+    lines = ["## Design ranking", "",
+             f"Per held-out pose with >= {r['min_designs']} designs, the Spearman correlation over its designs between a "
+             f"predicted success probability and the measured success_p: {r['poses']} poses ranked, {r['constant']} left out "
+             f"(the same measured p for every design), {r['too_few_designs']} with fewer designs.", "",
+             "| prediction | median | IQR | mean | poses > 0 |", "|---|---|---|---|---|"]  # fmt: skip
+    for name, s in r["models"].items():
+        iqr = "–" if s["iqr"] is None else f"{s['iqr'][0]:.3f} – {s['iqr'][1]:.3f}"
+        lines.append(f"| {name} | {_fmt(s['median'])} | {iqr} | {_fmt(s['mean'])} | {s['positive']} |")
+    rep = r["repeatability"]
+    if rep.get("computable"):
+        lo, hi = rep["first_draws"], rep["all_draws"]
+        lines += ["", f"The labels' own repeatability on the same {rep['poses']} poses, even against odd perturbed draws "
+                  f"of each cell: median split-half Spearman {_fmt(lo['split_half_spearman']['median'])} over the first "
+                  f"{rep['draws']} draws, {_fmt(hi['split_half_spearman']['median'])} over all draws; by Spearman–Brown a "
+                  f"perfect predictor of the true probability reaches about {_fmt(lo['ceiling'])} to {_fmt(hi['ceiling'])} "
+                  "(the first estimate is biased down, the second up by the adaptive extension)."]  # fmt: skip
+    else:
+        lines += ["", f"The labels' repeatability is not computable here: {rep['reason']}."]
+    if "ranking_median" in v:
+        lines += ["", f"Median {_fmt(v['ranking_median'])}: "
+                  + ("reaches" if v["ranking_target"] else "does not reach") + f" {_RANKING_TARGET}, and "
+                  + ("beats" if v["ranking_beats_trees"] else "does not beat") + " the trees'."]  # fmt: skip
+    return [*lines, ""]
 
 
 def summary_markdown(m: dict) -> str:
@@ -487,7 +591,10 @@ def summary_markdown(m: dict) -> str:
         ("The surrogate **beats both baselines** on the test loss."
          if v["loss"] else "The surrogate **does not beat both baselines** on the test loss.")
         + f" It has the lowest MAE on {v['outputs_better']} of {v['outputs']} outputs, and "
-        + ("the best success ROC AUC." if v["success_auc"] else "not the best success ROC AUC."),
+        + ("the best success ROC AUC." if v["success_auc"] else "not the best success ROC AUC.")
+        + ("" if "head_auc" not in v else
+           f" Its success head has {'the best' if v['head_auc'] else 'not the best'} success ROC AUC and "
+           f"{'the lowest' if v['head_brier'] else 'not the lowest'} Brier score of all success predictions."),
         "",
         "## Held-out test",
         "",
@@ -500,11 +607,18 @@ def summary_markdown(m: dict) -> str:
     rows += [("ground contact accuracy", lambda x: x["contact"]["accuracy"]), ("ground contact ROC AUC", lambda x: x["contact"]["roc_auc"]),
              ("success accuracy", lambda x: x["success"]["accuracy"]), ("success ROC AUC", lambda x: x["success"]["roc_auc"]),
              ("success Brier (calibrated)", lambda x: x["success"]["brier"]), ("predicted success rate", lambda x: x["success"]["predicted_rate"])]  # fmt: skip
+    if "success_head" in models["surrogate"]:
+        head = lambda key: lambda x: x.get("success_head", {}).get(key)  # noqa: E731
+        rows += [("success probability ROC AUC (head; trees: classifier)", head("roc_auc")),
+                 ("success probability Brier (vs 0/1)", head("brier")), ("success probability Brier (vs success_p)", head("brier_p")),
+                 ("success probability accuracy (p > 0.5)", head("accuracy"))]  # fmt: skip
     lines += [f"| {label} | " + " | ".join(_fmt(f(models[n])) for n in names) + " |" for label, f in rows]
     rule = m["success_rule_on_simulator_outputs"]
     lines += ["", f"Simulator success rate on the test rows: {models['surrogate']['success']['rate']:.3f}. The success rule "
               f"applied to the simulator's own outputs agrees with its flag on {rule['accuracy']:.3f} of them (the ceiling "
               "of success from outputs).", ""]  # fmt: skip
+    if "ranking" in m:
+        lines += ranking_markdown(m["ranking"], v)
     if "efficiency" in m:
         e = m["efficiency"]
         lines += ["## Data efficiency", "", "| training rows | epochs | test loss | success ROC AUC |", "|---|---|---|---|",

@@ -2,8 +2,11 @@
 
 As the authors' ``train.py``: AdamW at ``lr`` (the PointNet at half of it), weight decay 1e-3, batch
 512, L1 loss on z-scored outputs, ``ReduceLROnPlateau(0.8)`` on the validation loss, the best
-validation weights kept. Two changes: the ground contact is a logit under a binary cross-entropy (so
-that the network gives a probability), and a batch is grouped by pose (:func:`pose_batches`) so that
+validation weights kept. Three changes: the ground contact is a logit under a binary cross-entropy (so
+that the network gives a probability); a network with a success head
+(:attr:`~mjcodesign.surrogate.model.ModelConfig.success_head`) adds the binary cross-entropy of its
+logit against the soft label ``success_p`` (:func:`success_labels`), weighted by
+:attr:`TrainConfig.success_weight`; and a batch is grouped by pose (:func:`pose_batches`) so that
 each pose's PointNet feature is computed once and shared by its samples: over 512 random samples the
 PointNet would run ~460 times per step (2.6 s forward and backward on 512 clouds here), about 400 s
 an epoch on 80k samples.
@@ -27,6 +30,7 @@ from torch import nn
 
 from mjcodesign.errors import DesignError
 from mjcodesign.surrogate.data import (
+    N_OUTPUTS,
     N_REGRESSION,
     GraspData,
     GraspDataset,
@@ -38,10 +42,15 @@ from mjcodesign.surrogate.data import (
 from mjcodesign.surrogate.model import GraspNet, ModelConfig
 
 _CONTACT_WEIGHT = 1.0  # the contact's cross-entropy against one L1 term of a z-scored output
+SUCCESS_WEIGHT = 1.0
+"""Default weight of the success head's cross-entropy in the loss, against one L1 term of a z-scored
+output (the contact's weight): the head is one more output, and the regression that shares its
+layers keeps its share of the gradient (docs/concepts/surrogate.md gives the measured alternatives)."""
 PRECISIONS = ("fp32", "bf16")
 
 __all__ = [
     "PRECISIONS",
+    "SUCCESS_WEIGHT",
     "EpochLog",
     "OptimizerConfig",
     "TrainConfig",
@@ -49,7 +58,9 @@ __all__ = [
     "evaluate_loss",
     "grasp_loss",
     "make_optimizer",
+    "success_labels",
     "train",
+    "training_set",
     "train_step",
 ]
 
@@ -95,8 +106,13 @@ class TrainConfig:
     network's step at batch 512 takes 88 ms against 160 ms (``bench surrogate``, alternated, 2 threads);
     see docs/benchmarks.md for what it does to the metrics."""
     seed: int = 0
+    success_weight: float = SUCCESS_WEIGHT
+    """Weight of the success head's cross-entropy in the loss (unused by a network without a head)."""
 
     def __post_init__(self) -> None:
+        w = self.success_weight
+        if isinstance(w, bool) or not (isinstance(w, int | float) and 0 <= w < float("inf")):
+            raise DesignError(f"success_weight must be a finite number >= 0, got {self.success_weight!r}")
         bad = [n for n, low in (("epochs", 1), ("batch_size", 2), ("early_stop_patience", 1), ("pose_group", 0),
                                 ("seed", 0)) if _bad_count(getattr(self, n), low)]  # fmt: skip
         if bad:
@@ -156,20 +172,50 @@ class TrainResult:
         }
 
 
-def grasp_loss(pred: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
-    """Mean of the 9 L1 terms on z-scored outputs and the contact's cross-entropy, over 10."""
+def grasp_loss(pred: torch.Tensor, y: torch.Tensor, success_weight: float = SUCCESS_WEIGHT) -> torch.Tensor:
+    """Sum of the 9 L1 terms on z-scored outputs and the contact's cross-entropy, over 10.
+
+    With a success head (``pred`` and ``y`` of 11 columns) the sum also holds ``success_weight`` times
+    the cross-entropy of the head's logit against the soft label in ``y``'s last column.
+    """
     l1 = (pred[:, :N_REGRESSION] - y[:, :N_REGRESSION]).abs().mean(dim=0).sum()
     bce = nn.functional.binary_cross_entropy_with_logits(pred[:, N_REGRESSION], y[:, N_REGRESSION])
-    return (l1 + _CONTACT_WEIGHT * bce) / (N_REGRESSION + 1)
+    total = l1 + _CONTACT_WEIGHT * bce
+    if pred.shape[1] > N_OUTPUTS:
+        total = total + success_weight * nn.functional.binary_cross_entropy_with_logits(
+            pred[:, N_OUTPUTS], y[:, N_OUTPUTS]
+        )
+    return total / (N_REGRESSION + 1)
+
+
+def success_labels(data: GraspData, rows: np.ndarray) -> np.ndarray:
+    """The success head's target of the samples ``rows``, shape (S,): ``success_p``, else the 0/1 success."""
+    if data.success_p is not None:
+        return np.asarray(data.success_p[rows], dtype=float)
+    return data.success[rows].astype(float)
+
+
+def training_set(data: GraspData, rows: np.ndarray, norm: Normalizer, config: ModelConfig) -> GraspDataset:
+    """The samples ``rows`` as a :class:`GraspDataset` for a network of ``config``.
+
+    With a success head the targets get an 11th column, :func:`success_labels`.
+    """
+    ds = GraspDataset(data, rows, norm, frame=config.frame_inputs)
+    if config.success_head:
+        label = torch.from_numpy(success_labels(data, ds.rows).astype(np.float32))
+        ds.y = torch.cat([ds.y, label[:, None]], dim=1)
+    return ds
 
 
 @torch.no_grad()
-def evaluate_loss(model: GraspNet, dataset: GraspDataset, batch_size: int = 4096) -> float:
+def evaluate_loss(
+    model: GraspNet, dataset: GraspDataset, batch_size: int = 4096, success_weight: float = SUCCESS_WEIGHT
+) -> float:
     """:func:`grasp_loss` over a whole set in eval mode (sample-weighted mean over batches)."""
     model.eval()
     total, n = 0.0, 0
     for b in dataset.batches(batch_size):
-        total += float(grasp_loss(model(b.clouds, b.pose_of, b.x), b.y)) * len(b.y)
+        total += float(grasp_loss(model(b.clouds, b.pose_of, b.x), b.y, success_weight)) * len(b.y)
         n += len(b.y)
     return total / max(n, 1)
 
@@ -203,8 +249,8 @@ def train(
     rng = np.random.default_rng(cfg.seed)
     rows = parts.train
     norm = Normalizer.fit(data, rows) if init is None else init[1]
-    train_set = GraspDataset(data, rows, norm, frame=mcfg.frame_inputs)
-    val_set = GraspDataset(data, parts.val, norm, frame=mcfg.frame_inputs)
+    train_set = training_set(data, rows, norm, mcfg)
+    val_set = training_set(data, parts.val, norm, mcfg)
     t0 = time.perf_counter()
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(cfg.seed)
@@ -228,7 +274,13 @@ def make_optimizer(model: GraspNet, o: OptimizerConfig) -> torch.optim.AdamW:
     )
 
 
-def train_step(model: GraspNet, opt: torch.optim.Optimizer, b: TrainBatch, precision: str = "fp32") -> float:
+def train_step(
+    model: GraspNet,
+    opt: torch.optim.Optimizer,
+    b: TrainBatch,
+    precision: str = "fp32",
+    success_weight: float = SUCCESS_WEIGHT,
+) -> float:
     """One optimiser step on batch ``b`` (model in train mode); returns the batch's loss.
 
     ``bf16``: the forward (and so the backward) under CPU autocast in bfloat16; the loss is taken in
@@ -236,7 +288,7 @@ def train_step(model: GraspNet, opt: torch.optim.Optimizer, b: TrainBatch, preci
     """
     with torch.autocast("cpu", dtype=torch.bfloat16, enabled=precision == "bf16"):
         pred = model(b.clouds, b.pose_of, b.x)
-    loss = grasp_loss(pred.float(), b.y)
+    loss = grasp_loss(pred.float(), b.y, success_weight)
     opt.zero_grad(set_to_none=True)
     loss.backward()
     opt.step()
@@ -256,10 +308,10 @@ def _fit(model, train_set, val_set, cfg: TrainConfig, rng, result: TrainResult, 
         model.train()
         total, n = 0.0, 0
         for idx in pose_batches(train_set.pose, cfg.batch_size, rng, cfg.pose_group):
-            loss = train_step(model, opt, train_set.__getitems__(idx), cfg.precision)
+            loss = train_step(model, opt, train_set.__getitems__(idx), cfg.precision, cfg.success_weight)
             total += loss * len(idx)
             n += len(idx)
-        val = evaluate_loss(model, val_set)
+        val = evaluate_loss(model, val_set, success_weight=cfg.success_weight)
         sched.step(val)
         best = val < result.best_val_loss
         if best:

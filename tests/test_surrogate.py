@@ -389,6 +389,17 @@ def test_train_command_writes_checkpoint_and_report(dataset, work, cli):
     assert med["lines"] == 2 and "slope_correlation" in med and "slope_rank_correlation" in med
     assert 0.0 <= med["slope_sign_agreement"] <= 1.0
     assert "Verdict" in (out / "summary.md").read_text()
+    # The success head's probability beside the trees' classifier on the same rows, and the ranking
+    # measures (no rollouts table here: one rollout per cell, so no repeatability).
+    assert load_surrogate(out).has_success_head and m["model"]["success_head"]
+    for name in ("surrogate", "gradient-boosted trees"):
+        assert set(m["test"][name]["success_head"]) >= {"roc_auc", "brier", "brier_p", "calibration"}, name
+    assert set(m["ranking"]["models"]) >= {"surrogate (head)", "gradient-boosted trees (classifier)"}
+    assert m["ranking"]["repeatability"] == {
+        "computable": False,
+        "reason": "one rollout per cell: the dataset has no rollouts table",
+    }
+    assert "## Design ranking" in (out / "summary.md").read_text()
     assert load_surrogate(out).meta["dataset"]["manifest_sha256"] == m["dataset"]["manifest_sha256"]
     # The density range spans the configured one and the rows' (a dataset at published masses has one
     # density per object, whatever the configured one).

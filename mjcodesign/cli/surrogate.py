@@ -62,7 +62,10 @@ _TRAIN_OPTIONS = (
     ("--patience", "early_stop_patience", int_at_least(1), 20, "early stopping [epochs]"),
     ("--pose-group", "pose_group", int_at_least(0), 0, "samples of a pose kept together in a batch (0: all)"),
     ("--precision", "precision", _precision, "fp32", "fp32, or bf16 (autocast; ~1.7x faster on AVX512-BF16)"),
-)
+    ("--success-weight", "success_weight", finite_float(0.0), 1.0,
+     "weight of the success head's cross-entropy on success_p against one output's L1 (0: no head, the "
+     "paper's 10 outputs)"),
+)  # fmt: skip
 _OPTIMIZER_OPTIONS = (
     ("--lr", "lr", finite_float(0.0, strict=True), 1e-3, "AdamW learning rate (PointNet: half)"),
     ("--plateau-patience", "plateau_patience", int_at_least(1), 5, "epochs before the LR drops by 0.8"),
@@ -210,7 +213,11 @@ def run_train(args: argparse.Namespace) -> int:
     cfg = TrainConfig(
         **_fields(args, _TRAIN_OPTIONS), optimizer=OptimizerConfig(**_fields(args, _OPTIMIZER_OPTIONS))
     )
-    mcfg = ModelConfig(**_fields(args, _MODEL_OPTIONS), frame_inputs=not args.no_frame_inputs)
+    mcfg = ModelConfig(
+        **_fields(args, _MODEL_OPTIONS),
+        frame_inputs=not args.no_frame_inputs,
+        success_head=args.success_weight > 0,
+    )
     if args.init is not None:
         changed = [f for f, dest, _, default, _ in _MODEL_OPTIONS if getattr(args, dest) != default]
         if changed or args.no_frame_inputs:
