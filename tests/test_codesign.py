@@ -17,8 +17,19 @@ import torch
 from numpy.testing import assert_array_equal
 from torch import nn
 
-from mjcodesign.codesign import Mode, OptimizeConfig, Phase, PoseSelection, PoseSet, log_e_of, optimize, z_of
-from mjcodesign.surrogate import GraspBatch, Normalizer, Poses, Surrogate
+from mjcodesign.codesign import (
+    Mode,
+    Objective,
+    OptimizeConfig,
+    Phase,
+    PoseSelection,
+    PoseSet,
+    log_e_of,
+    optimize,
+    z_of,
+)
+from mjcodesign.errors import DesignError
+from mjcodesign.surrogate import GraspBatch, Normalizer, Poses, SuccessLoss, Surrogate
 
 cli_main = importlib.import_module("mjcodesign.cli.main")
 
@@ -63,9 +74,23 @@ class PlantedNet(nn.Module):
         return torch.stack([zero] * 5 + [one] + [zero] * 3 + [q], dim=1)
 
 
-def _surrogate() -> Surrogate:
+class _HeadConfig(_Config):
+    success_head = True
+
+
+class PlantedHeadNet(PlantedNet):
+    """:class:`PlantedNet` with a success head whose logit is −q: p = sigmoid(−q), largest at the planted optimum."""
+
+    config = _HeadConfig()
+
+    def head(self, features, x):
+        out = super().head(features, x)
+        return torch.cat([out, -out[:, 9:10]], dim=1)
+
+
+def _surrogate(net=None) -> Surrogate:
     norm = Normalizer(np.zeros(22), np.ones(22), 0.0, 1.0, np.zeros(9), np.ones(9), np.zeros(7), np.ones(7))
-    return Surrogate(PlantedNet(), norm, lift=0.03, lifted_fraction=0.5)
+    return Surrogate(net or PlantedNet(), norm, lift=0.03, lifted_fraction=0.5)
 
 
 def _poses(objects=(0, 1)) -> PoseSet:
@@ -177,6 +202,49 @@ def test_planted_optimum_individual_and_joint():
     assert joint.total_curve[-1] < joint.total_curve[0]
 
 
+def test_success_objective_reaches_the_planted_optimum_and_counts_1_minus_p():
+    sur, poses = _surrogate(PlantedHeadNet()), _poses()
+    cfg = OptimizeConfig(**{**_CONFIG.as_dict(), "mode": Mode.INDIVIDUAL, "objective": Objective.SUCCESS})
+    res = optimize(sur, poses, 200.0, cfg)
+    assert res.config["objective"] == "success" and all(p == "converged" for p in res.phases)
+    for k in range(2):
+        np.testing.assert_allclose(res.designs[k], _C[k] + _PATTERN, atol=_TOL_OPTIMUM)
+        assert res.chosen[k] == poses.rows(k)[np.argmin(_B[k])]
+    # The counted loss at the end is 1 − p of each object's chosen pose, p = sigmoid(−q) at the optimum
+    # (q = b_p there): the mean predicted success probability is 1 − mean(counted).
+    best = np.array([_B[k].min() for k in range(2)])
+    np.testing.assert_allclose(res.curves[-1], 1.0 - 1.0 / (1.0 + np.exp(best)), rtol=1e-3)
+
+
+def test_success_gradient_through_the_optimiser_equals_finite_differences():
+    """d Σ(1 − p) / d ln E of the counted rows, as the optimiser gets it, against central differences."""
+    sur, poses = _surrogate(PlantedHeadNet()), _poses()
+    batch = sur.prepare(GraspBatch(Poses.of(poses), np.arange(8), np.full(8, 200.0)))
+    d = np.full(22, 15.2) + np.linspace(-0.5, 0.5, 22)
+    g = sur.loss_and_grad(d, batch, SuccessLoss())
+    step = 1e-6  # [ln E] central differences of a float64 function: O(h²) error, round-off ~1e-10 / h
+    fd = np.array([(sur.loss_and_grad(d + e, batch, SuccessLoss()).loss
+                    - sur.loss_and_grad(d - e, batch, SuccessLoss()).loss) / (2 * step)
+                   for e in np.eye(22) * step])  # fmt: skip
+    assert np.linalg.norm(fd) > 0
+    np.testing.assert_allclose(g.grad, fd, rtol=1e-5, atol=1e-5 * np.abs(fd).max())
+    # object 0's four poses; the planted constants (c, b) reach the net as the normalised COM it is given
+    com = batch.features.com.numpy().astype(float)[:4]
+    q = _A * ((d[None] - com[:, :1] - _PATTERN) ** 2).mean(axis=1) + com[:, 1]
+    np.testing.assert_allclose(g.rows[:4], 1.0 - 1.0 / (1.0 + np.exp(q)), rtol=1e-12)
+
+
+def test_success_objective_needs_a_success_head():
+    with pytest.raises(DesignError, match="success head"):
+        optimize(_surrogate(), _poses(), 200.0, OptimizeConfig(objective="success", max_iterations=2))
+    with pytest.raises(DesignError, match="success head"):
+        _surrogate().loss_and_grad(
+            np.full(22, 15.0), GraspBatch(Poses.of(_poses()), [0], [200.0]), SuccessLoss()
+        )
+    with pytest.raises(DesignError, match="unknown objective"):
+        OptimizeConfig(objective="fastest")
+
+
 def test_deterministic():
     sur, poses = _surrogate(), _poses()
     cfg = OptimizeConfig(top_b=2, patience=5, max_iterations=200)
@@ -217,7 +285,13 @@ def candidates(tmp_path_factory):
 
 @pytest.mark.parametrize(
     "case, expect",
-    [("per_object_0", "--poses-per-object"), ("schema", "another schema"), ("no_poses", "no poses for")],
+    [
+        ("per_object_0", "--poses-per-object"),
+        ("schema", "another schema"),
+        ("no_poses", "no poses for"),
+        ("no_head", "success head"),
+        ("objective", "--objective"),
+    ],  # fmt: skip
 )
 def test_cli_bad_input_exits_2_with_one_line(case, expect, candidates, tmp_path):
     from mjcodesign.surrogate import GraspNet, ModelConfig, save_checkpoint
@@ -229,7 +303,8 @@ def test_cli_bad_input_exits_2_with_one_line(case, expect, candidates, tmp_path)
         (ckpt / "config.json").write_text(json.dumps(record))
     else:  # a valid checkpoint of a tiny network (untrained: these cases stop before it runs)
         norm = _surrogate().normalizer
-        net = GraspNet(ModelConfig(point_widths=(4,), hidden=4, depth=1, penultimate=4, dropout=0.0))
+        net = GraspNet(ModelConfig(point_widths=(4,), hidden=4, depth=1, penultimate=4, dropout=0.0,
+                                   success_head=case != "no_head"))  # fmt: skip
         save_checkpoint(ckpt, Surrogate(net, norm, lift=0.03, lifted_fraction=0.5))
     args = ["--ckpt", str(ckpt), "--objects", "box", "--poses", str(candidates / "box.npz"),
             "--out", str(tmp_path / "out"), "--json"]  # fmt: skip
@@ -237,6 +312,8 @@ def test_cli_bad_input_exits_2_with_one_line(case, expect, candidates, tmp_path)
         args += ["--poses-per-object", "0"]
     if case == "no_poses":
         args[3] = "box,025_mug"
+    if case in ("no_head", "objective"):
+        args += ["--objective", "success" if case == "no_head" else "fastest"]
     r = _run(*args, tmp_path=tmp_path)
     assert r.returncode == 2, r.stderr
     assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1 and expect in r.stderr, r.stderr

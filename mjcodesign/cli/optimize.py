@@ -25,6 +25,7 @@ from mjcodesign.cli.common import (
 __all__ = ["add_bench_parser", "add_parser", "run", "run_bench"]
 
 _MODES = ("joint", "individual")
+_OBJECTIVES = ("lopt", "success")  # mjcodesign.codesign.Objective, without importing torch here
 
 
 def add_parser(subparsers) -> None:
@@ -58,6 +59,13 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--mode", choices=_MODES, default="joint", help="one design for all objects, or one each")
     p.add_argument(
+        "--objective",
+        choices=_OBJECTIVES,
+        default="lopt",
+        help="lopt: the paper's Algorithm 1 on L_opt; success: maximise the success head's predicted "
+        "probability at each object's best pose (a checkpoint trained with a success head)",
+    )
+    p.add_argument(
         "--density",
         default=None,
         help="object density [kg/m³] or light (100) / heavy (400), the paper's relative scale, or ycb-median "
@@ -88,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.progress import Progress
 
-    from mjcodesign.codesign import Mode, OptimizeConfig
+    from mjcodesign.codesign import Mode, Objective, OptimizeConfig
     from mjcodesign.codesign.run import run_codesign
     from mjcodesign.data import resolve_objects
     from mjcodesign.objects import parse_density
@@ -104,7 +112,11 @@ def run(args: argparse.Namespace) -> int:
 
         torch.set_num_threads(args.threads)
     cfg = OptimizeConfig(
-        mode=Mode(args.mode), top_b=args.top_b, patience=args.patience, max_iterations=args.max_iterations
+        mode=Mode(args.mode),
+        objective=Objective(args.objective),
+        top_b=args.top_b,
+        patience=args.patience,
+        max_iterations=args.max_iterations,
     )
     with contextlib.ExitStack() as stack:
         bar: list = []  # the progress bar, started at the first iteration: a refusal before it is one line

@@ -16,6 +16,7 @@ Torch is imported only inside the functions that run the surrogate.
 
 from mjcodesign.codesign.optimize import (
     Mode,
+    Objective,
     OptimizeConfig,
     OptimizeResult,
     Step,
@@ -28,6 +29,7 @@ from mjcodesign.codesign.selection import Phase, PoseSelection
 
 __all__ = [
     "Mode",
+    "Objective",
     "OptimizeConfig",
     "OptimizeResult",
     "Phase",

@@ -26,6 +26,14 @@ is the world vertical expressed in the gripper frame, ``up = R[2, :]`` (row 2 of
 :class:`~mjcodesign.surrogate.DesignLoss` implements exactly that, with the authors' weights (w1 = 1e-3,
 w2 = 1e3) and their norm: ``‖·‖`` is read as the authors' code computes it, the sum of absolute
 components (6 wrench, 3 displacement); w1 only regularises, the w2 terms decide.
+
+**The success objective** (:attr:`Objective.SUCCESS`). The per-pose loss is the predicted failure
+probability ``1 − p`` of the surrogate's success head (:class:`~mjcodesign.surrogate.SuccessLoss`),
+ranked and counted by the same pose selection: the B most likely poses of each object until the set is
+fixed, then the best one. At the end the counted total is ``Σ_k (1 − p_k)`` over the objects' chosen
+poses, so minimising it maximises the mean over objects of the predicted success probability at each
+object's best pose. The surrogate gives no uncertainty (one deterministic network), so none is
+penalised. A surrogate without a success head is refused.
 """
 
 from __future__ import annotations
@@ -47,6 +55,7 @@ from mjcodesign.errors import DesignError
 
 __all__ = [
     "Mode",
+    "Objective",
     "OptimizeConfig",
     "OptimizeResult",
     "Step",
@@ -67,6 +76,13 @@ class Mode(enum.Enum):
     INDIVIDUAL = "individual"
 
 
+class Objective(enum.Enum):
+    """What a pose's loss is: the paper's L_opt, or the predicted failure probability (module docstring)."""
+
+    LOPT = "lopt"
+    SUCCESS = "success"
+
+
 def log_e_of(z) -> np.ndarray:
     """``ln E = 13.5 + 3.5 · sigmoid(z)`` [ln Pa], elementwise."""
     return LOG_E_MIN + _SPAN / (1.0 + np.exp(-np.asarray(z, dtype=float)))
@@ -85,6 +101,8 @@ class OptimizeConfig:
     """Algorithm 1's settings; defaults are the paper's (B, T_p, AdamW lr) or the authors' where it is silent."""
 
     mode: Mode = Mode.JOINT
+    objective: Objective = Objective.LOPT
+    """``lopt``: the paper's Algorithm 1 on L_opt; ``success``: on the success head's 1 − p."""
     top_b: int = 5
     """B: poses that count per object before the set is fixed."""
     patience: int = 100
@@ -104,6 +122,11 @@ class OptimizeConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mode", Mode(self.mode))
+        try:
+            object.__setattr__(self, "objective", Objective(self.objective))
+        except ValueError:
+            names = ", ".join(o.value for o in Objective)
+            raise DesignError(f"unknown objective {self.objective!r}: choose from {names}") from None
         ints = (self.top_b, self.patience, self.max_iterations)
         if any(isinstance(v, bool) or not isinstance(v, int) or v < 1 for v in ints):
             raise DesignError(f"top_b, patience and max_iterations must be integers >= 1, got {ints}")
@@ -116,6 +139,7 @@ class OptimizeConfig:
         """JSON-ready fields."""
         return {
             "mode": self.mode.value,
+            "objective": self.objective.value,
             "top_b": self.top_b,
             "patience": self.patience,
             "max_iterations": self.max_iterations,
@@ -201,8 +225,8 @@ def _counted_type(base_type: type) -> type:
     class CountedLoss(base_type):
         choose: Callable[[np.ndarray], np.ndarray]
 
-        def rows(self, body_force, displacement, p_contact, up):
-            r = super().rows(body_force, displacement, p_contact, up)
+        def rows(self, *outputs):
+            r = super().rows(*outputs)
             mask = torch.from_numpy(np.asarray(self.choose(r.detach().double().numpy()), dtype=bool))
             return torch.where(mask, r, r.detach())
 
@@ -229,21 +253,29 @@ def optimize(
     (:func:`~mjcodesign.codesign.problem.row_densities`).
 
     ``surrogate``: a :class:`~mjcodesign.surrogate.Surrogate` (or anything with its ``prepare`` and
-    ``loss_and_grad``); ``loss``: a :class:`~mjcodesign.surrogate.DesignLoss` (default: the paper's).
+    ``loss_and_grad``); ``loss``: a :class:`~mjcodesign.surrogate.DesignLoss` (default: the paper's), or
+    with the success objective a :class:`~mjcodesign.surrogate.SuccessLoss` (its default). Raises
+    :class:`DesignError` for the success objective on a surrogate without a success head.
     Deterministic: same inputs, same result, bit for bit.
     """
     import torch
 
-    from mjcodesign.surrogate import DesignLoss, GraspBatch, Poses
+    from mjcodesign.surrogate import DesignLoss, GraspBatch, Poses, SuccessLoss
 
     cfg = config or OptimizeConfig()
+    success = cfg.objective is Objective.SUCCESS
+    if success and not getattr(surrogate, "has_success_head", False):
+        raise DesignError(
+            "--objective success needs a surrogate with a success head (train one with --success-weight > 0); "
+            "this checkpoint predicts the paper's 10 outputs only"
+        )
     rho = row_densities(poses, density)
     k_objects = len(poses.objects)
     rows_of = [poses.rows(k) for k in range(k_objects)]
     if k_objects == 0 or any(len(r) == 0 for r in rows_of):
         empty = [poses.objects[k] for k, r in enumerate(rows_of) if len(r) == 0]
         raise DesignError(f"every object needs a candidate pose; none for {empty or 'any object'}")
-    base = loss or DesignLoss()
+    base = loss or (SuccessLoss() if success else DesignLoss())
     sur_poses = Poses.of(poses)
     joint = cfg.mode is Mode.JOINT
     groups = [np.arange(k_objects)] if joint else [np.array([k]) for k in range(k_objects)]
