@@ -151,6 +151,14 @@ class _Scorer:
         return draws * max(regimes, 1) * len(self.run.impulses)
 
 
+def _check_budget(budget: int, population: int, per_design: int) -> None:
+    if per_design * (population + 1) > budget:
+        raise DesignError(
+            f"a budget of {budget} rollouts does not cover the start and one generation "
+            f"({population + 1} designs x {per_design} rollouts)"
+        )
+
+
 def score_designs(
     suite: Suite, run: SuiteRun, designs: Sequence[Stiffness], *, policy: str = ALL_POSES, cache_dir=None
 ) -> list[dict[str, float]]:
@@ -181,18 +189,18 @@ def oracle_search(
         raise DesignError("the oracle starts from one design for every object (a preset or joint:FILE)")
     t0 = time.perf_counter()
     run = replace(run, designs=(start,), impulses=run.impulses[:1], pose_policies=("fixed",))
+    population = config.population or 4 + int(3 * np.log(N_LOG_E))
+    regimes = len(run.densities) if run.mass == "density" else 1
+    _check_budget(
+        config.budget, population, sum(len(o.poses) for o in suite.objects) * run.perturbations * regimes
+    )
     try:
         scorer = _Scorer(suite, run, config.policy, cache_dir=cache_dir, progress=progress)
     except MjcodesignError as exc:
         raise DesignError(f"the oracle needs every suite object: {exc}") from exc
     names = tuple(so.name for so, _ in scorer.prepared)
-    per_gen = scorer.per_design()
-    population = config.population or 4 + int(3 * np.log(N_LOG_E))
-    if per_gen * (population + 1) > config.budget:
-        raise DesignError(
-            f"a budget of {config.budget} rollouts does not cover the start and one generation "
-            f"({population + 1} designs x {per_gen} rollouts)"
-        )
+    per_gen = scorer.per_design()  # draws given up cost nothing
+    _check_budget(config.budget, population, per_gen)
     start_design = np.asarray(start.design.log_e, dtype=float).ravel()
     (start_rate,) = scorer([start.design])
     start_score = float(np.mean(list(start_rate.values())))

@@ -1,0 +1,122 @@
+"""The oracle (``bench oracle``): CMA-ES on the simulator, scoring designs exactly as the evaluation does.
+
+A small slice of the shipped suite (two in-domain objects, two poses each) at a short paper-scale grasp.
+"""
+
+import dataclasses
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from mjcodesign.design.stiffness import Stiffness, read_design_file
+from mjcodesign.errors import DesignError
+from mjcodesign.evaluation import SuiteRun, load_suite, parse_design_groups, run_suite
+from mjcodesign.evaluation.analysis import per_object_cells, select_policy
+from mjcodesign.evaluation.oracle import OracleConfig, oracle_search, score_designs
+from mjcodesign.outputs import MARKER
+from mjcodesign.scenarios.grasp import GraspScenario
+
+pytest.importorskip("cmaes")
+
+_OBJECTS = ("013_apple", "025_mug")
+_SHORT = GraspScenario(tighten_s=0.1, lift_s=0.2, hold_s=0.1, post_hold_s=0.05)
+
+
+@pytest.fixture(scope="module")
+def suite():
+    full = load_suite("default")
+    objects = tuple(
+        dataclasses.replace(o, poses=o.poses[:2], source_index=o.source_index[:2])
+        for o in full.objects
+        if o.name in _OBJECTS
+    )
+    return dataclasses.replace(full, objects=objects)
+
+
+def _run(designs: str, draws: int = 2) -> SuiteRun:
+    return SuiteRun(designs=parse_design_groups(designs), perturbations=draws, scenario=_SHORT)
+
+
+@pytest.mark.parametrize("policy", ["all", "oracle"])
+def test_designs_are_scored_as_the_evaluation_scores_them(suite, policy):
+    run = _run("soft,semi-rigid")
+    rows = run_suite(suite, run)["rows"]
+    cells = per_object_cells(select_policy(rows, policy))
+    expected = {(c["design"], c["object"]): c["successes"] / c["valid"] for c in cells.values() if c["valid"]}
+    got = score_designs(suite, run, [Stiffness.preset("soft"), Stiffness.preset("semi-rigid")], policy=policy)
+    for label, rates in zip(("soft", "semi-rigid"), got, strict=True):
+        assert set(rates) == set(_OBJECTS)
+        for name, p in rates.items():
+            assert p == expected[(label, name)]
+
+
+def test_search_keeps_its_budget_and_never_ends_below_its_start(suite):
+    run = _run("soft", draws=1)
+    per_design = 2 * 2  # objects x poses x draws
+    budget = per_design * (1 + 2 * 3)  # the start, then two generations of three
+    (start,) = parse_design_groups("soft")
+    res = oracle_search(suite, run, OracleConfig(budget=budget, population=3, sigma=1.5), start=start)
+    assert res.generations == 2 and res.rollouts == budget
+    assert res.success >= res.start_success
+    best = [c["best_so_far"] for c in res.curve]
+    assert best == sorted(best) and best[-1] == res.success
+    assert np.all((res.design >= 13.5) & (res.design <= 17.0))
+    (again,) = score_designs(suite, run, [Stiffness(res.design)])  # the same draws give the same score
+    assert float(np.mean(list(again.values()))) == res.success
+    assert again == res.per_object
+
+
+def test_refusals(suite):
+    run = _run("soft", draws=1)
+    (start,) = parse_design_groups("soft")
+    with pytest.raises(DesignError, match="does not cover"):
+        oracle_search(suite, run, OracleConfig(budget=8, population=3), start=start)
+    with pytest.raises(DesignError, match="oracle policy"):
+        OracleConfig(budget=10, policy="fixed")
+    with pytest.raises(DesignError, match="population"):
+        OracleConfig(budget=10, population=1)
+
+
+def _cli(*args, cwd):
+    return subprocess.run(
+        [sys.executable, "-m", "mjcodesign.cli.main", "bench", "oracle", *args],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=600,
+    )
+
+
+def test_cli_writes_a_design_every_command_reads(tmp_path):
+    out = tmp_path / "oracle"
+    p = _cli(
+        "--only", ",".join(_OBJECTS), "--candidates", "1", "--perturbations", "1",
+        "--budget", "10", "--population", "2", "--out", str(out), "--json", cwd=tmp_path,
+    )  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    summary = json.loads(p.stdout)
+    assert summary["regime"] == "real" and summary["suite"]["objects"] == 2
+    assert summary["rollouts"] <= 10 and summary["generations"] == 2
+    assert read_design_file(out / "design.json") == Stiffness(summary["design"])
+    assert {f.name for f in out.iterdir()} == {"design.json", "oracle.json", "curve.png", MARKER}
+
+
+@pytest.mark.parametrize(
+    "args, says",
+    [
+        (("--only", "013_apple,nosuch"), "not in the suite"),
+        (("--split", "out-of-domain", "--only", "013_apple"), "not in the suite"),
+        (("--start", "individual:x"), "individual"),
+        (("--only", "013_apple", "--budget", "1"), "does not cover"),
+        (("--policy", "fixed"), "invalid choice"),
+    ],
+)
+def test_bad_input_exits_2_with_one_line_and_no_folder(tmp_path, args, says):
+    out = tmp_path / "o"
+    p = _cli(*args, "--out", str(out), cwd=tmp_path)
+    assert p.returncode == 2
+    assert says in p.stderr and len(p.stderr.strip().splitlines()) == 1
+    assert p.stdout == "" and not out.exists()
