@@ -15,6 +15,7 @@ __all__ = [
     "HardwareError",
     "ObserverError",
     "UnsupportedError",
+    "ClusterError",
 ]
 
 
@@ -64,3 +65,7 @@ class ObserverError(MjcodesignError, RuntimeError):
 
 class UnsupportedError(MjcodesignError, NotImplementedError):
     """A backend cannot run this model or feature; raised instead of approximating it silently."""
+
+
+class ClusterError(MjcodesignError, RuntimeError):
+    """A Ray cluster lost a task for good (its nodes died, its retries ran out)."""

@@ -8,6 +8,7 @@ a refused command (exit 2, one line on stderr) leaves no folder behind.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import importlib.util
 import json
@@ -309,7 +310,9 @@ def run_datagen(args: argparse.Namespace) -> int:
         for k, v in _RAY_LOCAL_ENV.items():
             os.environ.setdefault(k, v)
     try:
-        with _DatagenProgress() as bar:
+        # stdout is the summary's: what else prints during the run (Ray's cluster messages, such as a
+        # node that died) goes to stderr with the progress.
+        with _DatagenProgress() as bar, contextlib.redirect_stdout(sys.stderr):
             res = generate(
                 config,
                 args.out,

@@ -10,8 +10,9 @@ back finished ones with their result or exception. A process keeps one
 * :class:`PoolExecutor`: ``concurrent.futures.ProcessPoolExecutor`` with the ``spawn`` context (no
   fork of a process holding MuJoCo's and Warp's threads); each worker runs ``cores // workers``
   MuJoCo threads and exits when its parent dies, so a killed run leaves no worker behind.
-* :class:`RayExecutor`: Ray remote tasks with ``max_retries`` (a lost worker's task is rerun), taken
-  with ``ray.wait``. ``ray`` is imported only here, when one is made.
+* :class:`RayExecutor`: Ray remote tasks with ``max_retries`` (the task of a worker or node that died is
+  rerun on what is left of the cluster), taken with ``ray.wait``; a task Ray gives up on stops the run
+  with :class:`~mjcodesign.errors.ClusterError`. ``ray`` is imported only here, when one is made.
 """
 
 from __future__ import annotations
@@ -26,10 +27,11 @@ from collections.abc import Callable
 from concurrent.futures.process import BrokenProcessPool
 
 from mjcodesign.data.tasks import Worker
+from mjcodesign.errors import ClusterError
 
 __all__ = ["InlineExecutor", "PoolExecutor", "RayExecutor", "ThreadExecutor", "cpu_count", "execute"]
 
-_RAY_RETRIES = 3  # reruns of a task whose worker process died
+_RAY_RETRIES = 3  # reruns of a task whose worker process or node died
 _PARENT_POLL_S = 0.5  # how often a pool worker checks that its parent is alive
 _RAY_OBJECT_STORE = 256 * 1024 * 1024  # [bytes] a local Ray's object store (results are small)
 
@@ -189,7 +191,10 @@ class RayExecutor:
 
     ``address``: ``"local"`` starts a Ray instance on this machine with ``num_cpus`` CPUs (its
     addresses are loopback only when the caller set ``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0``);
-    anything else is the address of a running cluster, which this joins.
+    anything else is the address of a running cluster, which this joins. A task whose worker or node
+    dies is rerun (up to three times) wherever the cluster has a free CPU, and waits for one while it
+    has none; a task Ray still loses raises :class:`~mjcodesign.errors.ClusterError` from ``wait``
+    (the shards written before it are kept).
     """
 
     def __init__(
@@ -214,7 +219,7 @@ class RayExecutor:
                 _node_ip_address="127.0.0.1",
             )
         else:
-            ray.init(address=address, log_to_driver=False)
+            ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING)
         cpus = int(ray.cluster_resources().get("CPU", 1))
         self.slots = slots or 2 * cpus
         self._remote = ray.remote(num_cpus=1, max_retries=_RAY_RETRIES, retry_exceptions=False)(_ray_task)
@@ -233,6 +238,12 @@ class RayExecutor:
             except ray.exceptions.RayTaskError as exc:
                 cause = exc.cause if isinstance(exc.cause, Exception) else exc
                 out.append((ref, None, cause))
+            except ray.exceptions.RayError as exc:  # the cluster lost it: a dead node, retries spent
+                first = (str(exc).strip().splitlines() or [""])[0]
+                raise ClusterError(
+                    f"Ray lost a task ({type(exc).__name__}: {first}); the shards written are kept: "
+                    "rerun the same command with --resume once the cluster is whole"
+                ) from exc
         return out
 
     def close(self) -> None:  # noqa: D102
