@@ -430,7 +430,8 @@ def train_folds(
 
     ``out`` receives ``foldK/`` (a checkpoint each) and ``folds.json`` (:mod:`.folds`): per fold its
     held-out and training objects, its training summary and held-out metrics, and over all folds the
-    held-out success accuracy and ROC AUC, each sample scored by the fold that never saw its object.
+    held-out success accuracy and ROC AUC, each sample scored by the fold that never saw its object (and
+    with a success head its ROC AUC and Brier score, ``held_out.success_head``).
     ``on_epoch(run, log)`` sees each fold's epochs as run ``foldK``. Returns the manifest.
     """
     from sklearn.metrics import roc_auc_score
@@ -447,6 +448,7 @@ def train_folds(
             warn(line)
     dataset = _dataset_record(data)
     pooled = np.zeros((len(data), N_OUTPUTS))
+    pooled_head = np.full(len(data), np.nan)  # the success head's probability; NaN without a head
     entries, surrogates = [], []
     for parts in folds:
         name = parts.mode
@@ -459,7 +461,9 @@ def train_folds(
             lifted_fraction=data.lifted_fraction,
             input_range=_trained_range(data),
         )
-        m, pooled[parts.test], _ = _held_out(sur, data, parts, "surrogate")
+        m, pooled[parts.test], head = _held_out(sur, data, parts, "surrogate")
+        if head is not None:
+            pooled_head[parts.test] = head
         seen = sorted(set(data.objects[data.pose[np.concatenate([parts.train, parts.val])]]))
         entry = {"path": name, "held_out": list(parts.test_objects), "train_objects": seen, "split": parts.as_dict(),
                  "training": {k: v for k, v in res.summary().items() if not isinstance(v, list)},
@@ -478,6 +482,10 @@ def train_folds(
                 "held_out": {"objects": sum(len(p.test_objects) for p in folds), "samples": int(len(rows)),
                              "success_accuracy": float(np.mean((score > 0) == truth)),
                              "success_roc_auc": float(roc_auc_score(truth, score)) if both else None}}  # fmt: skip
+    if not np.isnan(pooled_head[rows]).any():
+        p = pooled_head[rows]
+        manifest["held_out"]["success_head"] = {"roc_auc": float(roc_auc_score(truth, p)) if both else None,
+                                                "brier": float(np.mean((p - truth) ** 2))}  # fmt: skip
     if start is not None:
         manifest["init"] = _init_record(init)
     with staged(folder) as root:
@@ -608,10 +616,9 @@ def summary_markdown(m: dict) -> str:
              ("success accuracy", lambda x: x["success"]["accuracy"]), ("success ROC AUC", lambda x: x["success"]["roc_auc"]),
              ("success Brier (calibrated)", lambda x: x["success"]["brier"]), ("predicted success rate", lambda x: x["success"]["predicted_rate"])]  # fmt: skip
     if "success_head" in models["surrogate"]:
-        head = lambda key: lambda x: x.get("success_head", {}).get(key)  # noqa: E731
-        rows += [("success probability ROC AUC (head; trees: classifier)", head("roc_auc")),
-                 ("success probability Brier (vs 0/1)", head("brier")), ("success probability Brier (vs success_p)", head("brier_p")),
-                 ("success probability accuracy (p > 0.5)", head("accuracy"))]  # fmt: skip
+        head = (("success probability ROC AUC (head; trees: classifier)", "roc_auc"), ("success probability Brier (vs 0/1)", "brier"),
+                ("success probability Brier (vs success_p)", "brier_p"), ("success probability accuracy (p > 0.5)", "accuracy"))  # fmt: skip
+        rows += [(label, lambda x, k=key: x.get("success_head", {}).get(k)) for label, key in head]
     lines += [f"| {label} | " + " | ".join(_fmt(f(models[n])) for n in names) + " |" for label, f in rows]
     rule = m["success_rule_on_simulator_outputs"]
     lines += ["", f"Simulator success rate on the test rows: {models['surrogate']['success']['rate']:.3f}. The success rule "

@@ -513,6 +513,7 @@ def test_train_folds_writes_one_checkpoint_per_fold_and_evaluate_uses_the_one_th
     manifest = json.loads((out / "folds.json").read_text())
     names = sorted(set(load_grasp_data(dataset).objects))
     assert res["folds"] == 3 and res["held_out"]["objects"] == 3
+    assert set(manifest["held_out"]["success_head"]) == {"roc_auc", "brier"}  # the command trains a head
     assert sorted(n for f in manifest["folds"] for n in f["held_out"]) == names
     for f in manifest["folds"]:
         assert not set(f["held_out"]) & set(f["train_objects"])
