@@ -88,7 +88,9 @@ class _Cluster:
             else ["--address", self.address]
         )
         argv = [
-            shutil.which("ray") or "ray",
+            sys.executable,  # `ray start` with this interpreter's Ray (the `ray` command's entry point)
+            "-m",
+            "ray.scripts.scripts",
             "start",
             *where,
             "--node-ip-address",
