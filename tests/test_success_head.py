@@ -25,7 +25,7 @@ from mjcodesign.surrogate import (
     save_checkpoint,
 )
 from mjcodesign.surrogate.ranking import group_spearman, half_labels, ranking_fidelity
-from mjcodesign.surrogate.train import grasp_loss
+from mjcodesign.surrogate.train import grasp_loss, success_labels
 
 _TINY = {"point_widths": (8, 16), "hidden": 16, "depth": 1, "penultimate": 8, "dropout": 0.0}
 _FD_STEP = 1e-6  # [ln E] central differences of a float64 network
@@ -140,3 +140,12 @@ def test_half_labels_split_each_cell_by_draw_parity():
     even, odd = half_labels(draw, success, usable, cell, 3)
     assert_array_equal(even, [1.0, 0.5, np.nan])
     assert_array_equal(odd, [0.0, 1.0, np.nan])
+
+
+def test_the_head_learns_the_soft_label_and_falls_back_to_the_0_1_success():
+    p = np.array([0.0, 0.25, 0.75, 1.0])
+    perturbed = SimpleNamespace(success_p=p, success=p >= 0.5)
+    single = SimpleNamespace(success_p=None, success=p >= 0.5)
+    rows = np.array([3, 1, 2])
+    assert_array_equal(success_labels(perturbed, rows), [1.0, 0.25, 0.75])
+    assert_array_equal(success_labels(single, rows), [1.0, 0.0, 1.0])
