@@ -58,7 +58,8 @@ def add_parser(subparsers) -> None:
         nargs="+",
         metavar="OBJECT",
         help="YCB name, egad-like:N, mesh file (STL/OBJ/PLY) or folder of meshes, with an optional mass: "
-        "box.stl@120g, 013_apple@0.197kg (default: the light density, 100 kg/m³)",
+        "box.stl@120g, 013_apple@0.197kg (default: the checkpoint dataset's regime; real: the published "
+        "YCB mass, other objects at 680 kg/m³)",
     )
     add_out_folder(p, "design")
     p.add_argument(

@@ -49,7 +49,7 @@ def add_bench_parser(bench_subparsers) -> None:
     )
     b.add_argument("--budget", type=int_at_least(1), default=40_000, help="most rollouts")
     b.add_argument(
-        "--population", type=int_at_least(2), default=None, help="designs a generation (default 13)"
+        "--population", type=int_at_least(4), default=None, help="designs a generation (default 13)"
     )
     b.add_argument(
         "--sigma", type=finite_float(0.0, strict=True), default=1.0, help="CMA-ES's first step in z"
@@ -146,7 +146,7 @@ def run_bench(args: argparse.Namespace) -> int:
     with StageProgress("bench oracle") as progress:
         result = oracle_search(suite, run, config, start=start, cache_dir=user_cache_dir(), progress=progress)
     summary = {
-        **provenance("oracle", command=args.command_line),
+        "provenance": provenance("oracle", command=args.command_line),
         "suite": {"name": suite.name, "digest": suite.digest, "split": args.split, "objects": len(objects)},
         "regime": regime_name(run.scenario, run.mass),
         "scenario": run.scenario.as_dict(),

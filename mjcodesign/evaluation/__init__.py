@@ -11,6 +11,8 @@ Success always comes from the simulator; the surrogate (optional, imported lazil
   designs) under common random numbers;
 - :mod:`~mjcodesign.evaluation.stats` and :mod:`~mjcodesign.evaluation.analysis`: Wilson intervals per
   object, bootstrap intervals over objects, paired differences with permutation p-values;
+- :mod:`~mjcodesign.evaluation.oracle`: :func:`oracle_search`, CMA-ES on the simulator alone on the
+  evaluation's objective (``bench oracle``), and :func:`score_designs`;
 - :mod:`~mjcodesign.evaluation.suite_report`: ``results.json``, ``summary.json``, ``table.md``,
   ``paired.md``, ``per_object.csv`` and ``forest.png``.
 """
@@ -18,6 +20,7 @@ Success always comes from the simulator; the surrogate (optional, imported lazil
 from mjcodesign.evaluation.analysis import ALL_POSES, analyse, per_object_cells, select_policy
 from mjcodesign.evaluation.candidates import ObjectCandidates, object_candidates, predict_candidates
 from mjcodesign.evaluation.config import PAPER_TABLE1, DesignGroup, parse_design_groups, parse_list
+from mjcodesign.evaluation.oracle import OracleConfig, OracleResult, oracle_search, score_designs
 from mjcodesign.evaluation.rollouts import (
     MAX_REDRAWS,
     POSE_POLICIES,
@@ -52,6 +55,10 @@ from mjcodesign.evaluation.suite_report import PAPER_MEASURED, suite_header, wri
 from mjcodesign.scenarios.perturb import PerturbationModel
 
 __all__ = [
+    "OracleConfig",
+    "OracleResult",
+    "oracle_search",
+    "score_designs",
     "ALL_POSES",
     "DEFAULT_SUITE",
     "MAX_REDRAWS",

@@ -40,12 +40,21 @@ from mjcodesign.jobs import load_grasp_object, run_jobs
 from mjcodesign.objects import parse_density
 from mjcodesign.sim.protocol import get_backend
 
-__all__ = ["ORACLE_POLICIES", "OracleConfig", "OracleResult", "oracle_search", "score_designs"]
+__all__ = [
+    "MIN_POPULATION",
+    "ORACLE_POLICIES",
+    "OracleConfig",
+    "OracleResult",
+    "oracle_search",
+    "score_designs",
+]
 
 ORACLE_POLICIES = (ALL_POSES, "oracle")
 """``all``: success over every suite pose (the table's "every pose"); ``oracle``: each object's best pose
 for the design."""
 
+MIN_POPULATION = 4
+"""Fewer designs a generation leave CMA-ES's rank-mu update with no weight (cmaes divides by zero)."""
 _INSIDE = 1e-3
 """How far inside the printable range a start at its bound is moved to have a z (ln Pa)."""
 
@@ -73,8 +82,10 @@ class OracleConfig:
             raise DesignError(f"oracle policy {self.policy!r}: choose from {', '.join(ORACLE_POLICIES)}")
         if not (np.isfinite(self.sigma) and self.sigma > 0):
             raise DesignError(f"sigma must be > 0, got {self.sigma}")
-        if self.population is not None and (isinstance(self.population, bool) or self.population < 2):
-            raise DesignError(f"population must be >= 2 designs, got {self.population!r}")
+        if self.population is not None and (
+            isinstance(self.population, bool) or self.population < MIN_POPULATION
+        ):
+            raise DesignError(f"population must be >= {MIN_POPULATION} designs, got {self.population!r}")
 
 
 @dataclass
