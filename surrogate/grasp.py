@@ -81,6 +81,7 @@ def predict_grasp(
         "ground_contact": float(pred.ground_contact[0]),
         "success": bool(pred.success[0]),
         "success_score": float(pred.success_score[0]),
+        "success_p": None if pred.success_p is None else float(pred.success_p[0]),
         "cloud_inside": int(cloud.inside),
         "checkpoint": str(checkpoint),
     }

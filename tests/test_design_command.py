@@ -183,6 +183,10 @@ def test_bad_input_exits_2_with_one_line_and_no_folder(
     if case == "folder of other files":
         out.mkdir()
         (out / "notes.txt").write_text("mine")
+    if case == "no weights":  # as in an installation that ships none
+        from mjcodesign.surrogate import shipped
+
+        monkeypatch.setattr(shipped, "shipped_checkpoint", lambda: None)
     monkeypatch.chdir(tmp_path)
     code = cli_main.main(["design", *map(str, args), "--out", str(out)])  # in process: no interpreter start
     r = capsys.readouterr()

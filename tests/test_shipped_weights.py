@@ -1,0 +1,45 @@
+"""The surrogate that ships: its files are the ones its card names, it is the real regime's, and it predicts."""
+
+import hashlib
+import json
+import re
+import subprocess
+import sys
+
+import pytest
+
+from mjcodesign.surrogate.shipped import shipped_checkpoint
+
+pytest.importorskip("torch")
+
+
+def test_the_card_names_the_files_that_ship():
+    folder = shipped_checkpoint()
+    assert folder is not None, "no weights ship"
+    card = (folder / "README.md").read_text(encoding="utf-8")
+    for name in ("config.json", "model.safetensors"):
+        digest = hashlib.sha256((folder / name).read_bytes()).hexdigest()
+        assert re.search(rf"`{re.escape(name)}` {digest}", card), f"the card's SHA-256 of {name} is stale"
+    metrics = json.loads((folder / "config.json").read_text(encoding="utf-8"))["metrics"]
+    assert f"head AUC {metrics['success_head']['roc_auc']:.3f}" in card
+    assert f"score AUC {metrics['success']['roc_auc']:.3f}" in card
+
+
+def test_the_weights_are_the_real_regimes():
+    config = json.loads((shipped_checkpoint() / "config.json").read_text(encoding="utf-8"))
+    data = config["dataset"]["config"]
+    assert data["mass"]["mode"] == "auto" and data["density"]["text"] == "ycb-median"
+    assert data["tendon"]["mode"] == "position" and data["tendon"]["ticks"] == 1000.0
+    assert config["model"]["success_head"] is True
+
+
+def test_predict_without_ckpt_reads_them(tmp_path):
+    p = subprocess.run(
+        [sys.executable, "-m", "mjcodesign.cli.main", "predict", "--object", "013_apple", "--pose", "auto",
+         "--design", "soft", "--json"],
+        capture_output=True, text=True, cwd=tmp_path, timeout=300,
+    )  # fmt: skip
+    assert p.returncode == 0, p.stderr[-2000:]
+    out = json.loads(p.stdout)
+    assert out["checkpoint"] == str(shipped_checkpoint())
+    assert 0.0 <= out["success_p"] <= 1.0 and out["mass_kg"] == pytest.approx(0.068)
