@@ -470,3 +470,28 @@ def test_bench_evaluate_times_the_same_rollouts():
     assert res["rollouts"] == res["raw_rollouts"] == 4
     assert len(res["pipeline_vs_raw"]) == 1 and 0 < res["pipeline_vs_raw"][0] < 2
     assert res["provenance"]["benchmark"] == "evaluate"
+
+
+def test_routing_reaches_every_rollout(suite):
+    from mjcodesign.evaluation.rollouts import object_jobs, prepare_object
+    from mjcodesign.jobs import load_grasp_object
+    from mjcodesign.models.types import SimOptions
+
+    so = suite.objects[0]
+    obj = load_grasp_object(so.source, "light", seed=suite.seed)
+    runs = {
+        r: SuiteRun(
+            designs=parse_design_groups("soft"),
+            perturbations=1,
+            scenario=_SHORT,
+            options=None if r == "guided" else SimOptions(routing=r),
+        )
+        for r in ("guided", "printed")
+    }
+    hold = {}
+    for r, run in runs.items():
+        prep = prepare_object(suite, run, so, obj, [("light", 100.0)])
+        jobs, _ = object_jobs(prep, so, run, run.designs)
+        assert jobs and all((j.options or SimOptions()).routing == r for j in jobs)
+        hold[r] = [o.body_force for o in run_jobs(jobs[:1], get_backend("mujoco"))]
+    assert not np.allclose(hold["guided"], hold["printed"])  # a soft finger under the printed path differs

@@ -21,7 +21,7 @@ from mjcodesign.cli.common import (
     path_text,
     user_cache_dir,
 )
-from mjcodesign.cli.finger_flags import grasp_model_name
+from mjcodesign.cli.finger_flags import add_routing, grasp_model_name, routing_options
 from mjcodesign.cli.progress import StageProgress
 
 __all__ = ["add_bench_parser", "add_parser", "run", "run_bench"]
@@ -139,6 +139,7 @@ def add_parser(subparsers) -> None:
         help="ad-hoc suite: folder of the authors' AnyGrasp OBJECT.npz poses",
     )
     p.add_argument("--model", choices=("chain",), default="chain", type=grasp_model_name)
+    add_routing(p)
     p.add_argument(
         "--seed", type=int_at_least(0), default=0, help="seed of the perturbation draws (and ad-hoc poses)"
     )
@@ -210,6 +211,7 @@ def _run_config(args: argparse.Namespace):
         impulses=_floats(args.impulse, "impulse"),
         pose_policies=parse_list(args.pose_sampling, "pose-sampling"),
         model=args.model,
+        options=routing_options(args),
         seed=args.seed,
     )
 
@@ -344,6 +346,7 @@ def run(args: argparse.Namespace) -> int:
         "impulses_paper_ns": list(run_cfg.impulses),
         "pose_policies": list(run_cfg.pose_policies),
         "model": run_cfg.model,
+        "routing": args.routing,
         "seed": run_cfg.seed,
         "tendon": run_cfg.scenario.tendon.text(),
         "perturbation_model": suite.perturbation.as_dict(),

@@ -23,7 +23,7 @@ from mjcodesign.evaluation.candidates import ObjectCandidates, predict_candidate
 from mjcodesign.evaluation.config import DesignGroup
 from mjcodesign.evaluation.suite import Suite, SuiteObject
 from mjcodesign.jobs import GraspJob, SceneCache, load_grasp_object, run_jobs
-from mjcodesign.models.types import FingerModel
+from mjcodesign.models.types import FingerModel, SimOptions
 from mjcodesign.objects import MASS_MODES, mass_by_rule, parse_density, published_mass
 from mjcodesign.poses.candidates import MAX_PENETRATION
 from mjcodesign.scenarios.grasp import GraspScenario, at_paper_disturbance, scene_at_pose
@@ -72,6 +72,8 @@ class SuiteRun:
     seed: int = 0
     """Seed of the perturbation draws."""
     scenario: GraspScenario = field(default_factory=GraspScenario)
+    options: SimOptions | None = None
+    """The finger model's numerical options (e.g. the tendon's ``routing``); None for the defaults."""
 
     def __post_init__(self) -> None:
         if not self.designs:
@@ -226,6 +228,7 @@ def prepare_object(
             Stiffness.preset("soft"),
         ),
         finger_model=run.model,
+        options=run.options,
         scenario=run.scenario,
         density=regimes[0][1],
     )
@@ -270,6 +273,7 @@ def object_jobs(
                                 pose=pose,
                                 design=design,
                                 finger_model=run.model,
+                                options=run.options,
                                 scenario=scenario,
                                 density=rho,
                                 seed=run.seed,
@@ -399,6 +403,7 @@ def record_suite_examples(
                 pose=so.poses[r["pose"]],
                 design=g.for_object(so.name),
                 finger_model=run.model,
+                options=run.options,
                 scenario=scenario,
                 density=r["density_kg_m3"],
                 perturbation=Perturbation(**r["perturbation"]),
