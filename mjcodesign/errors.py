@@ -68,4 +68,4 @@ class UnsupportedError(MjcodesignError, NotImplementedError):
 
 
 class ClusterError(MjcodesignError, RuntimeError):
-    """A Ray cluster lost a task for good (its nodes died, its retries ran out)."""
+    """A Ray cluster cannot be reached or joined, or lost a task for good (its nodes died, its retries ran out)."""

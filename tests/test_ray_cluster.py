@@ -7,6 +7,10 @@ with SIGKILL, and so is that worker (a machine that dies takes both). The task l
 on the head, the run finishes, and the dataset equals the single-process reference: the same Parquet tables, bitwise but
 ``wall_time_s``, every (object, pose, design) once.
 
+The other tests check what is refused or redirected before any work: a ``--ray`` address of the wrong
+form, a cluster nobody answers for (refused in seconds, no folder made, a dataset being resumed left as
+it was), and ``--ray local`` with ``RAY_ADDRESS`` set (a local Ray all the same).
+
 The nodes bind 127.0.0.2 and 127.0.0.3, loopback addresses: Ray replaces 127.0.0.1 in a node's or a
 cluster's address by the machine's outward address whenever it may form a multi-node cluster. A
 random token (``RAY_AUTH_MODE=token``) keeps anyone else out of the cluster. The test ends what it
@@ -36,6 +40,9 @@ _RUN_S = 240.0  # [s] the datagen run on the cluster (10-15 s measured)
 _KILL_S = 120.0  # [s] until a shard is written and the second node runs a task
 _POLL_S = 0.02  # [s] how often the test looks at the run's lines and the node's workers
 _GONE_S = 15.0  # [s] for a killed process to be gone
+# [s] an unreachable --ray refused, interpreter start included (about 2 s measured; Ray alone would
+# retry for about 14 minutes)
+_REFUSE_S = 60.0
 _OBJECT_STORE = 100 * 1024 * 1024  # [bytes] each node's object store (Ray's minimum is 75 MiB)
 # A small dataset: a 50 mm box and two egad-like shapes, 4 poses x 2 designs, a shortened grasp.
 _SCENARIO = '{"impulse": 0.0, "tighten_s": 0.1, "lift_s": 0.2, "hold_s": 0.1, "post_hold_s": 0.02}'
@@ -277,3 +284,116 @@ def test_a_task_ray_loses_stops_the_run_with_one_line(monkeypatch):
         assert "\n" not in str(err.value) and "WorkerCrashedError" in str(err.value)
     finally:
         executor.close()
+
+
+@pytest.mark.parametrize(
+    ("address", "expected"),
+    [
+        ("local", None),
+        ("head:6379", ("head", 6379)),
+        ("10.0.0.1:1", ("10.0.0.1", 1)),
+        ("[::1]:65535", ("::1", 65535)),
+    ],
+)
+def test_ray_address_forms_accepted(address, expected):
+    from mjcodesign.data.executors import parse_ray_address
+
+    assert parse_ray_address(address) == expected
+
+
+@pytest.mark.parametrize(
+    "address",
+    [
+        "",
+        " ",
+        "head",
+        "head:",
+        ":6379",
+        "head:0",
+        "head:65536",
+        "head:x",
+        "ray://head:10001",
+        "auto",
+        "he ad:1",
+    ],
+)
+def test_ray_address_forms_refused(address):
+    from mjcodesign.data.executors import parse_ray_address
+    from mjcodesign.errors import DesignError
+
+    with pytest.raises(DesignError, match="--ray") as err:
+        parse_ray_address(address)
+    assert "\n" not in str(err.value)
+
+
+def _listing(root: Path) -> dict[str, tuple[int, int, bytes]]:
+    """Every file under ``root``: relative path -> (mode, mtime [ns], content)."""
+    return {
+        str(f.relative_to(root)): (f.stat().st_mode, f.stat().st_mtime_ns, f.read_bytes())
+        for f in sorted(root.rglob("*"))
+        if f.is_file()
+    }
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="loopback 127.0.0.2: Linux")
+def test_unreachable_cluster_refused_at_once_leaving_folders_as_they_were(tmp_path):
+    pytest.importorskip("ray")
+    import trimesh
+
+    from mjcodesign.cli.data import datagen_config
+    from mjcodesign.cli.main import build_parser
+    from mjcodesign.data.store import DatasetDir
+
+    box = tmp_path / "box50.stl"
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(box)
+    address = f"{HEAD_IP}:{_free_port(HEAD_IP)}"  # bound and closed: nothing listens there
+    argv = ["datagen", "--objects", str(box), "--poses-per-object", "1", "--designs-per-pose", "1"]
+    # A dataset to resume, as datagen leaves one: its manifest and lock.
+    existing = tmp_path / "existing"
+    config = datagen_config(build_parser().parse_args([*argv, "--out", str(existing)]))
+    DatasetDir.open(existing, config, {"command": argv}).close()
+    before = _listing(existing)
+    assert set(before) == {"manifest.json", ".lock"}
+    fresh = tmp_path / "fresh"
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
+    for out, extra in ((fresh, []), (existing, ["--resume"])):
+        t0 = time.monotonic()
+        run = subprocess.run(
+            [sys.executable, "-m", "mjcodesign.cli", *argv, "--ray", address, "--out", str(out), *extra],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=_REFUSE_S,
+        )
+        took = time.monotonic() - t0
+        lines = run.stderr.strip().splitlines()
+        assert run.returncode == 2 and len(lines) == 1, run.stderr[-3000:]
+        assert lines[0].startswith(f"error: --ray {address}: no Ray head answers there"), lines
+        assert "ray start --head" in lines[0] and took < _REFUSE_S, (lines, took)
+    assert not fresh.exists()
+    assert _listing(existing) == before
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="loopback 127.0.0.2: Linux")
+def test_ray_local_starts_a_local_ray_whatever_ray_address_says(tmp_path, monkeypatch, capsys):
+    pytest.importorskip("ray")
+    import trimesh
+
+    from mjcodesign.cli.main import main
+
+    box = tmp_path / "box50.stl"
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(box)
+    elsewhere = f"{HEAD_IP}:{_free_port(HEAD_IP)}"  # no cluster there: joining it could only fail
+    monkeypatch.setenv("RAY_ADDRESS", elsewhere)
+    for k in ("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "RAY_USAGE_STATS_ENABLED"):  # restored afterwards
+        monkeypatch.setenv(k, "0")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    argv = ["datagen", "--objects", str(box), "--poses-per-object", "1", "--designs-per-pose", "1"]
+    argv += ["--scenario", _SCENARIO, "--ray", "local", "--out", str(tmp_path / "ds")]
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    res = json.loads(out)
+    assert res["complete"] and res["ray"] == "local" and res["samples"] + res["rejected"] == 1, res
+    note = f"datagen: --ray local starts a Ray on this machine; RAY_ADDRESS={elsewhere} is ignored"
+    assert note in err.splitlines()[0], err[-3000:]
+    assert "RAY_ADDRESS" not in os.environ  # nothing started by this run can join that address

@@ -13,6 +13,9 @@ back finished ones with their result or exception. A process keeps one
 * :class:`RayExecutor`: Ray remote tasks with ``max_retries`` (the task of a worker or node that died is
   rerun on what is left of the cluster), taken with ``ray.wait``; a task Ray gives up on stops the run
   with :class:`~mjcodesign.errors.ClusterError`. ``ray`` is imported only here, when one is made.
+
+:func:`check_ray_address` refuses a ``--ray`` value that cannot be joined (its form, then a TCP
+connection to the head) before any work, in seconds rather than Ray's minutes of retries.
 """
 
 from __future__ import annotations
@@ -21,19 +24,33 @@ import concurrent.futures as cf
 import logging
 import multiprocessing
 import os
+import socket
 import threading
 import time
 from collections.abc import Callable
 from concurrent.futures.process import BrokenProcessPool
 
 from mjcodesign.data.tasks import Worker
-from mjcodesign.errors import ClusterError
+from mjcodesign.errors import ClusterError, DesignError
 
-__all__ = ["InlineExecutor", "PoolExecutor", "RayExecutor", "ThreadExecutor", "cpu_count", "execute"]
+__all__ = [
+    "InlineExecutor",
+    "PoolExecutor",
+    "RayExecutor",
+    "ThreadExecutor",
+    "check_ray_address",
+    "cpu_count",
+    "execute",
+    "parse_ray_address",
+]
 
 _RAY_RETRIES = 3  # reruns of a task whose worker process or node died
 _PARENT_POLL_S = 0.5  # how often a pool worker checks that its parent is alive
 _RAY_OBJECT_STORE = 256 * 1024 * 1024  # [bytes] a local Ray's object store (results are small)
+# [s] TCP connect to a cluster's head before Ray is asked: as long as Ray's own first gRPC connect
+# (RAY_gcs_rpc_server_connect_timeout_s, 5 s), after which Ray retries for about 14 minutes.
+_RAY_CONNECT_S = 5.0
+_RAY_ADDRESS_FORM = "'local' or a Ray head's HOST:PORT (the address `ray start --head` prints)"
 
 _worker: Worker | None = None  # this process's worker (pool and Ray processes)
 _setup_done = False
@@ -186,12 +203,72 @@ def _ray_task(kind: str, payload, device: str, setup: Callable[[], None] | None)
     return execute(kind, payload, _worker)
 
 
+def parse_ray_address(address: str) -> tuple[str, int] | None:
+    """``(host, port)`` of a ``--ray`` cluster address ``HOST:PORT`` (``[IPv6]:PORT``); ``None`` for ``"local"``.
+
+    Raises :class:`~mjcodesign.errors.DesignError` for anything else (no port, a port outside
+    1-65535, a ``ray://`` Ray Client address, ``auto``, blanks).
+    """
+    if address == "local":
+        return None
+    host, sep, port = address.rpartition(":")
+    if host.startswith("[") and host.endswith("]"):
+        host = host[1:-1]
+    if not sep or not host or not port or any(c.isspace() or c in "/[]" for c in host) or "://" in address:
+        raise DesignError(f"--ray takes {_RAY_ADDRESS_FORM}, got {address!r}")
+    if not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise DesignError(f"--ray {address}: the port must be a number in 1-65535, got {port!r}")
+    return host, int(port)
+
+
+def check_ray_address(address: str, timeout: float = _RAY_CONNECT_S) -> None:
+    """Refuse a ``--ray`` value that cannot be joined, before any work.
+
+    ``"local"`` passes. A cluster address must have the form of :func:`parse_ray_address`, and a TCP
+    connection to it must open within ``timeout`` seconds (the head's GCS listens there); else
+    :class:`~mjcodesign.errors.ClusterError` naming the address and what to check. The host dialled is
+    the one Ray dials: Ray replaces ``localhost``, ``127.0.0.1`` and ``::1`` by this machine's outward
+    address. A port that answers but is not a Ray head passes here; Ray then refuses it itself.
+    """
+    parsed = parse_ray_address(address)
+    if parsed is None:
+        return
+    host, port = parsed
+    dialled = _ray_dialled_host(host)
+    via = "" if dialled == host else f"; Ray dials {dialled} for {host}"
+    try:
+        with socket.create_connection((dialled, port), timeout=timeout):
+            pass
+    except socket.gaierror as exc:
+        raise ClusterError(
+            f"--ray {address}: cannot resolve host {host!r} ({exc.strerror}); check the head's name, "
+            "or give its IP address"
+        ) from None
+    except OSError as exc:
+        why = f"no answer within {timeout:g} s" if isinstance(exc, TimeoutError) else exc.strerror or exc
+        raise ClusterError(
+            f"--ray {address}: no Ray head answers there ({why}{via}); check that "
+            f"`ray start --head --port {port}` runs on {host} and that this machine can reach that port"
+        ) from None
+
+
+def _ray_dialled_host(host: str) -> str:
+    """The host Ray connects to for ``host`` (this machine's outward address for a loopback name)."""
+    try:
+        from ray._private.services import resolve_ip_for_localhost
+    except ImportError:  # no ray (the executor will say so), or another Ray layout: the host as given
+        return host
+    return resolve_ip_for_localhost(host)
+
+
 class RayExecutor:
     """Tasks as Ray remote tasks (one CPU and one MuJoCo thread each), at most ``slots`` in flight.
 
-    ``address``: ``"local"`` starts a Ray instance on this machine with ``num_cpus`` CPUs (its
-    addresses are loopback only when the caller set ``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0``);
-    anything else is the address of a running cluster, which this joins. A task whose worker or node
+    ``address``: ``"local"`` starts a Ray instance on this machine with ``num_cpus`` CPUs, whatever
+    ``RAY_ADDRESS`` says (its addresses are loopback only when the caller set
+    ``RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0``); ``HOST:PORT`` is the head of a running cluster, which
+    this joins once :func:`check_ray_address` passes; a cluster Ray cannot join raises
+    :class:`~mjcodesign.errors.ClusterError`. A task whose worker or node
     dies is rerun (up to three times) wherever the cluster has a free CPU, and waits for one while it
     has none; a task Ray still loses raises :class:`~mjcodesign.errors.ClusterError` from ``wait``
     (the shards written before it are kept).
@@ -211,6 +288,7 @@ class RayExecutor:
         self.ray = ray
         if address == "local":
             ray.init(
+                address="local",  # a new instance: Ray would join RAY_ADDRESS's cluster for None
                 num_cpus=num_cpus or cpu_count(),
                 include_dashboard=False,
                 log_to_driver=False,
@@ -219,7 +297,17 @@ class RayExecutor:
                 _node_ip_address="127.0.0.1",
             )
         else:
-            ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING)
+            check_ray_address(address)
+            try:
+                ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING)
+            except (ConnectionError, RuntimeError, TimeoutError) as exc:  # answers, but is no Ray head
+                ray.shutdown()
+                first = (str(exc).strip().splitlines() or [""])[0]
+                raise ClusterError(
+                    f"--ray {address}: Ray could not join a cluster there ({type(exc).__name__}: {first}); "
+                    "check that the port is the head's GCS port (`ray start --head --port`) and, with "
+                    "token authentication, that RAY_AUTH_TOKEN is the cluster's"
+                ) from exc
         cpus = int(ray.cluster_resources().get("CPU", 1))
         self.slots = slots or 2 * cpus
         self._remote = ray.remote(num_cpus=1, max_retries=_RAY_RETRIES, retry_exceptions=False)(_ray_task)

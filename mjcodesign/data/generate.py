@@ -16,6 +16,7 @@ by (object, pose) too (:mod:`mjcodesign.data.cells`).
 
 from __future__ import annotations
 
+import functools
 import time
 from collections import deque
 from collections.abc import Callable
@@ -88,9 +89,17 @@ def generate(
     emit = on_event or (lambda e: None)
     run_info = {"command": command, "workers": workers, "ray": ray, "device": device}
     t0 = time.perf_counter()
-    ds = DatasetDir.open(out, config, run_info)
+    make = functools.partial(_executor, workers, ray, device, worker_setup, slots, config.backend)
+    # A cluster is joined before the folder is touched: one Ray cannot join leaves the folder as it was.
+    joined = make() if ray not in (None, "local") else None
     try:
-        executor = _executor(workers, ray, device, worker_setup, slots, config.backend)
+        ds = DatasetDir.open(out, config, run_info)
+    except BaseException:
+        if joined is not None:
+            joined.close()
+        raise
+    try:
+        executor = joined or make()
         try:
             computed = _Scheduler(ds, config, executor, str(cache_dir) if cache_dir else None, emit).run()
         finally:
