@@ -375,6 +375,36 @@ def test_unreachable_cluster_refused_at_once_leaving_folders_as_they_were(tmp_pa
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="loopback 127.0.0.2: Linux")
+def test_a_port_that_answers_but_is_no_ray_head_is_refused_leaving_no_folder(tmp_path):
+    pytest.importorskip("ray")
+    import trimesh
+
+    box = tmp_path / "box50.stl"
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(box)
+    out = tmp_path / "ds"
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
+    # Ray's waits shortened for the test (about 42 s at its defaults): 1 s to connect, 1 s for the
+    # cluster id.
+    env |= {"RAY_gcs_rpc_server_connect_timeout_s": "1", "RAY_py_gcs_connect_timeout_s": "1"}
+    with socket.socket() as silent:  # the kernel completes the connection; nothing ever speaks on it
+        silent.bind((HEAD_IP, 0))
+        silent.listen(8)
+        address = f"{HEAD_IP}:{silent.getsockname()[1]}"
+        run = subprocess.run(
+            [sys.executable, "-m", "mjcodesign.cli", "datagen", "--objects", str(box), "--ray", address]
+            + ["--out", str(out)],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=_REFUSE_S,
+        )
+    last = run.stderr.strip().splitlines()[-1]
+    assert run.returncode == 2 and "Traceback" not in run.stderr, run.stderr[-3000:]
+    assert last.startswith(f"error: --ray {address}: Ray could not join a cluster there"), last
+    assert not out.exists()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="loopback 127.0.0.2: Linux")
 def test_ray_local_starts_a_local_ray_whatever_ray_address_says(tmp_path, monkeypatch, capsys):
     pytest.importorskip("ray")
     import trimesh
