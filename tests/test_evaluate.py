@@ -258,7 +258,6 @@ def test_tendon_drive_reaches_the_rollouts(tmp_path, suite_file, monkeypatch, ca
         ("--designs", "joint:BADLEN"),
         ("--designs", "soft,soft"),
         ("--density", "medium"),
-        ("--pose-sampling", "surrogate"),  # no --ckpt
         ("--pose-sampling", "psychic"),
         ("--impulse", "nan"),
         ("--perturbations", "0"),
@@ -276,6 +275,8 @@ def test_tendon_drive_reaches_the_rollouts(tmp_path, suite_file, monkeypatch, ca
         ("--egad-like", "-1"),
         ("--tendon", "position:abc"),
         ("--tendon", "torque:3"),
+        ("--friction", "slippery"),
+        ("--routing", "under"),
     ],
 )
 def test_bad_input_exits_2_with_one_line(tmp_path, args, monkeypatch, capsys):
@@ -495,3 +496,15 @@ def test_routing_reaches_every_rollout(suite):
         assert jobs and all((j.options or SimOptions()).routing == r for j in jobs)
         hold[r] = [o.body_force for o in run_jobs(jobs[:1], get_backend("mujoco"))]
     assert not np.allclose(hold["guided"], hold["printed"])  # a soft finger under the printed path differs
+
+
+@pytest.mark.parametrize("friction, expected", [(None, 1.0), ("tape-min", 0.6), ("0.8", 0.8)])
+def test_friction_and_routing_reach_the_run(friction, expected):
+    from mjcodesign.cli import evaluate as cli_evaluate
+    from mjcodesign.cli.main import build_parser
+
+    argv = ["evaluate", "--out", "o", "--routing", "printed"] + (
+        [] if friction is None else ["--friction", friction]
+    )
+    run = cli_evaluate._run_config(build_parser().parse_args(argv))
+    assert run.scenario.friction == expected and run.options.routing == "printed"

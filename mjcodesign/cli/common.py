@@ -36,6 +36,8 @@ __all__ = [
     "check_output_link",
     "choice_list",
     "warn_failed_objects",
+    "scenario_physics",
+    "FRICTION_HELP",
 ]
 
 _NO_DRIVER = b"Could not find or load the NVIDIA CUDA driver"  # expected on CPU-only machines
@@ -387,3 +389,33 @@ def quiet_warp() -> None:
     if kept:
         sys.stderr.buffer.write(b"".join(kept))
         sys.stderr.flush()
+
+
+FRICTION_HELP = (
+    "finger-object sliding friction coefficient (default: the regime's, 1 in both); 'tape-min': 0.6, the "
+    "floor the gripping tape's maker claims (the range 0.6-1 is in the docs' regime page)"
+)
+"""``--friction``'s help, the same on every command that takes it."""
+
+
+def scenario_physics(delta_v: str | float | None, friction: str | float | None) -> dict:
+    """GraspScenario's ``delta_v`` and ``friction`` from ``--delta-v`` and ``--friction`` (names or numbers).
+
+    None leaves a setting out of the result (the regime's stays). Raises :class:`DesignError`.
+    """
+    from mjcodesign.errors import DesignError
+    from mjcodesign.scenarios import PAPER_DELTA_V, TAPE_FRICTION_FLOOR
+
+    names = {"delta_v": {"paper": PAPER_DELTA_V}, "friction": {"tape-min": TAPE_FRICTION_FLOOR}}
+    out = {}
+    for key, text in (("delta_v", delta_v), ("friction", friction)):
+        if text is None:
+            continue
+        try:
+            out[key] = float(names[key].get(text, text))
+        except (TypeError, ValueError):
+            choices = ", ".join(names[key])
+            raise DesignError(
+                f"--{key.replace('_', '-')} must be a number or {choices}, got {text!r}"
+            ) from None
+    return out

@@ -13,12 +13,14 @@ import time
 from pathlib import Path
 
 from mjcodesign.cli.common import (
+    FRICTION_HELP,
     add_mass_mode,
     add_regime,
     emit,
     finite_float,
     int_at_least,
     path_text,
+    scenario_physics,
     user_cache_dir,
 )
 from mjcodesign.cli.finger_flags import add_routing, grasp_model_name, routing_options
@@ -140,6 +142,7 @@ def add_parser(subparsers) -> None:
     )
     p.add_argument("--model", choices=("chain",), default="chain", type=grasp_model_name)
     add_routing(p)
+    p.add_argument("--friction", default=None, help=FRICTION_HELP)
     p.add_argument(
         "--seed", type=int_at_least(0), default=0, help="seed of the perturbation draws (and ad-hoc poses)"
     )
@@ -199,7 +202,7 @@ def _run_config(args: argparse.Namespace):
     densities = parse_list(density, "density")
     for d in densities:
         parse_density(d)
-    scenario = regime.scenario
+    scenario = dataclasses.replace(regime.scenario, **scenario_physics(None, args.friction))
     if args.tendon is not None:
         scenario = dataclasses.replace(scenario, tendon=parse_tendon(args.tendon))
     return SuiteRun(

@@ -14,7 +14,14 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from mjcodesign.cli.common import add_regime, int_at_least, path_text, user_cache_dir
+from mjcodesign.cli.common import (
+    FRICTION_HELP,
+    add_regime,
+    int_at_least,
+    path_text,
+    scenario_physics,
+    user_cache_dir,
+)
 from mjcodesign.cli.finger_flags import add_routing, grasp_model_name, routing_options
 from mjcodesign.optional import WARP_DEVICES
 
@@ -94,8 +101,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--friction",
         default=None,
-        help="finger-object sliding friction coefficient (default: the regime's, 1 in both); 'tape-min': 0.6, the "
-        "floor the gripping tape's maker claims (the range 0.6-1 is in the docs' regime page)",
+        help=FRICTION_HELP,
     )
     p.add_argument("--tension", type=float, default=None, help="tendon tension per finger [N]")
     # --tendon: the tendon drive, parsed by mjcodesign.scenarios.parse_tendon.
@@ -240,7 +246,7 @@ def grasp(
     kwargs = {k: v for k, v in (("lift", lift), ("impulse", impulse)) if v is not None}
     if impulse is not None:
         kwargs["delta_v"] = None  # an impulse [N s] replaces the regime's velocity change
-    kwargs.update(_physics(delta_v, friction))
+    kwargs.update(scenario_physics(delta_v, friction))
     if tendon is not None:  # --tendon
         from mjcodesign.scenarios import parse_tendon
 
@@ -329,26 +335,6 @@ def prepare_object(
     check_pose_file(pose)
     obj = load_grasp_object(source, density, mass=mass, seed=seed, allow_open=allow_open, cache_dir=cache_dir)
     return obj, obj.density, resolve_pose(pose, obj, seed=seed)
-
-
-def _physics(delta_v: str | float | None, friction: str | float | None) -> dict:
-    """GraspScenario's ``delta_v`` and ``friction`` from ``--delta-v`` and ``--friction`` (names or numbers)."""
-    from mjcodesign.errors import DesignError
-    from mjcodesign.scenarios import PAPER_DELTA_V, TAPE_FRICTION_FLOOR
-
-    names = {"delta_v": {"paper": PAPER_DELTA_V}, "friction": {"tape-min": TAPE_FRICTION_FLOOR}}
-    out = {}
-    for key, text in (("delta_v", delta_v), ("friction", friction)):
-        if text is None:
-            continue
-        try:
-            out[key] = float(names[key].get(text, text))
-        except (TypeError, ValueError):
-            choices = ", ".join(names[key])
-            raise DesignError(
-                f"--{key.replace('_', '-')} must be a number or {choices}, got {text!r}"
-            ) from None
-    return out
 
 
 def _mass_facts(source: str, mass: str | float | None) -> dict:
