@@ -43,7 +43,9 @@ def test_predict_without_ckpt_reads_them(tmp_path):
     )  # fmt: skip
     assert p.returncode == 0, p.stderr[-2000:]
     out = json.loads(p.stdout)
-    assert out["checkpoint"] == str(shipped_checkpoint())
+    used = Path(out["checkpoint"])  # the subprocess's installation: compare what it read, not where
+    for name in ("config.json", "model.safetensors"):
+        assert (used / name).read_bytes() == (shipped_checkpoint() / name).read_bytes()
     assert 0.0 <= out["success_p"] <= 1.0 and out["mass_kg"] == pytest.approx(0.068)
 
 
