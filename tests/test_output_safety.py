@@ -287,6 +287,15 @@ def _consistent(ck: Path, old: dict) -> str:
     return "new"
 
 
+def _listing(folder: Path) -> list[str]:
+    """The names in ``folder``; none once it is gone (a staging sibling is renamed into place or removed
+    between the moment it is seen and the moment it is read)."""
+    try:
+        return os.listdir(folder)
+    except FileNotFoundError:
+        return []
+
+
 def test_train_killed_while_retraining_leaves_the_old_checkpoint_or_the_new_one(work, tmp_path):
     ck = tmp_path / "ck"
     shutil.copytree(work / "ck", ck)
@@ -314,7 +323,7 @@ def test_train_killed_while_retraining_leaves_the_old_checkpoint_or_the_new_one(
             while time.monotonic() < deadline and proc.poll() is None:
                 staging = [p for p in tmp_path.iterdir() if p.name.startswith(".ck.")]
                 changed = _tree(ck) != old if ck.is_dir() else True
-                files = [f for s in staging for f in os.listdir(s)] if staging else []
+                files = [f for s in staging for f in _listing(s)]
                 if (point == "start" and (staging or changed)) or (
                     point == "weights" and "model.safetensors" in files
                 ):
