@@ -26,6 +26,12 @@ _SHORT = GraspScenario(tighten_s=0.1, lift_s=0.2, hold_s=0.1, post_hold_s=0.05)
 
 
 @pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    """One cache of the objects' convex decompositions for the module (each costs tens of seconds)."""
+    return tmp_path_factory.mktemp("cache")
+
+
+@pytest.fixture(scope="module")
 def suite():
     full = load_suite("default")
     objects = tuple(
@@ -41,9 +47,9 @@ def _run(designs: str, draws: int = 2) -> SuiteRun:
 
 
 @pytest.mark.parametrize("policy", ["all", "oracle"])
-def test_designs_are_scored_as_the_evaluation_scores_them(suite, policy):
+def test_designs_are_scored_as_the_evaluation_scores_them(suite, cache, policy):
     run = _run("soft,semi-rigid")
-    rows = run_suite(suite, run)["rows"]
+    rows = run_suite(suite, run, cache_dir=cache)["rows"]
     cells = per_object_cells(select_policy(rows, policy))
     expected = {(c["design"], c["object"]): c["successes"] / c["valid"] for c in cells.values() if c["valid"]}
     got = score_designs(suite, run, [Stiffness.preset("soft"), Stiffness.preset("semi-rigid")], policy=policy)
@@ -53,7 +59,7 @@ def test_designs_are_scored_as_the_evaluation_scores_them(suite, policy):
             assert p == expected[(label, name)]
 
 
-def test_search_keeps_its_budget_and_never_ends_below_its_start(suite):
+def test_search_keeps_its_budget_and_never_ends_below_its_start(suite, cache):
     run = _run("soft", draws=1)
     per_design = 2 * 2  # objects x poses x draws
     budget = per_design * (1 + 2 * 4)  # the start, then two generations of four
@@ -64,7 +70,9 @@ def test_search_keeps_its_budget_and_never_ends_below_its_start(suite):
     best = [c["best_so_far"] for c in res.curve]
     assert best == sorted(best) and best[-1] == res.success
     assert np.all((res.design >= 13.5) & (res.design <= 17.0))
-    (again,) = score_designs(suite, run, [Stiffness(res.design)])  # the same draws give the same score
+    (again,) = score_designs(
+        suite, run, [Stiffness(res.design)], cache_dir=cache
+    )  # the same draws give the same score
     assert float(np.mean(list(again.values()))) == res.success
     assert again == res.per_object
 
