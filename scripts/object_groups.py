@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from mjcodesign.evaluation import bootstrap_mean, paired_difference, per_object_cells, select_policy
+from mjcodesign.evaluation.analysis import object_rates
 
 
 def _names(path: str) -> set[str]:
@@ -29,10 +30,7 @@ def _names(path: str) -> set[str]:
 
 def groups_summary(rows: list[dict], groups: dict[str, set[str]], pairs, policy: str, seed: int) -> dict:
     """Per group: objects, each design's interval, each pair's paired difference (module docstring)."""
-    rate: dict[str, dict[str, float]] = collections.defaultdict(dict)
-    for c in per_object_cells(select_policy(rows, policy)).values():
-        if c["valid"]:
-            rate[c["design"]][c["object"]] = c["successes"] / c["valid"]
+    rate = object_rates(per_object_cells(select_policy(rows, policy)).values())
     out = {}
     for name, objs in groups.items():
         entry = {"objects": sorted(objs), "designs": {}, "paired": []}

@@ -18,7 +18,7 @@ import numpy as np
 
 from mjcodesign.evaluation.stats import bootstrap_mean, mean_interval, paired_difference, wilson
 
-__all__ = ["ALL_POSES", "CONTINUOUS", "SPLITS", "analyse", "per_object_cells", "select_policy"]
+__all__ = ["ALL_POSES", "CONTINUOUS", "SPLITS", "analyse", "object_rates", "per_object_cells", "select_policy"]
 
 ALL_POSES = "all"
 """The pose policy that keeps every pose of the suite."""
@@ -106,12 +106,24 @@ def analyse(result: dict, designs: list[str], policies: list[str], *, seed: int 
     return {"cells": all_cells, "regimes": out_regimes}
 
 
+def object_rates(cells) -> dict[str, dict[str, float]]:
+    """Per design, each object's share of successful usable rollouts.
+
+    ``cells``: :func:`per_object_cells`' values; an object with no usable rollout is left out.
+    """
+    rate: dict[str, dict[str, float]] = defaultdict(dict)
+    for c in cells:
+        if c["valid"]:
+            rate[c["design"]][c["object"]] = c["successes"] / c["valid"]
+    return rate
+
+
 def _summarise(cells: dict[tuple, dict], designs: list[str], seed: int) -> dict:
     """Per design and split: the mean over objects; per pair and split: the paired difference."""
     rate: dict[str, dict[str, dict[str, float]]] = defaultdict(lambda: defaultdict(dict))
-    for c in cells.values():
-        if c["valid"]:
-            rate[c["design"]][c["domain"]][c["object"]] = c["successes"] / c["valid"]
+    for split in SPLITS:
+        for d, per in object_rates(c for c in cells.values() if c["domain"] == split).items():
+            rate[d][split] = per
     per_design: dict[str, dict] = {}
     for d in designs:
         per_design[d] = {}

@@ -27,7 +27,7 @@ import numpy as np
 from mjcodesign.codesign.optimize import LOG_E_MAX, LOG_E_MIN, log_e_of, z_of
 from mjcodesign.design.stiffness import N_LOG_E, Stiffness
 from mjcodesign.errors import DesignError, MjcodesignError, UnsupportedError
-from mjcodesign.evaluation.analysis import ALL_POSES, per_object_cells, select_policy
+from mjcodesign.evaluation.analysis import ALL_POSES, object_rates, per_object_cells, select_policy
 from mjcodesign.evaluation.config import DesignGroup
 from mjcodesign.evaluation.rollouts import (
     SuiteRun,
@@ -148,12 +148,9 @@ class _Scorer:
             jobs, meta = object_jobs(prep, so, self.run, groups)
             rows += outcome_rows(so, meta, run_jobs(jobs, self.backend, scenes=prep.scenes))
             self.rollouts += len(jobs)
-        cells = per_object_cells(select_policy(rows, self.policy))
-        rate = {g.label: dict.fromkeys((so.name for so, _ in self.prepared), 0.0) for g in groups}
-        for c in cells.values():
-            if c["valid"]:
-                rate[c["design"]][c["object"]] = c["successes"] / c["valid"]
-        return [rate[g.label] for g in groups]
+        found = object_rates(per_object_cells(select_policy(rows, self.policy)).values())
+        names = [so.name for so, _ in self.prepared]
+        return [{n: found[g.label].get(n, 0.0) for n in names} for g in groups]
 
     def per_design(self) -> int:
         """Rollouts one design costs (usable draws × regimes × impulses)."""
