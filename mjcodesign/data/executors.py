@@ -21,13 +21,16 @@ connection to the head) before any work, in seconds rather than Ray's minutes of
 from __future__ import annotations
 
 import concurrent.futures as cf
+import contextlib
 import logging
 import multiprocessing
 import os
 import socket
+import sys
+import tempfile
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures.process import BrokenProcessPool
 
 from mjcodesign.data.tasks import Worker
@@ -252,6 +255,32 @@ def check_ray_address(address: str, timeout: float = _RAY_CONNECT_S) -> None:
         ) from None
 
 
+@contextlib.contextmanager
+def _stderr_held() -> Iterator[None]:
+    """Hold what is written to file descriptor 2 in the block; hand it on to stderr only if it succeeds.
+
+    Ray's C++ GCS client writes its connection warnings straight to the descriptor, past Python's
+    ``sys.stderr``, so a cluster it cannot join would print them ahead of the command's one error line.
+    """
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        ok = False
+        try:
+            yield
+            ok = True
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            if ok:
+                held.seek(0)
+                text = held.read()
+                if text:
+                    os.write(2, text)
+
+
 def _ray_dialled_host(host: str) -> str:
     """The host Ray connects to for ``host`` (this machine's outward address for a loopback name)."""
     try:
@@ -299,9 +328,13 @@ class RayExecutor:
         else:
             check_ray_address(address)
             try:
-                ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING)
+                with _stderr_held():  # Ray's own retry warnings, for a port that is no Ray head
+                    try:
+                        ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING)
+                    except BaseException:
+                        ray.shutdown()
+                        raise
             except (ConnectionError, RuntimeError, TimeoutError) as exc:  # answers, but is no Ray head
-                ray.shutdown()
                 first = (str(exc).strip().splitlines() or [""])[0]
                 raise ClusterError(
                     f"--ray {address}: Ray could not join a cluster there ({type(exc).__name__}: {first}); "
