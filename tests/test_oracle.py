@@ -5,6 +5,7 @@ A small slice of the shipped suite (two in-domain objects, two poses each) at a 
 
 import dataclasses
 import json
+import os
 import subprocess
 import sys
 
@@ -27,8 +28,13 @@ _SHORT = GraspScenario(tighten_s=0.1, lift_s=0.2, hold_s=0.1, post_hold_s=0.05)
 
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
-    """One cache of the objects' convex decompositions for the module (each costs tens of seconds)."""
-    return tmp_path_factory.mktemp("cache")
+    """One cache of the objects' convex decompositions for the module (each costs tens of seconds).
+
+    It is laid out as the CLI's (``$XDG_CACHE_HOME/mjcodesign``), so that the command's test reads it too.
+    """
+    path = tmp_path_factory.mktemp("xdg") / "mjcodesign"
+    path.mkdir()
+    return path
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +58,8 @@ def test_designs_are_scored_as_the_evaluation_scores_them(suite, cache, policy):
     rows = run_suite(suite, run, cache_dir=cache)["rows"]
     cells = per_object_cells(select_policy(rows, policy))
     expected = {(c["design"], c["object"]): c["successes"] / c["valid"] for c in cells.values() if c["valid"]}
-    got = score_designs(suite, run, [Stiffness.preset("soft"), Stiffness.preset("semi-rigid")], policy=policy)
+    presets = [Stiffness.preset("soft"), Stiffness.preset("semi-rigid")]
+    got = score_designs(suite, run, presets, policy=policy, cache_dir=cache)
     for label, rates in zip(("soft", "semi-rigid"), got, strict=True):
         assert set(rates) == set(_OBJECTS)
         for name, p in rates.items():
@@ -64,7 +71,9 @@ def test_search_keeps_its_budget_and_never_ends_below_its_start(suite, cache):
     per_design = 2 * 2  # objects x poses x draws
     budget = per_design * (1 + 2 * 4)  # the start, then two generations of four
     (start,) = parse_design_groups("soft")
-    res = oracle_search(suite, run, OracleConfig(budget=budget, population=4, sigma=1.5), start=start)
+    res = oracle_search(
+        suite, run, OracleConfig(budget=budget, population=4, sigma=1.5), start=start, cache_dir=cache
+    )
     assert res.generations == 2 and res.rollouts == budget
     assert res.success >= res.start_success
     best = [c["best_so_far"] for c in res.curve]
@@ -88,21 +97,23 @@ def test_refusals(suite):
         OracleConfig(budget=10, population=3)
 
 
-def _cli(*args, cwd):
+def _cli(*args, cwd, cache=None):
+    env = os.environ | ({"XDG_CACHE_HOME": str(cache.parent)} if cache is not None else {})
     return subprocess.run(
         [sys.executable, "-m", "mjcodesign.cli.main", "bench", "oracle", *args],
         capture_output=True,
         text=True,
         cwd=cwd,
+        env=env,
         timeout=600,
     )
 
 
-def test_cli_writes_a_design_every_command_reads(tmp_path):
+def test_cli_writes_a_design_every_command_reads(tmp_path, cache):
     out = tmp_path / "oracle"
     p = _cli(
         "--only", ",".join(_OBJECTS), "--candidates", "1", "--perturbations", "1",
-        "--budget", "10", "--population", "4", "--out", str(out), "--json", cwd=tmp_path,
+        "--budget", "10", "--population", "4", "--out", str(out), "--json", cwd=tmp_path, cache=cache,
     )  # fmt: skip
     assert p.returncode == 0, p.stderr
     summary = json.loads(p.stdout)
