@@ -17,12 +17,12 @@ from collections.abc import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from mjcodesign.design.finger import FingerDesign
+from mjcodesign.design.finger import FingerDesign, Routing
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.design.tendon_law import tendon_forces
 from mjcodesign.errors import DesignError
 from mjcodesign.optional import import_warp
-from mjcodesign.sim.fem.mesh import FingerMesh, mesh_finger, to_quadratic
+from mjcodesign.sim.fem.mesh import FingerMesh, embed_points, mesh_finger, to_quadratic
 from mjcodesign.sim.fem.options import FemOptions
 
 __all__ = ["FemBody"]
@@ -91,6 +91,10 @@ class FemBody:
         self._cols = np.tile(dofs, (1, nd)).ravel()
         self._wk = sp.kron(sp.csr_matrix(m.waypoint_weights), sp.eye(3), format="csr")
         self._normal_rows = self._section_normal_rows()
+        if o.routing == "printed":
+            self.anchor, self.path_weights = self._channel_path()
+        else:
+            self.anchor, self.path_weights = design.tendon_exit(), m.waypoint_weights
         self._free_pattern = None  # built by the first static solve (`_free_tangent`)
 
     def _k(self, name: str):
@@ -241,29 +245,88 @@ class FemBody:
         rows[np.arange(len(pairs)), pairs[:, 1]] = -1.0
         return sp.kron(sp.csr_matrix(rows), sp.eye(3), format="csr")
 
-    def tendon_load(self, tension: float, variant: str = "frictionless") -> Callable:
-        """A configuration-dependent load ``x -> (f (n, 3), J = ∂f/∂x (3n, 3n))`` of the tendon [N]."""
-        exit_point = self.design.tendon_exit()
-        nb = self.design.n_blocks
-        S = sp.vstack([self._wk, self._normal_rows], format="csr")
+    def _channel_path(self) -> tuple[np.ndarray, np.ndarray]:
+        """The printed routing: its anchor [m] (3,) and the weights of its other channel points (17, n).
 
-        def forces(q: np.ndarray) -> np.ndarray:
-            q = q.reshape(2 * nb, 3)
-            return tendon_forces(q[:nb], q[nb:], exit_point, tension, variant).ravel()
+        The anchor is the base segment's channel entry, on the clamped base face (its weights touch
+        base vertices only, so it never moves); the rows are the 17 further entry, middle and exit points
+        of `mjcodesign.models.channels.channel_points` embedded in the rest mesh.
+        """
+        from mjcodesign.models.channels import channel_points
+
+        if self.design.routing is not Routing.UNIFORM_PRESSURE:
+            raise DesignError(
+                f"the printed routing runs through the printed finger's channels; a "
+                f"{self.design.routing.value} design has none"
+            )
+        points = channel_points(self.design).reshape(-1, 3)
+        W, _ = embed_points(self.mesh, points)
+        on_base = np.zeros(self.mesh.n_vertices, dtype=bool)
+        on_base[self.mesh.base] = True
+        if np.any(np.abs(W[0, ~on_base]) > 1e-12):
+            raise DesignError("the printed tendon's first channel entry is not on the clamped base face")
+        return points[0], W[1:]
+
+    def tendon_path(self, x: np.ndarray) -> np.ndarray:
+        """The tendon's polyline [m] at positions ``x`` (n, 3): the anchor, then its points, (k + 1, 3).
+
+        Guided routing: the exit point at the base face and one waypoint per block; printed: the base
+        segment's channel entry and the 17 further channel points (`FemOptions.routing`).
+        """
+        return np.vstack([self.anchor[None], self.path_weights @ x])
+
+    def tendon_length(self, x: np.ndarray) -> float:
+        """Length [m] of the tendon's polyline (`tendon_path`) at positions ``x`` (n, 3)."""
+        return float(np.linalg.norm(np.diff(self.tendon_path(x), axis=0), axis=1).sum())
+
+    def tendon_load(self, tension: float, variant: str = "frictionless") -> Callable:
+        """A configuration-dependent load ``x -> (f (n, 3), J = ∂f/∂x (3n, 3n))`` of the tendon [N].
+
+        The law of `mjcodesign.design.tendon_law.tendon_forces` at the routing's points
+        (`FemOptions.routing`), spread to the vertices by their weights; ∂f/∂x by central differences
+        over the points. The frictionless law is f = −T ∂ℓ/∂x, ℓ the `tendon_length`; the printed
+        routing runs it only (`DesignError` for ``paper``, which needs one section axis per block).
+        """
+        Wk, S, forces = self._point_law(tension, variant)
 
         def load(x: np.ndarray):
             q = S @ x.ravel()
-            F = forces(q)
-            dF = np.empty((len(F), len(q)))
-            for j in range(len(q)):
-                dq = np.zeros_like(q)
-                dq[j] = _JAC_EPS
-                dF[:, j] = (forces(q + dq) - forces(q - dq)) / (2 * _JAC_EPS)
-            f = (self._wk.T @ F).reshape(-1, 3)
-            J = self._wk.T @ sp.csr_matrix(dF) @ S
+            f = (Wk.T @ forces(q)).reshape(-1, 3)
+            J = Wk.T @ sp.csr_matrix(self._point_jacobian(forces, q)) @ S
             return f, J
 
         return load
+
+    def _point_law(self, tension: float, variant: str) -> tuple[sp.csr_matrix, sp.csr_matrix, Callable]:
+        """The tendon law over its points: (Wk, S, F).
+
+        Wk (3k, 3n) gives the k tendon points' coordinates from the vertex coordinates; S (m, 3n) the
+        law's inputs q, Wk then (guided routing) each block's section axis rows; F(q) the point forces
+        [N], shape (3k,).
+        """
+        printed = self.options.routing == "printed"
+        if printed and variant != "frictionless":
+            raise DesignError("the printed routing runs the frictionless tendon law only")
+        Wk = sp.kron(sp.csr_matrix(self.path_weights), sp.eye(3), format="csr") if printed else self._wk
+        S = Wk if printed else sp.vstack([Wk, self._normal_rows], format="csr")
+        k = Wk.shape[0] // 3
+
+        def forces(q: np.ndarray) -> np.ndarray:
+            q = q.reshape(-1, 3)
+            return tendon_forces(q[:k], q if printed else q[k:], self.anchor, tension, variant).ravel()
+
+        return Wk, S, forces
+
+    @staticmethod
+    def _point_jacobian(forces: Callable, q: np.ndarray) -> np.ndarray:
+        """∂F/∂q of the point law ``forces`` at ``q`` (m,) by central differences, shape (3k, m)."""
+        F = forces(q)
+        dF = np.empty((len(F), len(q)))
+        for j in range(len(q)):
+            dq = np.zeros_like(q)
+            dq[j] = _JAC_EPS
+            dF[:, j] = (forces(q + dq) - forces(q - dq)) / (2 * _JAC_EPS)
+        return dF
 
     def tip_face_load(self, force: np.ndarray) -> Callable:
         """A dead load ``force`` [N] (3,) spread over the tip face by area."""
@@ -299,7 +362,15 @@ class FemBody:
         return np.maximum(self.mass, k_v * dt**2 / 4.0)
 
     def waypoint_table(self) -> tuple[np.ndarray, np.ndarray]:
-        """The waypoint rows as padded tables: vertex indices (int32) and weights, (n_blocks, k)."""
+        """The waypoint rows as padded tables: vertex indices (int32) and weights, (n_blocks, k).
+
+        The explicit tendon kernels (contact rollouts, two-finger grasp) take these; they run the guided
+        waypoints only, so `DesignError` with ``FemOptions(routing="printed")`` (statics only).
+        """
+        if self.options.routing != "guided":
+            raise DesignError(
+                "the FEM's explicit tendon runs the guided waypoints; the printed routing is statics only"
+            )
         W = self.mesh.waypoint_weights
         k = max(int(np.count_nonzero(r)) for r in W)
         idx = np.zeros((len(W), k), dtype=np.int32)

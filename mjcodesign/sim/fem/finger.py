@@ -6,6 +6,8 @@
   block, ν = 0.45, base face clamped), stable Neo-Hookean forces, tangent and loads;
 * `mjcodesign.sim.fem.statics.FemStatics`: quasi-static Newton (`solve_static`) and the adjoint
   gradient of a static equilibrium (`static_gradient`);
+* `mjcodesign.sim.fem.stability.FemStability`: the tendon's buckling tension, at rest and along the
+  loaded path;
 * `FemFinger` (here): the cantilever and free-curl scenarios, and `FemFinger.rollout`, explicit
   semi-implicit Euler with substeps, gravity, Rayleigh damping and ground penalty contact with friction
   (`mjcodesign.sim.fem.contact_kernels.integrate`), the clamped base driven along a path.
@@ -54,12 +56,12 @@ from mjcodesign.design.beam import cantilever_tip_deflection
 from mjcodesign.errors import DesignError, SimulationDiverged
 from mjcodesign.sim.fem.options import FemDynamics
 from mjcodesign.sim.fem.results import FemCantilever, FemCurl
-from mjcodesign.sim.fem.statics import FemStatics
+from mjcodesign.sim.fem.stability import FemStability
 
 __all__ = ["FemFinger"]
 
 
-class FemFinger(FemStatics):
+class FemFinger(FemStability):
     """One finger (``finger`` 0 = A, 1 = B of ``stiffness``) as a tet FEM model, base clamped at x = 0.
 
     ``FemFinger(design, stiffness, *, finger=0, options=None)``: see `mjcodesign.sim.fem.body.FemBody`.

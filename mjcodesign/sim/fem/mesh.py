@@ -32,14 +32,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from mjcodesign.design.finger import BlockKind, FingerDesign
-from mjcodesign.errors import DesignError
+from mjcodesign.errors import DesignError, MeshError
 
-__all__ = ["FingerMesh", "mesh_finger", "to_quadratic"]
+__all__ = ["FingerMesh", "mesh_finger", "to_quadratic", "embed_points", "P2_EDGES"]
 
 _DEGENERATE = 1e-9
 """Tets below this fraction of a cell's volume are collapsed wedges (dropped)."""
 _COINCIDENT = 1e-12
 """Positions closer than this [m] are the same grid line."""
+_OUTSIDE = 1e-5
+"""Farthest [m] a point to embed may lie outside the mesh. A trapezoid cut's face is curved (the taper
+times a linear fall to the spine, curvature ~24 /m on the default design) and the mesh's is its chord
+between x grid lines, up to 2 µm inside it on a 1 mm grid: a channel's mouth on that face lies just
+outside the mesh, where its weights extrapolate it exactly."""
 
 
 @dataclass(frozen=True)
@@ -342,7 +347,8 @@ def _face_weights(vertices: np.ndarray, tets: np.ndarray, face: np.ndarray, x_fa
     return w / w.sum()
 
 
-_P2_EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
+P2_EDGES = ((0, 1), (1, 2), (0, 2), (0, 3), (1, 3), (2, 3))
+"""Corner pairs of the 10-node tet's edge midpoints, in node order 4..9."""
 
 
 def to_quadratic(mesh: FingerMesh, length: float) -> FingerMesh:
@@ -353,7 +359,7 @@ def to_quadratic(mesh: FingerMesh, length: float) -> FingerMesh:
     quadratic triangles (corners 0, each edge midpoint a third of its triangles' area).
     """
     n = mesh.n_vertices
-    edges = np.sort(mesh.tets[:, list(_P2_EDGES)].reshape(-1, 2), axis=1)
+    edges = np.sort(mesh.tets[:, list(P2_EDGES)].reshape(-1, 2), axis=1)
     uniq, inv = np.unique(edges, axis=0, return_inverse=True)
     mids = 0.5 * (mesh.vertices[uniq[:, 0]] + mesh.vertices[uniq[:, 1]])
     vertices = np.vstack([mesh.vertices, mids])
@@ -368,9 +374,42 @@ def to_quadratic(mesh: FingerMesh, length: float) -> FingerMesh:
         tri = [k for k in range(4) if corner_on[e, k]]
         p = vertices[tets[e, tri]]
         area = 0.5 * np.linalg.norm(np.cross(p[1] - p[0], p[2] - p[0]))
-        for j, (a, b) in enumerate(_P2_EDGES):
+        for j, (a, b) in enumerate(P2_EDGES):
             if a in tri and b in tri:
                 load[tets[e, 4 + j]] += area / 3.0
     w = load[tip_face]
     W = np.hstack([mesh.waypoint_weights, np.zeros((len(mesh.waypoint_weights), len(mids)))])
     return FingerMesh(vertices, tets, mesh.tet_block, base, tip_face, w / w.sum(), mesh.tip, W, mesh.h)
+
+
+def embed_points(mesh: FingerMesh, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rest-mesh tet holding each of ``points`` [m] (k, 3) and its shape-function weights.
+
+    Returns (W, tet): W of shape (k, n_vertices) with ``W @ mesh.vertices == points`` to round-off, and
+    the tet index of each point, shape (k,). W holds the tet's barycentric coordinates L for 4-node tets;
+    for 10-node tets (straight edges, so L is exact) the quadratic shape functions, L_i (2 L_i − 1) at
+    the corners and 4 L_i L_j at the midpoint of edge ij, which reproduce linear fields exactly. The tet
+    is the one the point lies deepest in (largest distance to its nearest face plane, negative outside;
+    lowest index on a tie); `MeshError` if that is more than ``_OUTSIDE`` outside the mesh.
+    """
+    points = np.atleast_2d(np.asarray(points, dtype=float))
+    corners = mesh.vertices[mesh.tets[:, :4]]  # (n_tets, 4, 3)
+    dm_inv = np.linalg.inv(np.transpose(corners[:, 1:] - corners[:, :1], (0, 2, 1)))
+    grad = np.concatenate([-dm_inv.sum(axis=1, keepdims=True), dm_inv], axis=1)  # ∇L_i [1/m], (n_tets, 4, 3)
+    altitude = 1.0 / np.linalg.norm(grad, axis=2)  # corner i's distance to its opposite face [m]
+    W = np.zeros((len(points), mesh.n_vertices))
+    tet = np.zeros(len(points), dtype=int)
+    for k, p in enumerate(points):
+        lam = np.einsum("tij,tj->ti", dm_inv, p[None] - corners[:, 0])
+        bary = np.c_[1.0 - lam.sum(axis=1), lam]  # (n_tets, 4)
+        depth = (bary * altitude).min(axis=1)  # signed distance to the nearest face plane [m]
+        tet[k] = e = int(np.argmax(depth))
+        if depth[e] < -_OUTSIDE:
+            raise MeshError(f"point {p} [m] lies {-depth[e]:.2e} m outside the finger mesh")
+        L = bary[e]
+        if mesh.tets.shape[1] == 4:
+            W[k, mesh.tets[e]] = L
+        else:
+            shape = np.r_[L * (2.0 * L - 1.0), [4.0 * L[a] * L[b] for a, b in P2_EDGES]]
+            W[k, mesh.tets[e]] = shape
+    return W, tet

@@ -8,6 +8,7 @@ import numpy as np
 
 from mjcodesign.design.tendon_law import TENDON_VARIANTS
 from mjcodesign.errors import DesignError
+from mjcodesign.models.types import ROUTINGS
 
 __all__ = ["FemOptions", "FemDynamics"]
 
@@ -52,6 +53,13 @@ class FemOptions:
     compresses the finger by T); ``paper``, the authors' law (`mjcodesign.design.tendon_law`): middle
     waypoints keep only the part across their section's axis, the first takes nothing and the tip a
     push T along its section's axis, so the finger is not compressed."""
+    routing: str = "guided"
+    """Statics (`FemBody.tendon_load`): ``guided``, the tendon through one waypoint per block
+    (`FingerMesh.waypoint_weights`); ``printed``, as in the printed finger, through the entry, middle and
+    exit of every segment's channel (`mjcodesign.models.channels.channel_points`, embedded in the rest
+    mesh by `mjcodesign.sim.fem.mesh.embed_points`) and straight across each flexure gap, anchored at the
+    base segment's channel entry on the clamped base face; frictionless law only. The two-finger grasp
+    and the contact rollouts run the guided waypoints and refuse ``printed``."""
     waypoint_layers: bool = True
     """Spine layer boundaries through in-spine waypoints (`mjcodesign.sim.fem.mesh.mesh_finger`); turn
     off for explicit dynamics, where their 30 µm layers cut the stable step tenfold."""
@@ -61,6 +69,11 @@ class FemOptions:
             raise DesignError(f"tet order must be 1 or 2, got {self.order}")
         if self.tendon_law not in TENDON_VARIANTS:
             raise DesignError(f"unknown tendon law {self.tendon_law!r}; choose from {TENDON_VARIANTS}")
+        if self.routing not in ROUTINGS:
+            raise DesignError(f"unknown routing {self.routing!r}; choose from {ROUTINGS}")
+        if self.routing == "printed" and self.tendon_law != "frictionless":
+            # The paper law needs one section axis per waypoint; a channel has three points per segment.
+            raise DesignError("the printed routing runs the frictionless tendon law only")
         if not 0.0 <= self.poisson < 0.5:
             raise DesignError(f"Poisson's ratio must be in [0, 0.5), got {self.poisson}")
 

@@ -2,7 +2,8 @@
 
 `FemCantilever` (:meth:`~mjcodesign.sim.fem.finger.FemFinger.cantilever`), `FemCurl`
 (:meth:`~mjcodesign.sim.fem.finger.FemFinger.curl`), `FemPress` (:func:`~mjcodesign.sim.fem.press.press_fem`)
-and `FemContactRun` (:meth:`~mjcodesign.sim.fem.contact.FemContact.run`). A JSON row builder can call
+`FemContactRun` (:meth:`~mjcodesign.sim.fem.contact.FemContact.run`), `FemBuckling` and
+`FemPathStability` (:mod:`mjcodesign.sim.fem.stability`). A JSON row builder can call
 :func:`dataclasses.asdict` on them (arrays stay arrays).
 """
 
@@ -12,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FemCantilever", "FemCurl", "FemPress", "FemContactRun"]
+__all__ = ["FemCantilever", "FemCurl", "FemPress", "FemContactRun", "FemBuckling", "FemPathStability"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,3 +89,38 @@ class FemContactRun:
     """Deepest final vertex inside the object [m]."""
     steps: int
     """Explicit steps taken."""
+
+
+@dataclass(frozen=True, eq=False)
+class FemBuckling:
+    """The unloaded finger's critical tendon tensions (`FemStability.buckling_tension`)."""
+
+    follower_eigenvalue_per_n: float
+    """λ_max(G_q C) [1/N]: the tendon's own stiffness at rest against the compliance at its points."""
+    follower_tension_n: float
+    """1 / ``follower_eigenvalue_per_n`` [N]; ``inf`` when that is not positive (no buckling)."""
+    linearised_eigenvalue_per_n: float
+    """μ_max of −(K₁ − G₀) v = μ K₀ v [1/N]: linear buckling with the unit tension's prestress."""
+    linearised_tension_n: float
+    """1 / ``linearised_eigenvalue_per_n`` [N]; ``inf`` when that is not positive."""
+    mode_block_angles: tuple[float, ...]
+    """The linearised mode's section rotation of each block relative to the previous one, largest
+    |entry| 1, (n_blocks,)."""
+    mode_block: int
+    """The block that turns most in the mode."""
+
+
+@dataclass(frozen=True, eq=False)
+class FemPathStability:
+    """Equilibria along increasing tension and their tangent's smallest eigenvalue."""
+
+    tensions_n: tuple[float, ...]
+    """Tendon tensions [N], increasing."""
+    eigenvalues: tuple[float, ...]
+    """Eigenvalue nearest zero of A(x, T) v = λ K₀ v at each equilibrium [-] (1 at rest)."""
+    bend_angles_rad: tuple[float, ...]
+    """Rotation of the tip block's distal section at each equilibrium [rad]; + curls inwards."""
+    critical_tension_n: float
+    """Where λ first crosses zero, linear between bracketing tensions [N]; ``inf`` if it never does."""
+    failed_tension_n: float | None
+    """The tension [N] whose equilibrium Newton did not find (the path ends there), or None."""

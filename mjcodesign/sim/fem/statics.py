@@ -113,7 +113,7 @@ class FemStatics(FemBody):
             A = self._free_tangent(x, J, done if it == 0 and done is not None else scale)
             dx = None if lu is None else self._krylov_step(A, r, lu)
             if dx is None:
-                lu = spla.splu(A, **_SPLU)
+                lu = self.factorise(A)
                 stats["factorisations"] += 1
                 dx = lu.solve(r)
             stats["newton_iterations"] += 1
@@ -135,6 +135,11 @@ class FemStatics(FemBody):
             f"FEM Newton did not converge: residual {np.linalg.norm(r) / ref:.2e} of the load after "
             f"{max_iter} iterations"
         )
+
+    @staticmethod
+    def factorise(A: sp.csc_matrix):
+        """SuperLU factorisation of a free-DOF tangent ``A`` (symmetric pattern; ``_SPLU``)."""
+        return spla.splu(A, **_SPLU)
 
     def _krylov_step(self, A: sp.csc_matrix, r: np.ndarray, lu) -> np.ndarray | None:
         """The step dx of A dx = r (free DOFs), or None if GMRES stalls.
