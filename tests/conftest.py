@@ -6,6 +6,14 @@ import pytest
 
 os.environ.setdefault("RERUN_ANALYTICS", "0")
 
+# A suite started as a background job of a script (`cmd &` without job control, nohup) inherits SIGINT
+# ignored, and an ignored signal stays ignored across exec: every command a test starts would then
+# ignore the SIGINT the test sends it (a view waiting out its 30 s, a grasp run never interrupted).
+# Python's own handler is caught, not ignored, so children start with SIGINT at its default again, as
+# from an interactive shell.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 REFERENCE = SHARED / "reference" / "codesign-soft-gripper"
 

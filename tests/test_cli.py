@@ -226,7 +226,7 @@ def _box_recording(tmp_path) -> Path:
     return rrd
 
 
-def test_desktop_view_binds_loopback_only(tmp_path, fake_display):
+def test_desktop_view_binds_loopback_only(tmp_path, fake_display, children):
     rrd, port = _box_recording(tmp_path), _free_tcp_port()
     cmd = [sys.executable, "-m", "mjcodesign.cli", "view", str(rrd), "--port", str(port)]
     proc = subprocess.Popen(
@@ -237,10 +237,27 @@ def test_desktop_view_binds_loopback_only(tmp_path, fake_display):
         assert set(sockets.values()) == {_LOOPBACK_HEX}, sockets
     finally:
         proc.send_signal(signal.SIGINT)  # view closes its viewer and returns 130
-        code = proc.wait(timeout=30)
+        code = _wait_or_end(proc, children)
     assert code == 130, proc.stderr.read()
     left = _sockets_on(port)  # the viewer went with it; if not, name who still holds the port
     assert not left, {pid: _cmdline(pid) for pid in _pids_holding(left)} or left
+
+
+def _wait_or_end(proc: subprocess.Popen, children) -> int:
+    """``proc``'s exit code within :data:`_VIEW_EXIT_S`; else it and its children are killed, and it raises.
+
+    A view that outlived its test would keep its viewer's servers spinning through the rest of the suite.
+    """
+    try:
+        return proc.wait(timeout=_VIEW_EXIT_S)
+    except subprocess.TimeoutExpired:
+        for pid in [*children(proc.pid), proc.pid]:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except OSError:
+                pass
+        proc.wait()
+        raise
 
 
 def _alive(pid: int) -> bool:
@@ -262,13 +279,14 @@ def test_web_view_leaves_no_viewer_behind_whatever_ends_it(tmp_path, sig, childr
     cmd = [sys.executable, "-m", "mjcodesign.cli", "view", str(rrd), "--web", "--port", str(port)]
     cmd += ["--web-port", str(web_port)]
     proc = subprocess.Popen(cmd, env=_ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    kids: set[int] = set()
     try:
         _await_sockets(port, lambda: proc.poll() is None)
         kids = children(proc.pid)
         assert kids, "view started no viewer"
     finally:
         proc.send_signal(sig)
-        code = proc.wait(timeout=_VIEW_EXIT_S)
+        code = _wait_or_end(proc, children)
     deadline = time.monotonic() + _VIEW_EXIT_S
     while any(_alive(k) for k in kids) and time.monotonic() < deadline:
         time.sleep(0.05)
