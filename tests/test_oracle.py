@@ -86,6 +86,26 @@ def test_search_keeps_its_budget_and_never_ends_below_its_start(suite, cache):
     assert again == res.per_object
 
 
+def test_proposals_are_scored_first_and_the_search_starts_from_the_best(suite, cache):
+    # The surrogate-then-simulator loop: proposals (here two presets) are scored on the search's own
+    # rollouts, CMA-ES starts from the best, and the proposals' rollouts count against the budget.
+    run = _run("soft", draws=1)
+    per_design = 2 * 2  # objects x poses x draws
+    starts = parse_design_groups("soft,semi-rigid")
+    budget = per_design * (2 + 4)  # the two proposals, then one generation of four
+    res = oracle_search(suite, run, OracleConfig(budget=budget, population=4), start=starts, cache_dir=cache)
+    expected = score_designs(suite, run, [g.design for g in starts], cache_dir=cache)
+    assert [p["label"] for p in res.proposals] == ["soft", "semi-rigid"]
+    assert [p["per_object"] for p in res.proposals] == expected
+    means = [float(np.mean(list(r.values()))) for r in expected]
+    k = int(np.argmax(means))
+    assert res.start == starts[k].label and res.start_success == means[k]
+    assert res.proposal_rollouts == 2 * per_design and res.rollouts == budget and res.generations == 1
+    assert res.evaluations == 2 + 4 and res.success >= max(means)
+    with pytest.raises(DesignError, match="the 2 proposals"):  # covers one start and a generation only
+        oracle_search(suite, run, OracleConfig(budget=per_design * 5, population=4), start=starts)
+
+
 def test_refusals(suite):
     run = _run("soft", draws=1)
     (start,) = parse_design_groups("soft")
@@ -112,13 +132,16 @@ def _cli(*args, cwd, cache=None):
 def test_cli_writes_a_design_every_command_reads(tmp_path, cache):
     out = tmp_path / "oracle"
     p = _cli(
-        "--only", ",".join(_OBJECTS), "--candidates", "1", "--perturbations", "1",
-        "--budget", "10", "--population", "4", "--out", str(out), "--json", cwd=tmp_path, cache=cache,
+        "--only", ",".join(_OBJECTS), "--candidates", "1", "--perturbations", "1", "--start", "soft,semi-rigid",
+        "--budget", "12", "--population", "4", "--out", str(out), "--json", cwd=tmp_path, cache=cache,
     )  # fmt: skip
     assert p.returncode == 0, p.stderr
     summary = json.loads(p.stdout)
     assert summary["regime"] == "real" and summary["suite"]["objects"] == 2
-    assert summary["rollouts"] == 10 and summary["generations"] == 1  # the start, then one generation
+    # the two proposals (2 rollouts each), then one generation of four
+    assert summary["rollouts"] == 12 and summary["generations"] == 1 and summary["proposal_rollouts"] == 4
+    assert [q["label"] for q in summary["proposals"]] == ["soft", "semi-rigid"]
+    assert summary["start"] in ("soft", "semi-rigid")
     assert read_design_file(out / "design.json") == Stiffness(summary["design"])
     assert {f.name for f in out.iterdir()} == {"design.json", "oracle.json", "curve.png", MARKER}
 

@@ -55,7 +55,10 @@ def add_bench_parser(bench_subparsers) -> None:
         "--sigma", type=finite_float(0.0, strict=True), default=1.0, help="CMA-ES's first step in z"
     )
     b.add_argument(
-        "--start", default="semi-rigid", help="the first generation's centre: a preset or joint:FILE"
+        "--start",
+        default="semi-rigid",
+        help="the first generation's centre: a preset or joint:FILE; several (comma-separated, e.g. a "
+        "surrogate's designs from optimize) are each scored first and the search starts from the best",
     )
     add_regime(b)
     b.add_argument("--seed", type=int_at_least(0), default=0, help="seed of the draws and of CMA-ES")
@@ -116,11 +119,11 @@ def run_bench(args: argparse.Namespace) -> int:
     config = OracleConfig(
         budget=args.budget, policy=args.policy, sigma=args.sigma, population=args.population, seed=args.seed
     )
-    (start,) = parse_design_groups(args.start)
+    starts = parse_design_groups(args.start)
     regime = get_regime(args.regime)
     density, mass = regime.masses(None, None)
     run = SuiteRun(
-        designs=(start,),
+        designs=starts[:1],
         perturbations=args.perturbations,
         densities=(density,),
         mass=mass,
@@ -144,7 +147,9 @@ def run_bench(args: argparse.Namespace) -> int:
         inputs={"--suite": args.suite, "--only": args.only},
     )
     with StageProgress("bench oracle") as progress:
-        result = oracle_search(suite, run, config, start=start, cache_dir=user_cache_dir(), progress=progress)
+        result = oracle_search(
+            suite, run, config, start=starts, cache_dir=user_cache_dir(), progress=progress
+        )
     summary = {
         "provenance": provenance("oracle", command=args.command_line),
         "suite": {"name": suite.name, "digest": suite.digest, "split": args.split, "objects": len(objects)},
@@ -182,6 +187,7 @@ def _dumps(summary: dict) -> str:
 def _flat(summary: dict) -> dict:
     return {
         "objects": summary["suite"]["objects"],
+        "proposals": ", ".join(f"{p['label']} {100 * p['success']:.1f}%" for p in summary["proposals"]),
         "start": f"{summary['start']} {100 * summary['start_success']:.1f}%",
         "oracle": f"{100 * summary['success']:.1f}%",
         "rollouts": summary["rollouts"],

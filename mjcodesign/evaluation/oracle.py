@@ -10,9 +10,12 @@ that design), and the mean of those shares over objects. An object whose rollout
 is the upper bound of what one design reaches on these objects, within the budget and up to the
 winner's curse of its draws (re-evaluate it on fresh draws or more of them: ``evaluate``).
 
-The search variable is Algorithm 1's (z, ``ln E = 13.5 + 3.5 · sigmoid(z)``); the first generation is
-centred on ``start`` (a preset or design file) and ``start`` itself is scored first, so the result is
-never below it on the search's own draws. A generation's designs go through the simulator together, one
+The search variable is Algorithm 1's (z, ``ln E = 13.5 + 3.5 · sigmoid(z)``). ``start`` is one design (a
+preset or design file) or several proposals, such as a surrogate's joint designs: every proposal is
+scored first on the same rollouts, and the first generation is centred on the best of them, so the
+result is never below any proposal on the search's own draws. With a surrogate's designs as the
+proposals this is the surrogate-then-simulator loop: the surrogate proposes, the simulator verifies
+and CMA-ES continues from the best verified proposal for the rest of the budget. A generation's designs go through the simulator together, one
 object at a time (one compiled scene per object). ``cmaes`` is imported inside :func:`oracle_search`.
 """
 
@@ -99,7 +102,12 @@ class OracleResult:
     """Mean over objects of the best design's success share (the objective)."""
     per_object: dict[str, float]
     start: str
+    """Label of the proposal the search started from (the best of ``proposals``)."""
     start_success: float
+    proposals: list[dict] = field(default_factory=list)
+    """Every proposal scored before the search, in the order given: label, success, per-object shares."""
+    proposal_rollouts: int = 0
+    """Rollouts spent scoring the proposals (part of ``rollouts``)."""
     rollouts: int = 0
     evaluations: int = 0
     generations: int = 0
@@ -117,6 +125,8 @@ class OracleResult:
             "start": self.start,
             "start_success": self.start_success,
             "gain_over_start": self.success - self.start_success,
+            "proposals": self.proposals,
+            "proposal_rollouts": self.proposal_rollouts,
             "rollouts": self.rollouts,
             "evaluations": self.evaluations,
             "generations": self.generations,
@@ -159,11 +169,12 @@ class _Scorer:
         return draws * max(regimes, 1) * len(self.run.impulses)
 
 
-def _check_budget(budget: int, population: int, per_design: int) -> None:
-    if per_design * (population + 1) > budget:
+def _check_budget(budget: int, population: int, per_design: int, starts: int = 1) -> None:
+    if per_design * (population + starts) > budget:
+        what = "the start" if starts == 1 else f"the {starts} proposals"
         raise DesignError(
-            f"a budget of {budget} rollouts does not cover the start and one generation "
-            f"({population + 1} designs x {per_design} rollouts)"
+            f"a budget of {budget} rollouts does not cover {what} and one generation "
+            f"({population + starts} designs x {per_design} rollouts)"
         )
 
 
@@ -179,28 +190,39 @@ def oracle_search(
     run: SuiteRun,
     config: OracleConfig,
     *,
-    start: DesignGroup,
+    start: DesignGroup | Sequence[DesignGroup],
     cache_dir=None,
     progress: Progress | None = None,
     on_generation: Callable[[OracleResult], None] | None = None,
 ) -> OracleResult:
     """CMA-ES over one design for every object of ``suite`` (module docstring).
 
-    ``run`` gives the regime, scenario, draws per pose (``perturbations``), impulse (the first of
-    ``impulses``) and seed; its ``designs`` are not used. ``on_generation`` gets the result so far.
+    ``start``: one design, or proposals scored first (the search starts from the best; ties go to the
+    first given). ``run`` gives the regime, scenario, draws per pose (``perturbations``), impulse (the
+    first of ``impulses``) and seed; its ``designs`` are not used. ``on_generation`` gets the result so
+    far.
     """
     try:
         from cmaes import CMA
     except ImportError:
         raise UnsupportedError("the oracle needs cmaes (pip install 'mjcodesign[codesign]')") from None
-    if start.design is None:
+    starts = (start,) if isinstance(start, DesignGroup) else tuple(start)
+    if not starts:
+        raise DesignError("the oracle needs a design to start from")
+    if any(s.design is None for s in starts):
         raise DesignError("the oracle starts from one design for every object (a preset or joint:FILE)")
+    labels = [s.label for s in starts]
+    if len(set(labels)) != len(labels):
+        raise DesignError(f"the oracle's proposals repeat a design: {', '.join(labels)}")
     t0 = time.perf_counter()
-    run = replace(run, designs=(start,), impulses=run.impulses[:1], pose_policies=("fixed",))
+    run = replace(run, designs=starts[:1], impulses=run.impulses[:1], pose_policies=("fixed",))
     population = config.population or 4 + int(3 * np.log(N_LOG_E))
     regimes = len(run.densities) if run.mass == "density" else 1
     _check_budget(
-        config.budget, population, sum(len(o.poses) for o in suite.objects) * run.perturbations * regimes
+        config.budget,
+        population,
+        sum(len(o.poses) for o in suite.objects) * run.perturbations * regimes,
+        len(starts),
     )
     try:
         scorer = _Scorer(suite, run, config.policy, cache_dir=cache_dir, progress=progress)
@@ -208,10 +230,15 @@ def oracle_search(
         raise DesignError(f"the oracle needs every suite object: {exc}") from exc
     names = tuple(so.name for so, _ in scorer.prepared)
     per_gen = scorer.per_design()  # draws given up cost nothing
-    _check_budget(config.budget, population, per_gen)
+    _check_budget(config.budget, population, per_gen, len(starts))
+    proposal_rates = scorer([s.design for s in starts])
+    proposals = [
+        {"label": s.label, "success": float(np.mean(list(r.values()))), "per_object": r}
+        for s, r in zip(starts, proposal_rates, strict=True)
+    ]
+    k = int(np.argmax([p["success"] for p in proposals]))  # the first of equal ones
+    start, start_rate, start_score = starts[k], proposal_rates[k], proposals[k]["success"]
     start_design = np.asarray(start.design.log_e, dtype=float).ravel()
-    (start_rate,) = scorer([start.design])
-    start_score = float(np.mean(list(start_rate.values())))
     best = (start_score, start_design, start_rate)
     opt = CMA(
         mean=z_of(np.clip(start_design, LOG_E_MIN + _INSIDE, LOG_E_MAX - _INSIDE)),
@@ -226,8 +253,10 @@ def oracle_search(
         per_object=start_rate,
         start=start.label,
         start_success=start_score,
+        proposals=proposals,
+        proposal_rollouts=scorer.rollouts,
         rollouts=scorer.rollouts,
-        evaluations=1,
+        evaluations=len(starts),
     )
     while scorer.rollouts + opt.population_size * per_gen <= config.budget:
         zs = [opt.ask() for _ in range(opt.population_size)]
