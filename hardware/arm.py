@@ -11,6 +11,8 @@ workspace box before the robot is asked to move.
 
 from __future__ import annotations
 
+import socket
+import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, TypeVar
@@ -19,16 +21,46 @@ import numpy as np
 
 from mjcodesign.errors import HardwareError, PoseError
 
-__all__ = ["ArmConfig", "FrankaArm", "Workspace", "check_transform"]
+__all__ = ["ArmConfig", "FrankaArm", "Workspace", "check_fci", "check_transform"]
 
 FRANKA_HAND_MAX_WIDTH = 0.08  # Franka Hand stroke [m], from the Franka datasheet
 _RIGID_TOL = 1e-4  # |R^T R - I| and |det R - 1| tolerance for a pose matrix
 _T = TypeVar("_T")
 _UNANSWERED: list[tuple[Any, Any]] = []  # hand connections with a command that never answered
 _UNRESPONSIVE: list[Any] = []  # robot connections whose motion did not end after a stop
+FCI_COMMAND_PORT = 1337
+"""libfranka's TCP command port on the robot's controller (franky-sim listens on it too)."""
+_FCI_CONNECT_S = 5.0
+"""Longest wait for the controller's command port to accept a TCP connection before libfranka is asked
+[s]: on a LAN it answers in milliseconds; libfranka's own connect waits 60 s (measured: 65 s to refuse
+an address nobody answers, a core busy in the kernel throughout)."""
+_HANDSHAKE_S = 15.0
+"""Longest wait for libfranka's connection to the robot or the hand to complete once the port answers
+[s]: a controller answers its handshake in milliseconds, franky-sim on a loaded machine in well under a
+second; a peer that accepts TCP but never speaks (a proxy, another service on the port) would hold
+libfranka for 60 s."""
 _STOP_WAIT_S = 5.0
 """Longest wait for a stopped arm motion to end [s]: a stop decelerates the arm within about a second
 (franky's stop motion; franky-sim alike), so longer means the connection no longer answers."""
+
+
+def check_fci(host: str, *, port: int = FCI_COMMAND_PORT, timeout: float = _FCI_CONNECT_S) -> None:
+    """Raise :class:`HardwareError` unless ``host`` accepts a TCP connection on ``port`` within ``timeout`` [s].
+
+    The connection is closed again at once, before any libfranka message (the controller and franky-sim
+    treat it as a client that went away).
+    """
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            pass
+    except socket.gaierror as exc:
+        raise HardwareError(f"arm: cannot resolve robot host {host!r} ({exc.strerror})") from None
+    except OSError as exc:
+        why = f"no answer within {timeout:g} s" if isinstance(exc, TimeoutError) else exc.strerror or exc
+        raise HardwareError(
+            f"arm: no robot answers at {host}:{port} ({why}); check the address, the network and that "
+            "FCI is activated in Desk"
+        ) from None
 
 
 def check_transform(matrix: Any, what: str = "pose") -> np.ndarray:
@@ -114,6 +146,36 @@ class ArmConfig:
             raise HardwareError(f"motion timeout must be positive, got {self.motion_timeout_s} s")
 
 
+def _within(what: str, connect: Callable[[], _T], seconds: float | None = None) -> _T:
+    """``connect()``'s result, run in a daemon thread; :class:`HardwareError` past ``seconds`` [s].
+
+    ``seconds`` defaults to :data:`_HANDSHAKE_S`.
+
+    libfranka's connection releases the GIL while it waits; one that is given up runs on in its thread
+    until libfranka's own timeout ends it, without holding up the process's exit.
+    """
+    out: dict[str, Any] = {}
+
+    def run() -> None:
+        try:
+            out["value"] = connect()
+        except BaseException as exc:  # handed to the caller's thread
+            out["error"] = exc
+
+    seconds = _HANDSHAKE_S if seconds is None else seconds
+    thread = threading.Thread(target=run, name="franky-connect", daemon=True)
+    thread.start()
+    thread.join(seconds)
+    if thread.is_alive():
+        raise HardwareError(
+            f"arm: {what} accepted the connection but libfranka's handshake did not finish within "
+            f"{seconds:g} s (is a Franka controller, or franky-sim, on port {FCI_COMMAND_PORT} there?)"
+        )
+    if "error" in out:
+        raise out["error"]
+    return out["value"]
+
+
 class FrankaArm:
     """Franka arm with Franka Hand over franky. Use as a context manager (connects on enter)."""
 
@@ -132,17 +194,20 @@ class FrankaArm:
 
     def open(self) -> None:
         """Connect to the robot and the hand, clear any reflex error, set the speed factor."""
+        check_fci(self.config.host)
         import franky
 
         self._franky = franky
         rt = franky.RealtimeConfig.Enforce if self.config.realtime else franky.RealtimeConfig.Ignore
         self._robot = self._call(
             f"connect to robot {self.config.host}",
-            lambda: franky.Robot(self.config.host, realtime_config=rt),
+            lambda: _within(
+                f"robot {self.config.host}", lambda: franky.Robot(self.config.host, realtime_config=rt)
+            ),
         )
         self._gripper = self._call(
             f"connect to Franka Hand at {self.config.host}",
-            lambda: franky.Gripper(self.config.host),
+            lambda: _within(f"Franka Hand at {self.config.host}", lambda: franky.Gripper(self.config.host)),
         )
         self.recover()
         self._robot.relative_dynamics_factor = self.config.speed_factor
