@@ -140,6 +140,12 @@ def main(argv=None) -> None:
     p.add_argument("--bend", type=float, default=1.0, help="the chain's bend [rad] that sets each tension")
     p.add_argument("--path-log-e", type=float, default=13.5, help="ln E of the path's uniform finger")
     p.add_argument("--parts", default="buckling,curl,path", help="what to record, comma-separated")
+    p.add_argument(
+        "--curl-mesh",
+        choices=("converged", "path"),
+        default="converged",
+        help="the curls' mesh: CONVERGED_MESH, or PATH_MESH where a converged curl is too slow",
+    )
     args = p.parse_args(argv)
     a, b = (int(v) for v in args.seeds.split(".."))
     seeds = [s for s in range(a, b + 1) if s not in TRAIN_SEEDS]
@@ -148,7 +154,13 @@ def main(argv=None) -> None:
     command = shlex.join(
         ["python3", "scripts/fem_routing_record.py", *(sys.argv[1:] if argv is None else argv)]
     )
-    record: dict = {"mesh": CONVERGED_MESH, "log_e": list(LOG_E), "bend_target_rad": args.bend}
+    curl_mesh = CONVERGED_MESH if args.curl_mesh == "converged" else PATH_MESH
+    record: dict = {
+        "mesh": CONVERGED_MESH,
+        "curl_mesh": curl_mesh,
+        "log_e": list(LOG_E),
+        "bend_target_rad": args.bend,
+    }
     out = {"provenance": provenance("fem_routing_record", command=command), "record": record}
 
     def log(row):
@@ -158,12 +170,16 @@ def main(argv=None) -> None:
             json.dump(out, f, indent=1)
 
     fem = None
-    if {"buckling", "curl"} & set(parts):
+    if "buckling" in parts or ("curl" in parts and curl_mesh is CONVERGED_MESH):
         options = FemOptions(**CONVERGED_MESH, routing="printed")
         fem = FemFinger(FingerDesign(), Stiffness([LOG_E[0]] * 11), options=options)
     if "buckling" in parts:
         _buckling(fem, record.setdefault("buckling", []), log)
     if "curl" in parts:
+        if curl_mesh is not CONVERGED_MESH:
+            fem = FemFinger(
+                FingerDesign(), Stiffness([LOG_E[0]] * 11), options=FemOptions(**curl_mesh, routing="printed")
+            )
         _curls(fem, seeds, args.bend, record.setdefault("curl", []), log)
     if "path" in parts:
         record["path"] = _path(args.path_log_e, log)
