@@ -29,7 +29,7 @@ from mjcodesign.codesign import (
     z_of,
 )
 from mjcodesign.errors import DesignError
-from mjcodesign.surrogate import GraspBatch, Normalizer, Poses, SuccessLoss, Surrogate
+from mjcodesign.surrogate import GraspBatch, GraspNet, ModelConfig, Normalizer, Poses, SuccessLoss, Surrogate
 
 cli_main = importlib.import_module("mjcodesign.cli.main")
 
@@ -462,3 +462,42 @@ def test_optimize_re_simulates_a_generated_mesh(own_mesh, tiny_checkpoint, tmp_p
         r.returncode == 2 and "give its mesh file in --objects" in r.stderr and r.stderr.count("\n") == 1
     ), r.stderr
     assert not (tmp_path / "out2").exists()
+
+
+def test_verify_under_the_success_loss_predicts_with_the_success_head(tiny_checkpoint):
+    # The success objective's ground truth predicts with the head (p > 0.5), not the outputs' score;
+    # with a head every row carries the head's probability at its pose and design, whatever the loss.
+    from mjcodesign.codesign import load_pose_set
+    from mjcodesign.codesign.verify import verify
+    from mjcodesign.design.stiffness import Stiffness
+    from mjcodesign.surrogate import load_surrogate
+
+    tiny = load_surrogate(tiny_checkpoint)  # trained without a head: its net is swapped for one with
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(0)
+        net = GraspNet(
+            ModelConfig(
+                point_widths=(8, 16), hidden=16, depth=2, penultimate=8, dropout=0.0, success_head=True
+            )
+        )
+    sur = Surrogate(
+        net, tiny.normalizer, lift=tiny.lift, lifted_fraction=tiny.lifted_fraction, meta=tiny.meta
+    )
+    assert sur.has_success_head
+    work = tiny_checkpoint.parent
+    poses = load_pose_set(work / "ds")
+    sets = {"presets": (poses, None, None)}
+    by_score = verify(sur, sets, 250.0, cache_dir=work / "cache")
+    by_head = verify(sur, sets, 250.0, cache_dir=work / "cache", loss=SuccessLoss())
+    assert (by_score["predicted_by"], by_head["predicted_by"]) == ("score", "success head")
+    for truth in (by_score, by_head):
+        for row in truth["rows"]:
+            design = Stiffness.preset(row["design"]).log_e.reshape(1, -1)
+            batch = GraspBatch(Poses.of(poses), np.array([row["pose_row"]]), np.array([250.0]), design)
+            pred = sur.predict(batch)
+            assert row["predicted_success_p"] == pytest.approx(float(pred.success_p[0]), rel=1e-5)
+            by = row["predicted_success_p"] > 0.5 if truth is by_head else bool(pred.success[0])
+            assert row["predicted_success"] == by
+    for rate in by_head["rates"]:
+        sel = [r for r in by_head["rows"] if r["design"] == rate["design"]]
+        assert rate["predicted_success_p"] == pytest.approx(np.mean([r["predicted_success_p"] for r in sel]))

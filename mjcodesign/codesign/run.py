@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from pathlib import Path
 
-from mjcodesign.codesign.optimize import Mode, OptimizeConfig, OptimizeResult, Step, optimize
+from mjcodesign.codesign.optimize import Mode, Objective, OptimizeConfig, OptimizeResult, Step, optimize
 from mjcodesign.codesign.problem import PoseSet, load_pose_set, object_key, real_densities
 from mjcodesign.codesign.report import (
     design_text,
@@ -125,11 +125,28 @@ def run_codesign(
         if held_set is not None:
             joint = [result.designs[0]] * len(held_set.objects) if config.mode is Mode.JOINT else None
             sets["held_out"] = (held_set, joint, None)
-        truth = verify(surrogate, sets, density, object_seed=object_seed, cache_dir=cache_dir, progress=say)
+        truth = verify(
+            surrogate,
+            sets,
+            density,
+            object_seed=object_seed,
+            cache_dir=cache_dir,
+            loss=_loss(config),
+            progress=say,
+        )
     record = _record(result, chosen_set, held, truth, checkpoint, poses, density, seed, root)
     record.update(mass=mass, held_out_without_mass=no_mass)
     _write(folder, result, chosen_set, record)
     return record, result
+
+
+def _loss(config: OptimizeConfig):
+    """The loss the optimisation used, for the presets' poses and the prediction (None: the paper's)."""
+    if config.objective is Objective.SUCCESS:
+        from mjcodesign.surrogate import SuccessLoss
+
+        return SuccessLoss()
+    return None
 
 
 def _record(result, poses: PoseSet, held, truth, checkpoint, source, density, seed, root) -> dict:

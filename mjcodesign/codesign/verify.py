@@ -4,7 +4,10 @@ For each object and each design compared (the optimised one, and the soft and se
 
 * the pose: the optimised design's chosen pose on the objects it was optimised for; otherwise the
   candidate pose of lowest L_opt for that design (what the surrogate would pick for it);
-* the surrogate's predicted success there (:meth:`~mjcodesign.surrogate.Surrogate.predict`);
+* the surrogate's predicted success there (:meth:`~mjcodesign.surrogate.Surrogate.predict`): its
+  success head's probability above one half under a loss that reads the head (the success objective's
+  :class:`~mjcodesign.surrogate.SuccessLoss`), else the outputs' success score above zero; with a head,
+  each row also carries the head's probability (``predicted_success_p``);
 * the simulated outcome (:class:`~mjcodesign.jobs.GraspJob` on MuJoCo C through
   :func:`~mjcodesign.jobs.run_jobs`) under the dataset's grasp scenario (tendon drive included),
   finger model and geometry, as the checkpoint records them
@@ -49,7 +52,10 @@ def pick_poses(surrogate, poses: PoseSet, design, density, loss=None) -> np.ndar
 
 
 def predicted_success(surrogate, poses: PoseSet, rows, designs, density):
-    """The surrogate's success and score at pose ``rows`` with ``designs`` (one per row, (n, 22))."""
+    """The surrogate's success and score at pose ``rows`` with ``designs`` (one per row, (n, 22)).
+
+    The success is the outputs' (score above zero); :func:`predicted_success_p` gives the head's.
+    """
     from mjcodesign.surrogate import GraspBatch, Poses
 
     rows = np.asarray(rows, dtype=np.int64)
@@ -58,6 +64,17 @@ def predicted_success(surrogate, poses: PoseSet, rows, designs, density):
     )
     pred = surrogate.predict(batch)
     return pred.success, pred.success_score
+
+
+def predicted_success_p(surrogate, poses: PoseSet, rows, designs, density) -> np.ndarray | None:
+    """The success head's probability at pose ``rows`` with ``designs``, shape (n,); None without a head."""
+    from mjcodesign.surrogate import GraspBatch, Poses
+
+    rows = np.asarray(rows, dtype=np.int64)
+    batch = GraspBatch(
+        Poses.of(poses), rows, row_densities(poses, density)[rows], np.asarray(designs, dtype=float)
+    )
+    return surrogate.predict(batch).success_p
 
 
 def verify(
@@ -75,8 +92,10 @@ def verify(
 
     ``sets``: name -> (poses, the optimised design of each object (22 ln E; None: only the presets),
     the optimised design's chosen pose rows (None: the surrogate picks them here)). ``scenario``
-    replaces the dataset's. Returns JSON-ready rows and rates per (set, design), and ``simulation``:
-    the scenario, tendon drive and finger model they ran under, and where those came from.
+    replaces the dataset's. ``loss`` picks the presets' poses and, when it reads the success head
+    (``needs_success_head``), makes the head's probability the prediction. Returns JSON-ready rows and
+    rates per (set, design), ``predicted_by`` (``success head`` or ``score``), and ``simulation``: the
+    scenario, tendon drive and finger model they ran under, and where those came from.
     """
     from mjcodesign.surrogate import dataset_config
 
@@ -95,6 +114,7 @@ def verify(
     # An object goes by its name (a mesh file's stem); it is loaded from the source its poses recorded
     # (the command's mesh file, the dataset's), else from the checkpoint's dataset, else by its name.
     sources = {object_key(s): s for s in config.objects} if config is not None else {}
+    by_head = bool(getattr(loss, "needs_success_head", False))
     jobs, meta = [], []
     for set_name, (poses, designs, chosen) in sets.items():
         objs = {}
@@ -107,6 +127,9 @@ def verify(
             else:
                 rows = _pick_each(surrogate, poses, per_object, density, loss)
             ok, score = predicted_success(surrogate, poses, rows, np.array(per_object), density)
+            p = predicted_success_p(surrogate, poses, rows, np.array(per_object), density)
+            if by_head:
+                ok = p > 0.5
             rho = row_densities(poses, density)
             for k, name in enumerate(poses.objects):
                 rho_k = float(rho[poses.rows(k)[0]])
@@ -119,7 +142,8 @@ def verify(
                              finger_model=model, scenario=scenario, density=rho_k,
                              seed=object_seed, geometry=geometry, label=f"{set_name}/{label}/{name}")
                 )  # fmt: skip
-                meta.append((set_name, label, name, int(rows[k]), bool(ok[k]), float(score[k])))
+                p_k = None if p is None else float(p[k])
+                meta.append((set_name, label, name, int(rows[k]), bool(ok[k]), float(score[k]), p_k))
     if progress is not None:
         progress(f"simulating {len(jobs)} grasps")
     outs = run_jobs(jobs, MujocoBackend())
@@ -131,15 +155,17 @@ def verify(
             "pose_row": row,
             "predicted_success": pred,
             "predicted_score": score,
+            **({} if p is None else {"predicted_success_p": p}),
             "simulated_success": bool(o.success),
             "reason": o.reason,
         }
-        for (s, label, name, row, pred, score), o in zip(meta, outs, strict=True)
+        for (s, label, name, row, pred, score, p), o in zip(meta, outs, strict=True)
     ]
     rates = []
     for s in dict.fromkeys(r["set"] for r in rows_out):
         for label in dict.fromkeys(r["design"] for r in rows_out if r["set"] == s):
             sel = [r for r in rows_out if r["set"] == s and r["design"] == label]
+            head = [r["predicted_success_p"] for r in sel if "predicted_success_p" in r]
             rates.append(
                 {
                     "set": s,
@@ -147,6 +173,7 @@ def verify(
                     "objects": len(sel),
                     "simulated_success": float(np.mean([r["simulated_success"] for r in sel])),
                     "predicted_success": float(np.mean([r["predicted_success"] for r in sel])),
+                    **({"predicted_success_p": float(np.mean(head))} if head else {}),
                     "agreement": float(
                         np.mean([r["simulated_success"] == r["predicted_success"] for r in sel])
                     ),
@@ -159,6 +186,7 @@ def verify(
         "scenario": dataclasses.asdict(scenario),
     }
     return {
+        "predicted_by": "success head" if by_head else "score",
         "rates": rates,
         "rows": rows_out,
         "rollouts": len(jobs),

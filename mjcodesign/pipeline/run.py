@@ -31,7 +31,7 @@ import numpy as np
 from mjcodesign.codesign import Mode, OptimizeConfig, PoseSet, optimize
 from mjcodesign.codesign.report import design_text, write_design, write_json, write_pose
 from mjcodesign.codesign.run import dataset_masses
-from mjcodesign.codesign.verify import pick_poses, predicted_success
+from mjcodesign.codesign.verify import pick_poses, predicted_success, predicted_success_p
 from mjcodesign.design.stiffness import PRESETS, Stiffness
 from mjcodesign.errors import DesignError
 from mjcodesign.evaluation import (
@@ -235,7 +235,10 @@ def run_design(
         designs[b] = [log_e] * len(names)
         rows[b] = pick_poses(surrogate, poses, log_e, rho)
     predicted = {
-        label: predicted_success(surrogate, poses, rows[label], np.array(designs[label]), rho)[0]
+        label: (
+            predicted_success(surrogate, poses, rows[label], np.array(designs[label]), rho)[0],
+            predicted_success_p(surrogate, poses, rows[label], np.array(designs[label]), rho),
+        )
         for label in designs
     }
 
@@ -345,6 +348,11 @@ def _verify(specs, objs, poses, designs, rows, rho, scenario, model, draws, opti
     return out
 
 
+def _head_p(p, k: int) -> dict:
+    """``{"predicted_success_p": p[k]}`` from a success head's probabilities, ``{}`` without a head."""
+    return {} if p is None else {"predicted_success_p": float(p[k])}
+
+
 def _summary(rows: list[dict], names, designs, chosen, poses: PoseSet, predicted) -> dict:
     """Per (object, design, disturbance) and per (design, disturbance): success with its Wilson interval."""
     cells = []
@@ -366,7 +374,8 @@ def _summary(rows: list[dict], names, designs, chosen, poses: PoseSet, predicted
                         "valid": len(valid),
                         "sample_errors": len(sel) - len(valid),
                         "p": wilson(int(ok), len(valid)).as_dict(),
-                        "predicted_success": bool(predicted[label][k]),
+                        "predicted_success": bool(predicted[label][0][k]),
+                        **_head_p(predicted[label][1], k),
                     }
                 )
     sweep = []
