@@ -625,6 +625,25 @@ def test_the_plate_is_refused_with_every_reason(sdf_cache):
     assert "grasped part wider than the stroke" in msg
 
 
+def test_an_object_out_of_the_fingers_reach_is_refused_without_the_fallback(tmp_path, monkeypatch, sdf_cache):
+    # A 1 mm cube: every pose the regular pass refines leaves the closed fingers short of it, and no other
+    # pair of its surface points can do better, so the fallback's thousands of refinements are not run.
+    import trimesh
+
+    from mjcodesign.objects import load_object
+    from mjcodesign.poses import sampler
+
+    def fallback(*args, **kwargs):
+        raise AssertionError("the fallback ran")
+
+    monkeypatch.setattr(sampler, "_fallback", fallback)
+    cube = tmp_path / "cube1mm.stl"
+    trimesh.creation.box(extents=(1e-3, 1e-3, 1e-3)).export(cube)
+    with pytest.raises(PoseError, match="no grasp candidate accepted") as err:
+        sample_poses(load_object(str(cube), 680.0), 10, seed=0, cache_dir=sdf_cache)
+    assert str(err.value).endswith("refused: finger does not reach the object " + str(err.value).split()[-1])
+
+
 @pytest.mark.parametrize(
     "key, command",
     [

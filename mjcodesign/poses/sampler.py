@@ -217,7 +217,7 @@ def sample_poses(
         parts.append(_refine_round(obj, T, prior[pick], tried, design, options, rng, rejected, sdf))
         tried += len(pick)
     got = len({int(x) for c in parts for x in c.source_index})
-    if got < n:  # the fallback: only where the pass above fell short, so it changes no other output
+    if got < n and not _out_of_reach(parts):  # the fallback: only where the pass above fell short
         more = range(extra + 1, _EXTRA_POOLS + _FALLBACK_POOLS + 1) if points is None else range(0)
         pools = [seed + _POOL_SEED_STEP * k for k in more]
         pairs = _Pairs(centre, u, prior)
@@ -292,6 +292,17 @@ class _Pairs:
     centre: np.ndarray
     u: np.ndarray
     prior: np.ndarray
+
+
+def _out_of_reach(parts: list[Candidates]) -> bool:
+    """Whether the regular pass accepted nothing and refused every pose it refined as out of reach.
+
+    Such an object is smaller than the gap the closed fingers leave: no other pair of its surface
+    points does better, so the fallback (thousands of refinements) is skipped.
+    """
+    refused = [r for c in parts for _, _, r in c.refused]
+    accepted = sum(len(c) for c in parts)
+    return accepted == 0 and bool(refused) and all(r == Rejection.NO_REACH.value for r in refused)
 
 
 def _refine_round(obj, T, prior, first, design, options, rng, rejected, sdf) -> Candidates:
