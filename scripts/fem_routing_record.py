@@ -86,28 +86,28 @@ def _buckling(fem: FemFinger, rows: list, log) -> None:
         log(rows[-1])
 
 
-def _path(log_e: float, log) -> dict:
+def _path(log_e: float, row: dict, log) -> None:
+    """Fill ``row`` with the path of the uniform finger ``log_e``, point by point (logged as it goes)."""
     t0 = time.perf_counter()
     fem = FemFinger(
         FingerDesign(), Stiffness([log_e] * 11), options=FemOptions(**PATH_MESH, routing="printed")
     )
     t_lin = fem.buckling_tension().linearised_tension_n
-    path = fem.path_stability(
-        np.array(PATH_FRACTIONS) * t_lin,
-        on_point=lambda t, lam, bend: log({"tension_n": t, "eigenvalue": lam, "bend_rad": bend}),
+    row.update(log_e=log_e, mesh=PATH_MESH, fem_linearised_n=t_lin, chain_n=_chain_t_crit([log_e] * 11))
+    row.update(tensions_n=[], eigenvalues=[], bend_angles_rad=[], critical_tension_n=None)
+
+    def point(tension, lam, bend):
+        row["tensions_n"].append(tension)
+        row["eigenvalues"].append(lam)
+        row["bend_angles_rad"].append(bend)
+        log({"tension_n": tension, "eigenvalue": lam, "bend_rad": bend})
+
+    path = fem.path_stability(np.array(PATH_FRACTIONS) * t_lin, on_point=point)
+    row.update(
+        critical_tension_n=path.critical_tension_n,
+        failed_tension_n=path.failed_tension_n,
+        seconds=time.perf_counter() - t0,
     )
-    return {
-        "log_e": log_e,
-        "mesh": PATH_MESH,
-        "fem_linearised_n": t_lin,
-        "tensions_n": list(path.tensions_n),
-        "eigenvalues": list(path.eigenvalues),
-        "bend_angles_rad": list(path.bend_angles_rad),
-        "critical_tension_n": path.critical_tension_n,
-        "failed_tension_n": path.failed_tension_n,
-        "chain_n": _chain_t_crit([log_e] * 11),
-        "seconds": time.perf_counter() - t0,
-    }
 
 
 def _curls(fem: FemFinger, seeds, bend: float, rows: list, log) -> None:
@@ -182,7 +182,7 @@ def main(argv=None) -> None:
             )
         _curls(fem, seeds, args.bend, record.setdefault("curl", []), log)
     if "path" in parts:
-        record["path"] = _path(args.path_log_e, log)
+        _path(args.path_log_e, record.setdefault("path", {}), log)
         log({"path_critical_tension_n": record["path"]["critical_tension_n"]})
 
 
