@@ -52,9 +52,10 @@ def pick_poses(surrogate, poses: PoseSet, design, density, loss=None) -> np.ndar
 
 
 def predicted_success(surrogate, poses: PoseSet, rows, designs, density):
-    """The surrogate's success and score at pose ``rows`` with ``designs`` (one per row, (n, 22)).
+    """The surrogate at pose ``rows`` with ``designs`` (one per row, (n, 22)): (success, score, p).
 
-    The success is the outputs' (score above zero); :func:`predicted_success_p` gives the head's.
+    The success is the outputs' (score above zero); ``p`` the success head's probability, shape (n,),
+    or None for a network without a head.
     """
     from mjcodesign.surrogate import GraspBatch, Poses
 
@@ -63,18 +64,7 @@ def predicted_success(surrogate, poses: PoseSet, rows, designs, density):
         Poses.of(poses), rows, row_densities(poses, density)[rows], np.asarray(designs, dtype=float)
     )
     pred = surrogate.predict(batch)
-    return pred.success, pred.success_score
-
-
-def predicted_success_p(surrogate, poses: PoseSet, rows, designs, density) -> np.ndarray | None:
-    """The success head's probability at pose ``rows`` with ``designs``, shape (n,); None without a head."""
-    from mjcodesign.surrogate import GraspBatch, Poses
-
-    rows = np.asarray(rows, dtype=np.int64)
-    batch = GraspBatch(
-        Poses.of(poses), rows, row_densities(poses, density)[rows], np.asarray(designs, dtype=float)
-    )
-    return surrogate.predict(batch).success_p
+    return pred.success, pred.success_score, pred.success_p
 
 
 def verify(
@@ -126,8 +116,7 @@ def verify(
                 rows = np.asarray(chosen)
             else:
                 rows = _pick_each(surrogate, poses, per_object, density, loss)
-            ok, score = predicted_success(surrogate, poses, rows, np.array(per_object), density)
-            p = predicted_success_p(surrogate, poses, rows, np.array(per_object), density)
+            ok, score, p = predicted_success(surrogate, poses, rows, np.array(per_object), density)
             if by_head:
                 ok = p > 0.5
             rho = row_densities(poses, density)

@@ -31,7 +31,7 @@ import numpy as np
 from mjcodesign.codesign import Mode, OptimizeConfig, PoseSet, optimize
 from mjcodesign.codesign.report import design_text, write_design, write_json, write_pose
 from mjcodesign.codesign.run import dataset_masses
-from mjcodesign.codesign.verify import pick_poses, predicted_success, predicted_success_p
+from mjcodesign.codesign.verify import pick_poses, predicted_success
 from mjcodesign.design.stiffness import PRESETS, Stiffness
 from mjcodesign.errors import DesignError
 from mjcodesign.evaluation import (
@@ -234,11 +234,8 @@ def run_design(
         log_e = np.asarray(PRESETS[b], dtype=float).ravel()
         designs[b] = [log_e] * len(names)
         rows[b] = pick_poses(surrogate, poses, log_e, rho)
-    predicted = {
-        label: (
-            predicted_success(surrogate, poses, rows[label], np.array(designs[label]), rho)[0],
-            predicted_success_p(surrogate, poses, rows[label], np.array(designs[label]), rho),
-        )
+    predicted = {  # (success, head's p) per design label
+        label: predicted_success(surrogate, poses, rows[label], np.array(designs[label]), rho)[::2]
         for label in designs
     }
 
