@@ -164,6 +164,40 @@ def test_non_manifold_edge_is_closed_exactly_and_cached(tmp_path, monkeypatch):
     np.testing.assert_array_equal(again.faces, fixed.faces)
 
 
+def test_inputs_manifold3d_reads_out_of_bounds_are_refused_before_it(monkeypatch):
+    # manifold3d 3.5.4 crashes (SIGSEGV, now and then) instead of refusing these: Manifold() on an odd
+    # number of triangles leaves a halfedge unset that IsManifold reads as an index; Mesh.merge on a
+    # face index outside the vertices. Both are refused in Python before those calls.
+    import manifold3d
+
+    def boom(*args, **kwargs):
+        raise AssertionError("manifold3d was handed a mesh it reads out of bounds")
+
+    monkeypatch.setattr(manifold3d, "Manifold", boom)
+    tri = trimesh.Trimesh([[0, 0, 0.1], [0.05, 0, 0.1], [0, 0.05, 0.1]], [[0, 1, 2]])
+    odd = trimesh.util.concatenate([trimesh.creation.box(extents=(0.03,) * 3), tri])  # 13 triangles
+    with pytest.raises(MeshError, match=r"manifold3d: NotManifold \(13 triangles"):
+        repair_mesh(odd, RepairMethod.MANIFOLD)
+    monkeypatch.setattr(manifold3d, "Mesh", boom)
+    box = trimesh.creation.box(extents=(0.03,) * 3)
+    for bad in (-1, len(box.vertices), 2**32):
+        faces = np.array(box.faces, dtype=np.int64)
+        faces[0, 0] = bad
+        mesh = trimesh.Trimesh(box.vertices, faces, process=False, validate=False)
+        with pytest.raises(MeshError, match="manifold3d: VertexOutOfBounds"):
+            repair_mesh(mesh, RepairMethod.MANIFOLD)
+
+
+def test_merge_collapsed_triangles_do_not_count_towards_the_parity():
+    # A closed box plus a sliver triangle that Manifold's merge collapses (two corners 1e-9 m apart):
+    # 13 triangles in, 12 kept, so it is closed exactly rather than refused for an odd count.
+    box = trimesh.creation.box(extents=(0.03,) * 3)
+    v = np.vstack([box.vertices, box.vertices[0] + [1e-9, 0, 0]])
+    f = np.vstack([box.faces, [[0, len(v) - 1, 1]]])
+    fixed = repair_mesh(trimesh.Trimesh(v, f, process=False), RepairMethod.MANIFOLD)
+    assert watertight(fixed) and fixed.volume == pytest.approx(0.03**3, rel=1e-6)
+
+
 def test_load_object_closes_with_the_chain_and_names_the_repair(tmp_path):
     path = tmp_path / "touching.ply"
     _edge_touching_boxes().export(path)
