@@ -87,6 +87,7 @@ FAMILIES: dict[str, list[Case]] = {
         grasp --object egad-like:1 --seed -1                    | seed
         grasp --object random.stl                               | random.stl !charset_normalizer | random.stl
         grasp --object nan.stl                                  | nan | nan.stl
+        grasp --object bad.ply                                  | bad.ply outside | bad.ply
         grasp --object box.stl --pose empty.npz                 | empty.npz | box.stl empty.npz
         grasp --object box.stl --pose random.npz                | random.npz | box.stl random.npz
         grasp --model fem --object box.stl --tendon position:-5 | ticks | box.stl
@@ -228,6 +229,11 @@ def make(name, cwd):
             lines.append("  endloop\n endfacet")
         lines.append("endsolid nan")
         path.write_text("\n".join(lines) + "\n")
+    elif base == "bad.ply":  # a tetrahedron whose last face names vertex 99 of 4, as ASCII PLY
+        v = "0 0 0\n0.05 0 0\n0 0.05 0\n0 0 0.05\n"
+        path.write_text("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                        "property float z\nelement face 4\nproperty list uchar int vertex_indices\n"
+                        "end_header\n" + v + "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 99\n")
     elif base.startswith("empty."):
         path.write_bytes(b"")
     elif base.startswith("random.") or base == "bad.rrd" or base == "stl":

@@ -232,6 +232,26 @@ def test_nan_random_and_empty_files_say_why(tmp_path):
         load_object(empty, 100.0)
 
 
+def test_face_index_outside_the_vertices_says_why(tmp_path):
+    # A tetrahedron whose last face names vertex 99 of 4 (and -1, which numpy would wrap to 3).
+    verts = "0 0 0\n0.05 0 0\n0 0.05 0\n0 0 0.05\n"
+    header = (
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 4\nproperty list uchar int vertex_indices\nend_header\n"
+    )
+    for index in (99, -1):
+        ply = tmp_path / f"bad{index}.ply"
+        ply.write_text(header + verts + f"3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 {index}\n")
+        with pytest.raises(
+            MeshError, match=f"bad{index}.ply: mesh has face index {index} outside its 4 vertices"
+        ):
+            load_object(ply, 100.0)
+    obj = tmp_path / "bad.obj"
+    obj.write_text("".join(f"v {v}\n" for v in verts.splitlines()) + "f 1 3 2\nf 1 2 4\nf 1 4 3\nf 2 3 100\n")
+    with pytest.raises(MeshError, match="bad.obj: cannot read mesh .*index 99 is out of bounds"):
+        load_object(obj, 100.0)
+
+
 def test_object_names_are_unique_in_a_folder(tmp_path):
     box = trimesh.creation.box(extents=(0.03,) * 3)
     for name in ("cup.obj", "cup.stl", "lid.stl"):

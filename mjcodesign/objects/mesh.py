@@ -161,6 +161,23 @@ def _read_file(path: Path):
         raise MeshError(f"{path}: cannot read mesh ({type(exc).__name__}: {exc})") from exc
 
 
+def _check_face_indices(mesh, source) -> None:
+    """:class:`MeshError` naming the first face index outside ``[0, n_vertices)``, if any.
+
+    Trimesh's OBJ reader refuses such an index itself; its PLY reader keeps it, and ``process()`` then
+    raises a plain ``IndexError`` (an index past the end) or wraps a negative one silently.
+    """
+    faces = np.asarray(mesh.faces)
+    n = len(mesh.vertices)
+    outside = (faces < 0) | (faces >= n)
+    if outside.any():
+        count = int(outside.sum())
+        more = f" ({count} such indices)" if count > 1 else ""
+        raise MeshError(
+            f"{source}: mesh has face index {int(faces[outside][0])} outside its {n} vertices{more}"
+        )
+
+
 def load_mesh(source: str | Path):
     """A single trimesh from a YCB name or a mesh file; raises :class:`MeshError` if unusable."""
     import trimesh
@@ -181,7 +198,11 @@ def load_mesh(source: str | Path):
     if not np.all(np.isfinite(mesh.vertices)):
         bad = int(np.sum(~np.all(np.isfinite(mesh.vertices), axis=1)))
         raise MeshError(f"{source}: mesh has {bad} NaN or inf vertices")
-    mesh.process()  # merge duplicate vertices, drop degenerate faces (trimesh's load default)
+    _check_face_indices(mesh, source)
+    try:
+        mesh.process()  # merge duplicate vertices, drop degenerate faces (trimesh's load default)
+    except (IndexError, ValueError) as exc:
+        raise MeshError(f"{source}: cannot process mesh ({type(exc).__name__}: {exc})") from exc
     if len(mesh.faces) == 0:
         raise MeshError(f"{source}: mesh is empty (every triangle is degenerate)")
     mesh.metadata["mjcodesign_name"] = object_name(source)
