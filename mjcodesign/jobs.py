@@ -116,6 +116,11 @@ class GraspJob:
         return float(self.obj.density if self.density is None else self.density)
 
 
+_KEPT_PERTURBED = 256
+"""Perturbed scenes a :class:`SceneCache` keeps for their rollouts (a model copy each, ~1 MB): an
+evaluation keeps one object's 10 poses x 8 draws."""
+
+
 class SceneCache:
     """Compiled scenes kept between :func:`run_jobs` calls, ``size`` at most (least recently used out).
 
@@ -130,6 +135,26 @@ class SceneCache:
             raise DesignError(f"a scene cache holds at least one scene, got {size}")
         self.size = size
         self._scenes: dict[tuple, tuple[GraspObject, GraspScene]] = {}
+        self._perturbed: dict[tuple, GraspScene] = {}
+
+    def keep_perturbed(
+        self, base: GraspScene, scenario: GraspScenario, pose: GripperPose, p: Perturbation, scene: GraspScene
+    ) -> None:
+        """Keep ``scene``, ``base`` perturbed by ``p`` at ``pose``, for that draw's rollout to take once.
+
+        ``scene`` is :func:`~mjcodesign.scenarios.perturb.perturbed_scene`'s, as a draw's start check
+        built it. ``base`` must be a scene of this cache: the rollout looks it up by the scene it runs on.
+        """
+        self._perturbed[_perturbed_key(base, scenario, pose, p)] = scene
+        while len(self._perturbed) > _KEPT_PERTURBED:  # oldest first out: a later rollout builds it again
+            self._perturbed.pop(next(iter(self._perturbed)))
+
+    def take_perturbed(
+        self, base: GraspScene, scenario: GraspScenario, pose: GripperPose, p: Perturbation
+    ) -> GraspScene:
+        """The kept perturbed scene (removed from the cache), or a new one; :class:`PoseError` if bad."""
+        kept = self._perturbed.pop(_perturbed_key(base, scenario, pose, p), None)
+        return kept if kept is not None else perturbed_scene(base, scenario, p, pose=pose)
 
     def scene(self, job: GraspJob) -> GraspScene:
         """The compiled scene (gripper at the reference pose) for ``job``'s object and fingers."""
@@ -174,8 +199,13 @@ def run_jobs(
     for i, job in enumerate(jobs):
         groups[_scene_key(job)].append(i)
     for idx in groups.values():
-        _run_group(jobs, idx, backend, observer, outs, strict, scenes.scene(jobs[idx[0]]))
+        _run_group(jobs, idx, backend, observer, outs, strict, scenes.scene(jobs[idx[0]]), scenes)
     return outs  # type: ignore[return-value]  # every slot is filled by _run_group
+
+
+def _perturbed_key(base: GraspScene, scenario: GraspScenario, pose: GripperPose, p: Perturbation) -> tuple:
+    """What a perturbed scene depends on: its base scene, the scenario's drive and friction, pose, draw."""
+    return (id(base), scenario.tendon, scenario.friction, pose, p)
 
 
 def _scene_key(job: GraspJob) -> tuple:
@@ -183,7 +213,9 @@ def _scene_key(job: GraspJob) -> tuple:
     return (id(job.obj), job.rho, job.finger_model, job.geometry, job.options, job.scenario)
 
 
-def _run_group(jobs, idx: list[int], backend, observer, outs: list, strict: bool, base: GraspScene) -> None:
+def _run_group(
+    jobs, idx: list[int], backend, observer, outs: list, strict: bool, base: GraspScene, scenes: SceneCache
+) -> None:
     """The jobs ``idx`` of one scene key: per pose a design batch, then per design a pose batch.
 
     Perturbed jobs go together through the backend's ``run_scenes`` (:func:`_run_perturbed`).
@@ -191,7 +223,7 @@ def _run_group(jobs, idx: list[int], backend, observer, outs: list, strict: bool
     first = jobs[idx[0]]
     perturbed = [i for i in idx if jobs[i].perturbation is not None]
     if perturbed:
-        _run_perturbed(jobs, perturbed, backend, observer, outs, strict, base)
+        _run_perturbed(jobs, perturbed, backend, observer, outs, strict, base, scenes)
         idx = [i for i in idx if jobs[i].perturbation is None]
         if not idx:
             return
@@ -220,28 +252,41 @@ def _run_group(jobs, idx: list[int], backend, observer, outs: list, strict: bool
 _SCENES_PER_CALL = (
     256  # perturbed scenes per rollout call: its states (nstep x nstate doubles each) stay < 0.5 GB
 )
+_PIPELINE_CHUNK = 64
+"""Perturbed scenes per rollout call when the backend pipelines its calls (``run_scene_chunks``): small
+enough that building the next chunk and scoring the last one overlap most of the rollouts, large
+enough to keep every core busy in each call (``mujoco.rollout`` splits a call into chunks of
+``nbatch / (10 nthread)``)."""
 
 
 def _run_perturbed(
-    jobs, idx: list[int], backend, observer, outs: list, strict: bool, base: GraspScene
+    jobs, idx: list[int], backend, observer, outs: list, strict: bool, base: GraspScene, cache: SceneCache
 ) -> None:
     """Perturbed jobs of one scene key: a scene per (pose, draw), a model copy per design, batched.
 
     A (pose, draw) that cannot be simulated marks its jobs :attr:`Failure.BAD_POSE`. Backends with
-    ``run_scenes`` take up to :data:`_SCENES_PER_CALL` scenes a call; others a design batch per scene.
+    ``run_scene_chunks`` (MuJoCo C) take :data:`_PIPELINE_CHUNK` scenes a call, each chunk built while
+    the one before rolls out; backends with ``run_scenes`` take up to :data:`_SCENES_PER_CALL` scenes a
+    call; others a design batch per scene. The outcomes do not depend on the chunking. A scene that a
+    draw's start check kept in ``cache`` (:meth:`SceneCache.keep_perturbed`) is taken, not built again.
     """
     scenario = jobs[idx[0]].scenario
+    if hasattr(backend, "run_scene_chunks"):
+        placed: list[list[int]] = []
+        results = backend.run_scene_chunks(
+            _perturbed_chunks(jobs, idx, base, cache, scenario, outs, strict, placed),
+            scenario,
+            observer=observer,
+        )
+        for n, res in enumerate(results):  # chunk n is in ``placed`` once it has been pulled
+            _place(outs, placed[n], res)
+        return
     at: dict[tuple, GraspScene | PoseError] = {}
     by_scene: dict[tuple, list[int]] = defaultdict(list)
     for i in idx:
         key = (jobs[i].pose, jobs[i].perturbation)
         if key not in at:
-            try:
-                at[key] = perturbed_scene(base, scenario, jobs[i].perturbation, pose=jobs[i].pose)
-            except PoseError as exc:
-                if strict:
-                    raise
-                at[key] = exc
+            at[key] = _perturbed_or_error(base, cache, scenario, jobs[i], strict)
         if isinstance(at[key], PoseError):
             outs[i] = failed_outcome(Failure.BAD_POSE, f"bad pose: {at[key]}")
         else:
@@ -261,6 +306,47 @@ def _run_perturbed(
         designs = [jobs[i].design for i in members]
         res = backend.run_batch(at[key], scenario, designs, observer=observer, labels=_labels(jobs, members))
         _place(outs, members, res)
+
+
+def _perturbed_or_error(base: GraspScene, cache: SceneCache, scenario, job: GraspJob, strict: bool):
+    """``base`` under ``job``'s draw at its pose, or the :class:`PoseError` (raised with ``strict``)."""
+    try:
+        return cache.take_perturbed(base, scenario, job.pose, job.perturbation)
+    except PoseError as exc:
+        if strict:
+            raise
+        return exc
+
+
+def _perturbed_chunks(jobs, idx, base, cache, scenario, outs, strict, placed):
+    """Chunks ``(scenes, labels, start_keys)`` of the perturbed jobs ``idx``, built as they are pulled.
+
+    Jobs of one (pose, draw) follow each other, so its scene is built once and kept until the next
+    (pose, draw); its design copies share its initial state and controls (``start_keys``). Each chunk's
+    job indices are appended to ``placed`` before it is yielded; bad poses are marked in ``outs``.
+    """
+    by_key: dict[tuple, list[int]] = defaultdict(list)
+    for i in idx:  # (pose, draw) groups in order of first appearance, as the batched path runs them
+        by_key[(jobs[i].pose, jobs[i].perturbation)].append(i)
+    members: list[int] = []
+    scenes: list[GraspScene] = []
+    keys: list[int] = []
+    for n, group in enumerate(by_key.values()):
+        at = _perturbed_or_error(base, cache, scenario, jobs[group[0]], strict)
+        for i in group:
+            if isinstance(at, PoseError):
+                outs[i] = failed_outcome(Failure.BAD_POSE, f"bad pose: {at}")
+                continue
+            members.append(i)
+            scenes.append(_with_design(at, jobs[i].design))
+            keys.append(n)
+            if len(members) == _PIPELINE_CHUNK:
+                placed.append(members)
+                yield scenes, _labels(jobs, members), keys
+                members, scenes, keys = [], [], []
+    if members:
+        placed.append(members)
+        yield scenes, _labels(jobs, members), keys
 
 
 def _run_poses(jobs, members: list[int], base: GraspScene, backend, observer, outs, strict: bool) -> None:

@@ -4,6 +4,7 @@ success from the simulator, intervals recomputable from the rows, identical reru
 A small suite: an in-domain YCB strawberry and an out-of-domain egad-like shape, two poses each.
 """
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -508,3 +509,21 @@ def test_friction_and_routing_reach_the_run(friction, expected):
     )
     run = cli_evaluate._run_config(build_parser().parse_args(argv))
     assert run.scenario.friction == expected and run.options.routing == "printed"
+
+
+def test_each_accepted_draw_is_built_once(suite, monkeypatch):
+    """The scene a draw's start check built is the one rolled out: ``run_jobs`` builds none again
+    (with one disturbance; a second disturbance is another compiled scene and builds its own)."""
+    import mjcodesign.jobs as jobs_module
+
+    built = []
+    real = jobs_module.perturbed_scene
+    monkeypatch.setattr(jobs_module, "perturbed_scene", lambda *a, **k: built.append(1) or real(*a, **k))
+    run = SuiteRun(designs=parse_design_groups("soft,semi-rigid"), perturbations=2, scenario=_SHORT)
+    rows = run_suite(suite, run)["rows"]
+    assert rows and built == []
+    run2 = dataclasses.replace(run, impulses=(0.1, 0.4))
+    rows2 = run_suite(suite, run2)["rows"]
+    draws = {(r["object"], r["pose"], r["draw"]) for r in rows2 if r["impulse_paper_ns"] == 0.4}
+    assert len(built) == len(draws)
+    assert [r for r in rows2 if r["impulse_paper_ns"] == 0.1] == rows

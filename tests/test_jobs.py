@@ -133,3 +133,79 @@ def test_an_outcome_does_not_depend_on_the_rollout_before_it(box):
     alone = sim.run_batch(scene, _SCENARIO, [soft])[0]
     after = sim.run_batch(scene, _SCENARIO, [other, soft])[1]
     _assert_same(alone, after)
+
+
+class _ScenesOnly:
+    """MuJoCo C without ``run_scene_chunks``: perturbed jobs go through ``run_scenes``, one call."""
+
+    name = "scenes-only"
+
+    def __init__(self):
+        self.inner = MujocoBackend(nthread=2)
+
+    def run(self, scene, scenario, *, observer=None, label="grasp"):
+        return self.inner.run(scene, scenario, observer=observer, label=label)
+
+    def run_scenes(self, scenes, scenario, *, observer=None, labels=None):
+        return self.inner.run_scenes(scenes, scenario, observer=observer, labels=labels)
+
+
+def _perturbed_jobs(box, n_draws=3):
+    from mjcodesign.scenarios.perturb import PerturbationModel
+
+    model, rng = PerturbationModel(), np.random.default_rng(5)
+    designs = [Stiffness.preset("soft"), Stiffness.preset("semi-rigid"), Stiffness.random(4)]
+    return [
+        GraspJob(obj=box, pose=pose, design=d, scenario=_SCENARIO, perturbation=p)
+        for pose in (_pose(box), _pose(box, dx=0.003))
+        for p in [model.draw(rng) for _ in range(n_draws)]
+        for d in designs
+    ]
+
+
+def test_pipelined_chunks_give_the_outcomes_of_one_call(box, monkeypatch):
+    """Chunks of 4 (a draw's designs split across chunks, the rollout of one chunk overlapping the
+    next chunk's build and the last chunk's outcomes) against every scene in one ``run_scenes`` call."""
+    import mjcodesign.jobs as jobs_module
+
+    jobs = _perturbed_jobs(box)
+    one_call = run_jobs(jobs, _ScenesOnly())
+    monkeypatch.setattr(jobs_module, "_PIPELINE_CHUNK", 4)
+    backend = MujocoBackend(nthread=2)
+    chunks = []
+    inner = backend.run_scene_chunks
+
+    def counted(stream, scenario, *, observer=None):
+        for out in inner(stream, scenario, observer=observer):
+            chunks.append(len(out))
+            yield out
+
+    monkeypatch.setattr(backend, "run_scene_chunks", counted)
+    piped = run_jobs(jobs, backend)
+    assert chunks == [4, 4, 4, 4, 2]
+    for a, b in zip(piped, one_call, strict=True):
+        _assert_same(a, b)
+
+
+def test_a_kept_perturbed_scene_is_rolled_out_not_built_again(box, monkeypatch):
+    import mjcodesign.jobs as jobs_module
+    from mjcodesign.jobs import SceneCache
+    from mjcodesign.scenarios.perturb import perturbed_scene
+
+    jobs = _perturbed_jobs(box, n_draws=1)[:3]  # one (pose, draw), three designs
+    fresh = run_jobs(jobs, MujocoBackend(nthread=2))
+    cache = SceneCache()
+    base = cache.scene(jobs[0])
+    job = jobs[0]
+    kept = perturbed_scene(base, job.scenario, job.perturbation, pose=job.pose)
+    cache.keep_perturbed(base, job.scenario, job.pose, job.perturbation, kept)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the kept scene was built again")
+
+    monkeypatch.setattr(jobs_module, "perturbed_scene", refuse)
+    again = run_jobs(jobs, MujocoBackend(nthread=2), scenes=cache)
+    for a, b in zip(again, fresh, strict=True):
+        _assert_same(a, b)
+    with pytest.raises(AssertionError, match="built again"):  # taken once: the next run builds it
+        run_jobs(jobs, MujocoBackend(nthread=2), scenes=cache)

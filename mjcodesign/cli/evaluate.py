@@ -425,9 +425,10 @@ def add_bench_parser(bench_subparsers) -> None:
         help="suite evaluation throughput against raw mujoco.rollout on the same scenes (JSON)",
     )
     b.add_argument("--objects", default="013_apple,025_mug,egad-like:3", help="comma-separated objects")
-    b.add_argument("--poses-per-object", type=int_at_least(1), default=3)
-    b.add_argument("--perturbations", type=int_at_least(1), default=4)
+    b.add_argument("--poses-per-object", type=int_at_least(1), default=10)
+    b.add_argument("--perturbations", type=int_at_least(1), default=8)
     b.add_argument("--designs", default="soft,semi-rigid,paper-optimized,random:1")
+    add_regime(b)
     b.add_argument("--repeats", type=int_at_least(1), default=2, help="pipeline/raw pairs, back to back")
     b.add_argument("--out", type=path_text, default=None, help="also write the record here")
     b.add_argument("--json", action="store_true")
@@ -448,6 +449,7 @@ def run_bench(args: argparse.Namespace) -> int:
         poses_per_object=args.poses_per_object,
         perturbations=args.perturbations,
         designs=args.designs,
+        regime=args.regime,
         repeats=args.repeats,
         cache_dir=user_cache_dir(),
     )

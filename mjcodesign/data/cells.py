@@ -90,7 +90,14 @@ def run_cells(
         if not posable:
             return [None] * n
         got, _ = draw_perturbations(
-            c.perturbation, rng, n, base, c.scenario, pose, max_penetration=MAX_PENETRATION
+            c.perturbation,
+            rng,
+            n,
+            base,
+            c.scenario,
+            pose,
+            max_penetration=MAX_PENETRATION,
+            keep=lambda p, scene: scenes.keep_perturbed(base, c.scenario, pose, p, scene),
         )
         return got
 

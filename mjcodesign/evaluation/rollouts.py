@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -135,9 +136,12 @@ def _regimes(run: SuiteRun, so: SuiteObject, obj, densities: list) -> list[tuple
 
 
 def _draws(
-    suite: Suite, run: SuiteRun, so: SuiteObject, base, k: int
+    suite: Suite, run: SuiteRun, so: SuiteObject, base, k: int, scenes: SceneCache
 ) -> tuple[list[Perturbation | None], int]:
-    """The ``run.perturbations`` draws of pose ``k`` (None where given up) and how many were redrawn."""
+    """The ``run.perturbations`` draws of pose ``k`` (None where given up) and how many were redrawn.
+
+    Each accepted draw's scene is kept in ``scenes`` (``base``'s cache) for its rollout.
+    """
     return draw_perturbations(
         suite.perturbation,
         suite.perturbation.stream(run.seed, so.name, k),
@@ -146,6 +150,7 @@ def _draws(
         run.scenario,
         so.poses[k],
         max_penetration=MAX_PENETRATION,
+        keep=lambda p, scene: scenes.keep_perturbed(base, run.scenario, so.poses[k], p, scene),
     )
 
 
@@ -241,7 +246,7 @@ def prepare_object(
             prep.draws.append([None] * run.perturbations)
             prep.given_up += run.perturbations
             continue
-        d, r = _draws(suite, run, so, base, k)
+        d, r = _draws(suite, run, so, base, k, scenes)
         prep.draws.append(d)
         prep.redrawn += r
         prep.given_up += sum(x is None for x in d)
@@ -333,36 +338,52 @@ def run_suite(
     objects: list[dict] = []
     choice: dict[str, dict] = {}
     densities = [(str(d), parse_density(d)) for d in run.densities]
-    for n_done, so in enumerate(suite.objects):
+
+    def ready(so: SuiteObject):
+        """``so`` loaded, its draws and its jobs; or the error that left it out."""
         try:
             obj = load_grasp_object(so.source, "light", seed=suite.seed, cache_dir=cache_dir)
         except MjcodesignError as exc:
-            objects.append({"name": so.name, "domain": so.domain, "error": f"{type(exc).__name__}: {exc}"})
-            if warn:
-                warn(f"{so.name}: left out ({type(exc).__name__}: {exc})")
-            continue
+            return exc
         prep = prepare_object(suite, run, so, obj, densities)
-        if surrogate is not None:
-            for dens, rho in prep.regimes:
-                choice.setdefault(so.name, {})[dens] = _surrogate_choice(
-                    surrogate, prep.obj, so, run, rho, n_points
+        return (prep, *object_jobs(prep, so, run, run.designs))
+
+    # One object ahead: the next object is loaded and its draws checked on a thread of its own while
+    # this one rolls out (MuJoCo releases the GIL); each object's rows do not depend on the others.
+    with ThreadPoolExecutor(max_workers=1) as ahead:
+        pending = ahead.submit(ready, suite.objects[0]) if suite.objects else None
+        for n_done, so in enumerate(suite.objects):
+            got = pending.result()
+            if n_done + 1 < len(suite.objects):
+                pending = ahead.submit(ready, suite.objects[n_done + 1])
+            if isinstance(got, MjcodesignError):
+                objects.append(
+                    {"name": so.name, "domain": so.domain, "error": f"{type(got).__name__}: {got}"}
                 )
-        jobs, meta = object_jobs(prep, so, run, run.designs)
-        outs = run_jobs(jobs, backend, scenes=prep.scenes)
-        rows += outcome_rows(so, meta, outs)
-        objects.append(
-            {
-                "name": so.name,
-                "domain": so.domain,
-                "fold": so.fold,
-                "poses": len(so.poses),
-                "redrawn": prep.redrawn,
-                "draws_given_up": prep.given_up,
-                "error": None,
-            }
-        )
-        if progress:
-            progress("objects", n_done + 1, len(suite.objects))
+                if warn:
+                    warn(f"{so.name}: left out ({type(got).__name__}: {got})")
+                continue
+            prep, jobs, meta = got
+            if surrogate is not None:
+                for dens, rho in prep.regimes:
+                    choice.setdefault(so.name, {})[dens] = _surrogate_choice(
+                        surrogate, prep.obj, so, run, rho, n_points
+                    )
+            outs = run_jobs(jobs, backend, scenes=prep.scenes)
+            rows += outcome_rows(so, meta, outs)
+            objects.append(
+                {
+                    "name": so.name,
+                    "domain": so.domain,
+                    "fold": so.fold,
+                    "poses": len(so.poses),
+                    "redrawn": prep.redrawn,
+                    "draws_given_up": prep.given_up,
+                    "error": None,
+                }
+            )
+            if progress:
+                progress("objects", n_done + 1, len(suite.objects))
     return {
         "rows": rows,
         "objects": objects,

@@ -27,6 +27,7 @@ import copy
 import dataclasses
 import math
 import zlib
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import mujoco
@@ -156,13 +157,15 @@ def draw_perturbations(
     *,
     max_penetration: float,
     max_redraws: int = MAX_REDRAWS,
+    keep: Callable[[Perturbation, GraspScene], None] | None = None,
 ) -> tuple[list[Perturbation | None], int]:
     """``n`` draws of ``model`` from ``rng`` for ``scene`` at ``pose``, and how many were drawn again.
 
     A draw whose start penetrates deeper than ``max_penetration`` [m] (:func:`start_penetration`), or
     whose pose cannot be simulated, is drawn again, at most ``max_redraws`` times; then that draw is
     None (given up). The draws come from ``rng`` in order, so ``n`` draws and then ``m`` more from the
-    same generator are the first ``n + m`` draws of one call.
+    same generator are the first ``n + m`` draws of one call. ``keep`` receives each accepted draw and
+    its :func:`perturbed_scene`, so that a caller can roll out that scene instead of building it again.
     """
     out: list[Perturbation | None] = []
     redrawn = 0
@@ -170,8 +173,11 @@ def draw_perturbations(
         for _attempt in range(max_redraws):
             p = model.draw(rng)
             try:
-                if start_penetration(perturbed_scene(scene, scenario, p, pose=pose)) <= max_penetration:
+                moved = perturbed_scene(scene, scenario, p, pose=pose)
+                if start_penetration(moved) <= max_penetration:
                     out.append(p)
+                    if keep is not None:
+                        keep(p, moved)
                     break
             except PoseError:
                 pass

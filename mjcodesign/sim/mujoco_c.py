@@ -8,8 +8,8 @@ import functools
 import os
 import threading
 import time
-from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 
 import mujoco
 import numpy as np
@@ -70,19 +70,33 @@ def _stiffness_writer(scene: GraspScene) -> Callable[[Stiffness], mujoco.MjModel
 
         return flex
     design, opts = built.design, built.options
-    blocks = list(_blocks(design))
     ids = _chain_ids(scene)
 
     def chain(stiffness: Stiffness) -> mujoco.MjModel:
         m = copy.copy(scene.model)
         for (jids, dofs, gids, owner, blocks_of), young in zip(ids, stiffness.young, strict=True):
-            k, damping = joint_stiffness(design, young, opts)
+            k, damping, solref = _finger_numbers(design, opts, tuple(float(e) for e in young))
             m.jnt_stiffness[jids] = k[blocks_of]
             m.dof_damping[dofs] = damping[blocks_of]
-            m.geom_solref[gids] = contact_solrefs(blocks, young, design.density, opts.timestep)[owner]
+            m.geom_solref[gids] = solref[owner]
         return m
 
     return chain
+
+
+@functools.lru_cache(maxsize=256)
+def _finger_numbers(design: FingerDesign, options, young: tuple[float, ...]) -> tuple[np.ndarray, ...]:
+    """One finger's hinge stiffness, damping and block contact solrefs for ``young`` (read-only arrays).
+
+    Cached: an evaluation writes each design into a model copy per (pose, draw), the same numbers each
+    time (:func:`~mjcodesign.models.chain.joint_stiffness`, ~0.2 ms a finger).
+    """
+    e = np.array(young)
+    k, damping = joint_stiffness(design, e, options)
+    solref = contact_solrefs(list(_blocks(design)), e, design.density, options.timestep)
+    for a in (k, damping, solref):
+        a.setflags(write=False)
+    return k, damping, solref
 
 
 def _chain_ids(scene: GraspScene) -> list[tuple[np.ndarray, ...]]:
@@ -269,11 +283,46 @@ class MujocoBackend(SceneBatchSimulator):
             scenes, scenario, observer, labels or [f"scene{i}" for i in range(len(scenes))]
         )
 
+    def run_scene_chunks(
+        self,
+        chunks: Iterable[tuple[list[GraspScene], list[str], list | None]],
+        scenario: GraspScenario,
+        *,
+        observer: Observer | None = None,
+    ) -> Iterator[list[Outcome]]:
+        """:meth:`run_scenes` over a stream of chunks, each chunk's outcomes yielded in order.
+
+        A chunk is ``(scenes, labels, start_keys)``: scenes with equal ``start_keys`` (not None) differ
+        only in stiffness and share one initial state and control sequence. The rollout of chunk k runs
+        on a thread of its own (``mujoco.rollout`` releases the GIL) while this thread pulls chunk k+1
+        from ``chunks`` (the caller may build it then) and evaluates the outcomes of chunk k-1, so the
+        Python work of a chunk overlaps the rollouts of its neighbours. The outcomes equal
+        :meth:`run_scenes`' chunk by chunk: the same rollouts and the same checks, in another order.
+        """
+        with ThreadPoolExecutor(max_workers=1) as rollouts:
+            pending = None
+            for scenes, labels, keys in chunks:
+                started = self._start(scenes, scenario, labels, start_keys=keys, pool=rollouts)
+                if pending is not None:
+                    yield self._finish(pending, observer)
+                pending = started
+            if pending is not None:
+                yield self._finish(pending, observer)
+
     def _run_scenes(self, scenes, scenario, observer, labels, *, same_start: bool = False) -> list[Outcome]:
         """:meth:`run_scenes`, with ``same_start`` when the scenes differ only in stiffness.
 
         Then (:meth:`run_batch`) they share one initial state and one control sequence (neither
         depends on stiffness), made once and broadcast by ``mujoco.rollout``.
+        """
+        return self._finish(self._start(scenes, scenario, labels, same_start=same_start), observer)
+
+    def _start(
+        self, scenes, scenario, labels, *, same_start: bool = False, start_keys=None, pool=None
+    ) -> _Started:
+        """Drive the scenes, make their initial states and controls, and start their rollout.
+
+        The rollout runs in ``pool`` (a future) or here (a finished future) when ``pool`` is None.
         """
         t0 = time.perf_counter()
         scenes = [drive_scene(sc, scenario) for sc in scenes]
@@ -283,12 +332,13 @@ class MujocoBackend(SceneBatchSimulator):
             ctrl_in, x0_in = c0[None], initial_state(scenes[0])[None]
             ctrl, x0 = np.broadcast_to(ctrl_in, (n, *c0.shape)), np.broadcast_to(x0_in, (n, x0_in.shape[1]))
         else:
-            plans: dict[tuple, tuple[np.ndarray, dict[str, int], np.ndarray]] = {}
-            for sc in scenes:  # designs of one pose share their controls and initial state
-                key = (id(sc.built), sc.pose)
+            if start_keys is None:  # scenes share a start only when they are the same scene and pose
+                start_keys = [(id(sc.built), sc.pose) for sc in scenes]
+            plans: dict = {}
+            for sc, key in zip(scenes, start_keys, strict=True):
                 if key not in plans:
                     plans[key] = (*phase_controls(sc, scenario), initial_state(sc))
-            rows = [plans[(id(sc.built), sc.pose)] for sc in scenes]
+            rows = [plans[key] for key in start_keys]
             starts = rows[0][1]
             ctrl_in = ctrl = np.stack([c for c, _, _ in rows])
             x0_in = x0 = np.stack([x for _, _, x in rows])
@@ -296,11 +346,25 @@ class MujocoBackend(SceneBatchSimulator):
         datas = [mujoco.MjData(models[0]) for _ in range(min(self.nthread, n))]
         for d in datas:
             reset_warnings(d)
-        with captured_warnings() as printed:
-            states, sensors = mj_rollout.rollout(models, datas, x0_in, ctrl_in, control_spec=control_spec())
+
+        def roll():
+            with captured_warnings() as printed:
+                states, sensors = mj_rollout.rollout(
+                    models, datas, x0_in, ctrl_in, control_spec=control_spec()
+                )
+            return states, sensors, printed
+
+        future = pool.submit(roll) if pool is not None else _done(roll())
+        return _Started(scenes, scenario, labels, models, datas, x0, ctrl, starts, future, t0)
+
+    def _finish(self, started: _Started, observer) -> list[Outcome]:
+        """Wait for a started rollout, check it, and evaluate its outcomes (see :meth:`run_scenes`)."""
+        scenes, scenario, labels, models = started.scenes, started.scenario, started.labels, started.models
+        x0, ctrl, starts = started.x0, started.ctrl, started.starts
+        states, sensors, printed = started.future.result()
         bad = _diverged(states, x0, models[0].opt.timestep)
         warned = bool(printed)
-        for d in datas:
+        for d in started.datas:
             try:
                 check_state(d)
             except SimulationDiverged:
@@ -330,7 +394,7 @@ class MujocoBackend(SceneBatchSimulator):
 
             for i, out in zip(good, pool.map(evaluate, good), strict=True):
                 outs[i] = out
-        wall = (time.perf_counter() - t0) / len(scenes)
+        wall = (time.perf_counter() - started.t0) / len(scenes)
         outs = [o.with_wall_time(wall) for o in outs]
         for i in good if observer is not None else ():
             sc = scenes[i]
@@ -349,6 +413,29 @@ class MujocoBackend(SceneBatchSimulator):
                 )
             )
         return outs
+
+
+@dataclasses.dataclass
+class _Started:
+    """A batch whose rollout has started (:meth:`MujocoBackend._start`): what finishing it needs."""
+
+    scenes: list[GraspScene]
+    scenario: GraspScenario
+    labels: list[str]
+    models: list[mujoco.MjModel]
+    datas: list[mujoco.MjData]
+    x0: np.ndarray
+    ctrl: np.ndarray
+    starts: dict[str, int]
+    future: Future
+    t0: float
+
+
+def _done(value) -> Future:
+    """A future that already holds ``value``."""
+    f: Future = Future()
+    f.set_result(value)
+    return f
 
 
 def _observe(
