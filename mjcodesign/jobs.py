@@ -135,7 +135,7 @@ class SceneCache:
             raise DesignError(f"a scene cache holds at least one scene, got {size}")
         self.size = size
         self._scenes: dict[tuple, tuple[GraspObject, GraspScene]] = {}
-        self._perturbed: dict[tuple, GraspScene] = {}
+        self._perturbed: dict[tuple, tuple[GraspScene, GraspScene]] = {}
 
     def keep_perturbed(
         self, base: GraspScene, scenario: GraspScenario, pose: GripperPose, p: Perturbation, scene: GraspScene
@@ -145,7 +145,7 @@ class SceneCache:
         ``scene`` is :func:`~mjcodesign.scenarios.perturb.perturbed_scene`'s, as a draw's start check
         built it. ``base`` must be a scene of this cache: the rollout looks it up by the scene it runs on.
         """
-        self._perturbed[_perturbed_key(base, scenario, pose, p)] = scene
+        self._perturbed[_perturbed_key(base, scenario, pose, p)] = (base, scene)  # base held: its id stays
         while len(self._perturbed) > _KEPT_PERTURBED:  # oldest first out: a later rollout builds it again
             self._perturbed.pop(next(iter(self._perturbed)))
 
@@ -154,7 +154,9 @@ class SceneCache:
     ) -> GraspScene:
         """The kept perturbed scene (removed from the cache), or a new one; :class:`PoseError` if bad."""
         kept = self._perturbed.pop(_perturbed_key(base, scenario, pose, p), None)
-        return kept if kept is not None else perturbed_scene(base, scenario, p, pose=pose)
+        if kept is not None and kept[0] is base:
+            return kept[1]
+        return perturbed_scene(base, scenario, p, pose=pose)
 
     def scene(self, job: GraspJob) -> GraspScene:
         """The compiled scene (gripper at the reference pose) for ``job``'s object and fingers."""

@@ -527,3 +527,30 @@ def test_each_accepted_draw_is_built_once(suite, monkeypatch):
     draws = {(r["object"], r["pose"], r["draw"]) for r in rows2 if r["impulse_paper_ns"] == 0.4}
     assert len(built) == len(draws)
     assert [r for r in rows2 if r["impulse_paper_ns"] == 0.1] == rows
+
+
+def test_draw_scenes_are_kept_only_where_a_rollout_takes_them(suite):
+    """The oracle prepares every object before rolling any out and keeps no draw's scene; a run whose
+    disturbances all compile other scenes keeps none either (they would never be taken)."""
+    from mjcodesign.evaluation.rollouts import prepare_object
+    from mjcodesign.jobs import load_grasp_object
+
+    so = suite.objects[0]
+    obj = load_grasp_object(so.source, "light", seed=suite.seed)
+    run = SuiteRun(designs=parse_design_groups("soft"), perturbations=2, scenario=_SHORT)
+    dens = [("light", 100.0)]
+    assert len(prepare_object(suite, run, so, obj, dens).scenes._perturbed) == 2 * len(so.poses)
+    assert len(prepare_object(suite, run, so, obj, dens, keep_scenes=False).scenes._perturbed) == 0
+    other = dataclasses.replace(run, impulses=(0.4,))
+    assert len(prepare_object(suite, other, so, obj, dens).scenes._perturbed) == 0
+
+
+def test_the_object_ahead_hands_its_error_to_the_caller():
+    from mjcodesign.evaluation.rollouts import _Ahead
+
+    def boom(x):
+        raise KeyError(x)
+
+    with pytest.raises(KeyError, match="q"):
+        _Ahead(boom, "q").result()
+    assert _Ahead(lambda x: x + 1, 1).result() == 2

@@ -209,3 +209,43 @@ def test_a_kept_perturbed_scene_is_rolled_out_not_built_again(box, monkeypatch):
         _assert_same(a, b)
     with pytest.raises(AssertionError, match="built again"):  # taken once: the next run builds it
         run_jobs(jobs, MujocoBackend(nthread=2), scenes=cache)
+
+
+def test_a_rerun_waits_for_the_rollout_in_flight(box, monkeypatch):
+    """A chunk whose rollout must be rerun step by step (here: its first scene marked diverged) reruns
+    only once the next chunk's rollout has ended, so that no other rollout's MuJoCo warning can reach the
+    rerun's; the outcomes are still those of one call."""
+    import mjcodesign.jobs as jobs_module
+    import mjcodesign.sim.mujoco_c as mc
+
+    jobs = _perturbed_jobs(box, n_draws=2)
+    one_call = run_jobs(jobs, _ScenesOnly())
+    monkeypatch.setattr(jobs_module, "_PIPELINE_CHUNK", 4)
+    in_flight, calls, seen = [0], [0], []
+    real_rollout, real_diverged = mc.mj_rollout.rollout, mc._diverged
+
+    def counted(*args, **kwargs):
+        in_flight[0] += 1
+        try:
+            return real_rollout(*args, **kwargs)
+        finally:
+            in_flight[0] -= 1
+
+    def first_call_first_scene(states, x0, dt):
+        bad = real_diverged(states, x0, dt)
+        calls[0] += 1
+        if calls[0] == 1:
+            bad[0] = True
+        return bad
+
+    class Watched(MujocoBackend):
+        def run(self, scene, scenario, *, observer=None, label="grasp"):
+            seen.append(in_flight[0])
+            return super().run(scene, scenario, observer=observer, label=label)
+
+    monkeypatch.setattr(mc.mj_rollout, "rollout", counted)
+    monkeypatch.setattr(mc, "_diverged", first_call_first_scene)
+    piped = run_jobs(jobs, Watched(nthread=2))
+    assert seen == [0]  # one rerun, with no rollout in flight
+    for a, b in zip(piped, one_call, strict=True):
+        _assert_same(a, b)

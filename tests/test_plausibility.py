@@ -151,3 +151,33 @@ def test_motion_bounds_each_hold_and_break():
     assert not sunk.plausible and "below the ground" in sunk.reason
     high = motion_bound(np.zeros(3), np.array([0.03 + 0.091]), 0.03, dt=0.002, extents=ext, lift=0.03)
     assert not high.plausible and "rose" in high.reason  # 91 mm > 30 mm lift + 60 mm size
+
+
+def test_a_capture_takes_its_own_threads_warnings_not_another_python_threads(capfd):
+    """A warning raised in another Python thread (a scene built, an outcome replayed beside a rollout)
+    does not reach this thread's capture: it is printed on stderr, named as outside a checked rollout.
+    MuJoCo's own threads (``mujoco.rollout``'s pool) do reach the capture of the thread that started it."""
+    import threading
+
+    from mujoco import rollout as mj_rollout
+
+    with captured_warnings() as mine:
+        other = threading.Thread(target=_blow_up)
+        other.start()
+        other.join()
+    assert mine == []
+    err = capfd.readouterr().err
+    assert "MuJoCo warning outside a checked rollout" in err and "QACC" in err
+
+    m = mujoco.MjModel.from_xml_string(
+        '<mujoco><worldbody><body><joint type="slide"/><geom size=".1" mass="1"/></body></worldbody></mujoco>'
+    )
+    datas = [mujoco.MjData(m) for _ in range(2)]
+    x0 = np.zeros(mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_FULLPHYSICS))
+    ctrl = np.zeros((4, 3, m.nv))
+    ctrl[..., 0] = 1e300  # qfrc_applied, every step of every rollout
+    with captured_warnings() as pooled:
+        mj_rollout.rollout(
+            [m] * 4, datas, x0[None], ctrl, control_spec=mujoco.mjtState.mjSTATE_QFRC_APPLIED
+        )
+    assert pooled and all("QACC" in w for w in pooled)

@@ -144,7 +144,8 @@ class _Scorer:
         self.prepared = []
         for i, so in enumerate(suite.objects):
             obj = load_grasp_object(so.source, "light", seed=suite.seed, cache_dir=cache_dir)
-            self.prepared.append((so, prepare_object(suite, run, so, obj, densities)))
+            # Every object is prepared before any rolls out: keeping each draw's scene would hold them all.
+            self.prepared.append((so, prepare_object(suite, run, so, obj, densities, keep_scenes=False)))
             if progress:
                 progress("preparing objects", i + 1, len(suite.objects))
         self.backend = get_backend("mujoco")

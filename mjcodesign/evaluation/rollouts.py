@@ -11,9 +11,9 @@ surrogate only scores poses for the ``surrogate`` pose policy.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -136,12 +136,15 @@ def _regimes(run: SuiteRun, so: SuiteObject, obj, densities: list) -> list[tuple
 
 
 def _draws(
-    suite: Suite, run: SuiteRun, so: SuiteObject, base, k: int, scenes: SceneCache
+    suite: Suite, run: SuiteRun, so: SuiteObject, base, k: int, scenes: SceneCache | None
 ) -> tuple[list[Perturbation | None], int]:
     """The ``run.perturbations`` draws of pose ``k`` (None where given up) and how many were redrawn.
 
-    Each accepted draw's scene is kept in ``scenes`` (``base``'s cache) for its rollout.
+    With ``scenes`` (``base``'s cache), each accepted draw's scene is kept there for its rollout.
     """
+    keep = None
+    if scenes is not None:
+        keep = lambda p, scene: scenes.keep_perturbed(base, run.scenario, so.poses[k], p, scene)  # noqa: E731
     return draw_perturbations(
         suite.perturbation,
         suite.perturbation.stream(run.seed, so.name, k),
@@ -150,7 +153,7 @@ def _draws(
         run.scenario,
         so.poses[k],
         max_penetration=MAX_PENETRATION,
-        keep=lambda p, scene: scenes.keep_perturbed(base, run.scenario, so.poses[k], p, scene),
+        keep=keep,
     )
 
 
@@ -217,11 +220,20 @@ class PreparedObject:
 
 
 def prepare_object(
-    suite: Suite, run: SuiteRun, so: SuiteObject, obj, densities: list[tuple[str, float]]
+    suite: Suite,
+    run: SuiteRun,
+    so: SuiteObject,
+    obj,
+    densities: list[tuple[str, float]],
+    *,
+    keep_scenes: bool = True,
 ) -> PreparedObject:
     """Compile ``so``'s first scene and draw every pose's perturbations (common to all designs).
 
     ``obj``: ``so`` loaded (:func:`~mjcodesign.jobs.load_grasp_object` at ``light``, the suite's seed).
+    With ``keep_scenes``, the scene each accepted draw's start check built is kept in ``scenes`` for its
+    one rollout (a model copy each, ~1 MB), where a disturbance of ``run`` rolls out on that scene;
+    a caller that prepares many objects before rolling any out passes False.
     """
     regimes = _regimes(run, so, obj, densities)
     scenes = SceneCache(size=len(regimes) * len(run.impulses) + 1)
@@ -238,6 +250,9 @@ def prepare_object(
         density=regimes[0][1],
     )
     base = scenes.scene(first)
+    # The draws' scenes are rolled out only by jobs on this scene: those of a disturbance that leaves
+    # run.scenario as it is (at_paper_disturbance), in the first regime.
+    keep = keep_scenes and any(at_paper_disturbance(run.scenario, i) == run.scenario for i in run.impulses)
     prep = PreparedObject(obj=obj, regimes=regimes, scenes=scenes, draws=[])
     for k in range(len(so.poses)):
         try:
@@ -246,7 +261,7 @@ def prepare_object(
             prep.draws.append([None] * run.perturbations)
             prep.given_up += run.perturbations
             continue
-        d, r = _draws(suite, run, so, base, k, scenes)
+        d, r = _draws(suite, run, so, base, k, scenes if keep else None)
         prep.draws.append(d)
         prep.redrawn += r
         prep.given_up += sum(x is None for x in d)
@@ -350,46 +365,69 @@ def run_suite(
 
     # One object ahead: the next object is loaded and its draws checked on a thread of its own while
     # this one rolls out (MuJoCo releases the GIL); each object's rows do not depend on the others.
-    with ThreadPoolExecutor(max_workers=1) as ahead:
-        pending = ahead.submit(ready, suite.objects[0]) if suite.objects else None
-        for n_done, so in enumerate(suite.objects):
-            got = pending.result()
-            if n_done + 1 < len(suite.objects):
-                pending = ahead.submit(ready, suite.objects[n_done + 1])
-            if isinstance(got, MjcodesignError):
-                objects.append(
-                    {"name": so.name, "domain": so.domain, "error": f"{type(got).__name__}: {got}"}
+    pending = _Ahead(ready, suite.objects[0]) if suite.objects else None
+    for n_done, so in enumerate(suite.objects):
+        got = pending.result()
+        if n_done + 1 < len(suite.objects):
+            pending = _Ahead(ready, suite.objects[n_done + 1])
+        if isinstance(got, MjcodesignError):
+            objects.append({"name": so.name, "domain": so.domain, "error": f"{type(got).__name__}: {got}"})
+            if warn:
+                warn(f"{so.name}: left out ({type(got).__name__}: {got})")
+            continue
+        prep, jobs, meta = got
+        if surrogate is not None:
+            for dens, rho in prep.regimes:
+                choice.setdefault(so.name, {})[dens] = _surrogate_choice(
+                    surrogate, prep.obj, so, run, rho, n_points
                 )
-                if warn:
-                    warn(f"{so.name}: left out ({type(got).__name__}: {got})")
-                continue
-            prep, jobs, meta = got
-            if surrogate is not None:
-                for dens, rho in prep.regimes:
-                    choice.setdefault(so.name, {})[dens] = _surrogate_choice(
-                        surrogate, prep.obj, so, run, rho, n_points
-                    )
-            outs = run_jobs(jobs, backend, scenes=prep.scenes)
-            rows += outcome_rows(so, meta, outs)
-            objects.append(
-                {
-                    "name": so.name,
-                    "domain": so.domain,
-                    "fold": so.fold,
-                    "poses": len(so.poses),
-                    "redrawn": prep.redrawn,
-                    "draws_given_up": prep.given_up,
-                    "error": None,
-                }
-            )
-            if progress:
-                progress("objects", n_done + 1, len(suite.objects))
+        outs = run_jobs(jobs, backend, scenes=prep.scenes)
+        rows += outcome_rows(so, meta, outs)
+        objects.append(
+            {
+                "name": so.name,
+                "domain": so.domain,
+                "fold": so.fold,
+                "poses": len(so.poses),
+                "redrawn": prep.redrawn,
+                "draws_given_up": prep.given_up,
+                "error": None,
+            }
+        )
+        if progress:
+            progress("objects", n_done + 1, len(suite.objects))
     return {
         "rows": rows,
         "objects": objects,
         "surrogate_choice": choice,
         "wall_time_s": time.perf_counter() - t0,
     }
+
+
+class _Ahead:
+    """``fn(arg)`` on a daemon thread.
+
+    An interrupted evaluation does not wait for the object it was preparing (CoACD may take minutes on
+    an uncached mesh), and the interpreter exits without it.
+    """
+
+    def __init__(self, fn, arg):
+        self._value = self._error = None
+        self._thread = threading.Thread(target=self._run, args=(fn, arg), daemon=True, name="suite-ahead")
+        self._thread.start()
+
+    def _run(self, fn, arg) -> None:
+        try:
+            self._value = fn(arg)
+        except BaseException as exc:  # handed to the caller of result()
+            self._error = exc
+
+    def result(self):
+        """The value, or the exception raised, once the thread has ended."""
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._value
 
 
 def record_suite_examples(

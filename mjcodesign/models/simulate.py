@@ -5,12 +5,15 @@ MuJoCo prints the first warning of each kind per ``MjData`` to stdout and append
 before every rollout, so a batch printed one line per thread. :func:`captured_warnings` routes MuJoCo's
 warning callback into a list while a rollout runs (the one process-wide hook the library sets: it is
 installed on entry and the previous handler restored on exit, under a lock, nested uses sharing it), so
-the backends count the warnings into a ``DIVERGED`` outcome instead.
+the backends count the warnings into a ``DIVERGED`` outcome instead. A capture takes the warnings of its
+own thread and of threads Python did not start (``mujoco.rollout``'s pool), never those of another Python
+thread: one rollout's warning is not another's, whatever else the process runs beside it.
 """
 
 from __future__ import annotations
 
 import contextlib
+import sys
 import threading
 from collections.abc import Iterator
 
@@ -22,30 +25,50 @@ from mjcodesign.errors import SimulationDiverged
 __all__ = ["check_state", "has_warning", "reset_warnings", "captured_warnings", "warning_counts"]
 
 _CAPTURE_LOCK = threading.Lock()
-_CAPTURES: list[list[str]] = []
+_CAPTURES: list[tuple[int, list[str]]] = []  # (the capturing thread's ident, its log)
 _SAVED_HANDLER: list = []
 
 
+def _python_thread(ident: int) -> bool:
+    """Whether ``ident`` is a thread Python started (a callback from a native thread has none)."""
+    # A native thread only appears in threading's registry as a _DummyThread, and only once it asks
+    # for current_thread(); _on_warning never does.
+    return any(t.ident == ident and not isinstance(t, threading._DummyThread) for t in threading.enumerate())
+
+
 def _on_warning(message: str) -> None:
+    me = threading.get_ident()
+    python = _python_thread(me)
     with _CAPTURE_LOCK:
-        for log in _CAPTURES:
+        takers = [log for owner, log in _CAPTURES if owner == me or not python]
+        for log in takers:
             log.append(message)
+        saved = None if takers else (_SAVED_HANDLER[0] if _SAVED_HANDLER else None)
+    if takers:
+        return
+    if saved is not None:
+        saved(message)
+    else:  # a Python thread outside any capture (a scene being built, an outcome replay): say so
+        print(f"MuJoCo warning outside a checked rollout: {message}", file=sys.stderr)
 
 
 @contextlib.contextmanager
 def captured_warnings() -> Iterator[list[str]]:
-    """A list that collects MuJoCo's warning messages (any thread) while the block runs; none print."""
+    """A list that collects MuJoCo's warnings while the block runs; none print.
+
+    It takes the warnings of this thread and of MuJoCo's own threads, not those of other Python threads.
+    """
     log: list[str] = []
     with _CAPTURE_LOCK:
         if not _CAPTURES:
             _SAVED_HANDLER[:] = [mujoco.get_mju_user_warning()]
             mujoco.set_mju_user_warning(_on_warning)
-        _CAPTURES.append(log)
+        _CAPTURES.append((threading.get_ident(), log))
     try:
         yield log
     finally:
         with _CAPTURE_LOCK:
-            del _CAPTURES[next(i for i, x in enumerate(_CAPTURES) if x is log)]  # by identity
+            del _CAPTURES[next(i for i, (_, x) in enumerate(_CAPTURES) if x is log)]  # by identity
             if not _CAPTURES:
                 mujoco.set_mju_user_warning(_SAVED_HANDLER[0])
                 _SAVED_HANDLER.clear()

@@ -296,15 +296,18 @@ class MujocoBackend(SceneBatchSimulator):
         only in stiffness and share one initial state and control sequence. The rollout of chunk k runs
         on a thread of its own (``mujoco.rollout`` releases the GIL) while this thread pulls chunk k+1
         from ``chunks`` (the caller may build it then) and evaluates the outcomes of chunk k-1, so the
-        Python work of a chunk overlaps the rollouts of its neighbours. The outcomes equal
-        :meth:`run_scenes`' chunk by chunk: the same rollouts and the same checks, in another order.
+        Python work of a chunk overlaps the rollouts of its neighbours. A chunk that needs step-by-step
+        reruns (:meth:`run`) runs them only once the next chunk's rollout has ended, so that no other
+        rollout's warning can reach theirs. The outcomes equal :meth:`run_scenes`' chunk by chunk: the
+        same rollouts and the same checks, in another order. ``wall_time_s`` is a chunk's time from its
+        rollout's start to its outcomes, shared evenly.
         """
         with ThreadPoolExecutor(max_workers=1) as rollouts:
             pending = None
             for scenes, labels, keys in chunks:
                 started = self._start(scenes, scenario, labels, start_keys=keys, pool=rollouts)
-                if pending is not None:
-                    yield self._finish(pending, observer)
+                if pending is not None:  # its step-by-step reruns, if any, wait for this rollout to end
+                    yield self._finish(pending, observer, settle=started.future.result)
                 pending = started
             if pending is not None:
                 yield self._finish(pending, observer)
@@ -348,17 +351,25 @@ class MujocoBackend(SceneBatchSimulator):
             reset_warnings(d)
 
         def roll():
+            if pool is not None:  # pipelined: the chunk's time starts with its rollout
+                started.t0 = time.perf_counter()
             with captured_warnings() as printed:
                 states, sensors = mj_rollout.rollout(
                     models, datas, x0_in, ctrl_in, control_spec=control_spec()
                 )
             return states, sensors, printed
 
-        future = pool.submit(roll) if pool is not None else _done(roll())
-        return _Started(scenes, scenario, labels, models, datas, x0, ctrl, starts, future, t0)
+        started = _Started(scenes, scenario, labels, models, datas, x0, ctrl, starts, None, t0)
+        started.future = pool.submit(roll) if pool is not None else _done(roll())
+        return started
 
-    def _finish(self, started: _Started, observer) -> list[Outcome]:
-        """Wait for a started rollout, check it, and evaluate its outcomes (see :meth:`run_scenes`)."""
+    def _finish(
+        self, started: _Started, observer, *, settle: Callable[[], object] | None = None
+    ) -> list[Outcome]:
+        """Wait for a started rollout, check it, and evaluate its outcomes (see :meth:`run_scenes`).
+
+        ``settle`` is called before any step-by-step rerun (it waits for a rollout still in flight).
+        """
         scenes, scenario, labels, models = started.scenes, started.scenario, started.labels, started.models
         x0, ctrl, starts = started.x0, started.ctrl, started.starts
         states, sensors, printed = started.future.result()
@@ -372,6 +383,8 @@ class MujocoBackend(SceneBatchSimulator):
         if warned:
             bad[:] = True
         outs: list[Outcome | None] = [None] * len(scenes)
+        if settle is not None and bad.any():
+            settle()
         for i in np.flatnonzero(bad):  # run() hands these to the observer itself
             outs[i] = self.run(scenes[i], scenario, observer=observer, label=labels[i])
         good = np.flatnonzero(~bad)
@@ -427,8 +440,9 @@ class _Started:
     x0: np.ndarray
     ctrl: np.ndarray
     starts: dict[str, int]
-    future: Future
+    future: Future | None
     t0: float
+    """When the batch started (its rollout's start, once that has begun)."""
 
 
 def _done(value) -> Future:
