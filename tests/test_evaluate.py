@@ -554,3 +554,33 @@ def test_the_object_ahead_hands_its_error_to_the_caller():
     with pytest.raises(KeyError, match="q"):
         _Ahead(boom, "q").result()
     assert _Ahead(lambda x: x + 1, 1).result() == 2
+
+
+def test_rows_equal_one_object_at_a_time(suite, evaluated):
+    """``run_suite`` (the next object prepared on its own thread, chunks pipelined) gives the rows of the
+    plain loop: each object prepared, its jobs run in one ``run_jobs`` call on a backend without
+    ``run_scene_chunks``, one after another."""
+    from mjcodesign.evaluation.rollouts import object_jobs, outcome_rows, prepare_object
+    from mjcodesign.jobs import load_grasp_object
+    from mjcodesign.objects import parse_density
+
+    run, result = evaluated
+    backend = get_backend("mujoco")
+
+    class Plain:  # run_scenes only: one rollout call per chunk of up to 256 scenes, nothing overlapped
+        name = "plain"
+
+        def run(self, *a, **k):
+            return backend.run(*a, **k)
+
+        def run_scenes(self, *a, **k):
+            return backend.run_scenes(*a, **k)
+
+    rows = []
+    dens = [(str(d), parse_density(d)) for d in run.densities]
+    for so in suite.objects:
+        obj = load_grasp_object(so.source, "light", seed=suite.seed)
+        prep = prepare_object(suite, run, so, obj, dens, keep_scenes=False)
+        jobs, meta = object_jobs(prep, so, run, run.designs)
+        rows += outcome_rows(so, meta, run_jobs(jobs, Plain(), scenes=prep.scenes))
+    assert json.dumps(rows, sort_keys=True) == json.dumps(result["rows"], sort_keys=True)
