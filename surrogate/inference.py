@@ -467,6 +467,31 @@ class Surrogate:
         score = success_score(force, disp, p, up, batch.mass, self.lift, self.lifted_fraction)
         return Prediction(force, disp, p, score, None if ps is None else ps.numpy().astype(float))
 
+    def check_loss(self, loss) -> bool:
+        """Whether ``loss`` reads the success head.
+
+        Raises :class:`~mjcodesign.errors.DesignError` when it does and this network has none.
+        """
+        head = bool(getattr(loss, "needs_success_head", False))
+        if head and not self.has_success_head:
+            raise DesignError(
+                "the success objective needs a surrogate with a success head (train one with "
+                "--success-weight > 0; this checkpoint predicts the paper's 10 outputs only)"
+            )
+        return head
+
+    def loss_rows(
+        self, log_e: torch.Tensor, batch: GraspBatch, loss: DesignLoss | SuccessLoss
+    ) -> torch.Tensor:
+        """Per-row loss (B,) of one design ``log_e`` (a (22,) tensor of :attr:`dtype`), differentiable in it.
+
+        ``batch`` must be prepared (:meth:`prepare`). Raises :class:`~mjcodesign.errors.DesignError` for a
+        :class:`SuccessLoss` on a network without a head.
+        """
+        head = self.check_loss(loss)
+        force, disp, p, up, ps = self._outputs(batch, log_e.expand(len(batch), N_LOG_E))
+        return loss.rows(force, disp, p, up, ps) if head else loss.rows(force, disp, p, up)
+
     def loss_and_grad(
         self, design, batch: GraspBatch, loss: DesignLoss | SuccessLoss | None = None
     ) -> DesignGradient:
@@ -482,18 +507,12 @@ class Surrogate:
         if d.shape != (N_LOG_E,) or not np.all(np.isfinite(d)):
             raise StiffnessError(f"a design is {N_LOG_E} finite values of ln E, got shape {d.shape}")
         loss = loss or DesignLoss()
-        head = getattr(loss, "needs_success_head", False)
-        if head and not self.has_success_head:
-            raise DesignError(
-                "the success objective needs a surrogate with a success head (train one with "
-                "--success-weight > 0; this checkpoint predicts the paper's 10 outputs only)"
-            )
+        self.check_loss(loss)
         self.check_inputs(None, batch.density)
         batch = self.prepare(batch)
         x = torch.tensor(d, dtype=self.dtype, requires_grad=True)
         with torch.enable_grad():
-            force, disp, p, up, ps = self._outputs(batch, x.expand(len(batch), N_LOG_E))
-            rows = loss.rows(force, disp, p, up, ps) if head else loss.rows(force, disp, p, up)
+            rows = self.loss_rows(x, batch, loss)
             total = rows.sum()
             (grad,) = torch.autograd.grad(total, x)
         return DesignGradient(total.item(), grad.numpy().astype(float), rows.detach().numpy().astype(float))

@@ -172,6 +172,42 @@ def test_grasp_routing_flag_reaches_the_model(tmp_path, monkeypatch, capsys):
     assert outs["guided"]["displacement"] != outs["printed"]["displacement"]
 
 
+def test_datagen_routing_is_recorded_and_reaches_every_rollout(tmp_path, monkeypatch):
+    import dataclasses
+    import json
+
+    import trimesh
+
+    import mjcodesign.jobs as jobs
+    from mjcodesign.cli.main import main
+    from mjcodesign.data import DatagenConfig, parse_density_spec
+
+    base = DatagenConfig(
+        objects=("013_apple",), poses_per_object=1, designs_per_pose=1, density=parse_density_spec("light")
+    )
+    printed = dataclasses.replace(base, routing="printed")
+    assert base.options is None and printed.options == SimOptions(routing="printed")
+    assert base.as_dict()["sim_options"] == dataclasses.asdict(SimOptions())  # guided keeps its fingerprint
+    assert printed.fingerprint() != base.fingerprint()
+    assert DatagenConfig.from_dict(printed.as_dict()) == printed
+    with pytest.raises(DesignError, match="--routing"):
+        dataclasses.replace(base, routing="straight")
+    with pytest.raises(UnsupportedError, match="chain"):
+        dataclasses.replace(base, routing="printed", model=FingerModel.FLEX)
+
+    seen = []
+    run = jobs.run_jobs
+    monkeypatch.setattr(jobs, "run_jobs", lambda js, *a, **k: seen.extend(js) or run(js, *a, **k))
+    monkeypatch.setattr("mjcodesign.data.tasks.run_jobs", jobs.run_jobs)
+    box = tmp_path / "box.stl"
+    trimesh.creation.box(extents=(0.05, 0.05, 0.05)).export(box)
+    out = tmp_path / "ds"
+    args = ["datagen", "--objects", str(box), "--regime", "paper", "--poses-per-object", "1"]
+    assert main([*args, "--designs-per-pose", "2", "--routing", "printed", "--out", str(out)]) == 0
+    assert json.loads((out / "manifest.json").read_text())["config"]["sim_options"]["routing"] == "printed"
+    assert seen and all(j.options == SimOptions(routing="printed") for j in seen)
+
+
 _TOL_REST = 5e-4  # hinge angle [rad]: run_to_rest's stop against the energy minimum (measured ≤ 1.1e-4)
 
 

@@ -27,7 +27,7 @@ from mjcodesign.cli.common import (
     user_cache_dir,
     warn_failed_objects,
 )
-from mjcodesign.cli.finger_flags import grasp_model_name
+from mjcodesign.cli.finger_flags import add_routing, grasp_model_name
 from mjcodesign.optional import WARP_DEVICES
 
 __all__ = [
@@ -85,6 +85,7 @@ def add_parser(subparsers) -> None:
         "default: the regime's (real: position:1000; paper: force:10)",
     )
     p.add_argument("--model", choices=_MODELS, default="chain", type=grasp_model_name)
+    add_routing(p)
     p.add_argument("--backend", choices=("mujoco", "mjwarp"), default="mujoco")
     p.add_argument(
         "--device",
@@ -211,6 +212,7 @@ def datagen_config(args: argparse.Namespace):
         mass=mass,
         perturbations=draws,
         perturbations_max=extend_to,
+        routing=args.routing,
         **{k: getattr(args, k) for k in same},
     )
 

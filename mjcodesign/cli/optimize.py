@@ -26,6 +26,7 @@ __all__ = ["add_bench_parser", "add_parser", "run", "run_bench"]
 
 _MODES = ("joint", "individual")
 _OBJECTIVES = ("lopt", "success")  # mjcodesign.codesign.Objective, without importing torch here
+_ROBUST = ("worst", "mean")  # mjcodesign.codesign.robust.Robust
 
 
 def add_parser(subparsers) -> None:
@@ -82,6 +83,23 @@ def add_parser(subparsers) -> None:
     p.add_argument("--top-b", type=int_at_least(1), default=5, help="B of Algorithm 1 (paper: 5)")
     p.add_argument("--no-ground-truth", action="store_true", help="skip re-simulating the designs in MuJoCo")
     p.add_argument(
+        "--robust",
+        choices=_ROBUST,
+        default=None,
+        help="co-design across model variants: each (object, pose)'s loss is the worst of, or the mean over, "
+        "the surrogates of --ckpt (the nominal model) and every --variant; the ground truth is simulated "
+        "under each model (default: off)",
+    )
+    p.add_argument(
+        "--variant",
+        type=path_text,
+        action="append",
+        default=None,
+        metavar="CKPT",
+        help="with --robust: a checkpoint trained on a dataset of one model variant (e.g. datagen --routing "
+        "printed, or --scenario '{\"friction\": 0.6}'); repeat for more; named by its folder",
+    )
+    p.add_argument(
         "--threads",
         type=int_at_least(0),
         default=0,
@@ -103,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
     from mjcodesign.surrogate import checkpoint_or_shipped
 
     density = None if args.density is None else parse_density(args.density)
+    variants = _variants(args.robust, args.variant)
     objects, meshes = _objects(args.objects, resolve_objects)
     if args.rrd:
         check_output_link(args.rrd, "--rrd", overwrite=args.overwrite)
@@ -148,6 +167,8 @@ def run(args: argparse.Namespace) -> int:
             sources=meshes,
             on_step=on_step,
             progress=say,
+            variants=variants,
+            robust=args.robust or "worst",
         )
     if args.rrd:
         _log_rerun(Path(args.rrd), result)
@@ -159,6 +180,31 @@ def run(args: argparse.Namespace) -> int:
         if record["ground_truth"]:
             emit(record["ground_truth"]["rates"], False)
     return 0
+
+
+def _variants(robust: str | None, paths: list[str] | None) -> dict[str, str] | None:
+    """``--robust`` and ``--variant``: the variants' checkpoints by name (their folders' names), or None.
+
+    Raises :class:`~mjcodesign.errors.DesignError` for one flag without the other, a missing folder or
+    two variants of one name.
+    """
+    from mjcodesign.errors import DesignError
+
+    if robust is None and not paths:
+        return None
+    if robust is None:
+        raise DesignError("--variant needs --robust worst|mean (how the variants' losses combine)")
+    if not paths:
+        raise DesignError("--robust needs at least one --variant CKPT (a checkpoint of a model variant)")
+    named: dict[str, str] = {}
+    for p in paths:
+        if not Path(p).is_dir():
+            raise DesignError(f"--variant {p}: no such checkpoint folder")
+        name = Path(p).resolve().name
+        if name in named or name == "nominal":
+            raise DesignError(f"--variant {p}: two variants named {name!r} (name their folders apart)")
+        named[name] = p
+    return named
 
 
 def _objects(text: str, resolve) -> tuple[tuple[str, ...], dict[str, str]]:

@@ -226,9 +226,16 @@ def _counted_type(base_type: type) -> type:
         choose: Callable[[np.ndarray], np.ndarray]
 
         def rows(self, *outputs):
-            r = super().rows(*outputs)
+            return self.counted(super().rows(*outputs))
+
+        def counted(self, r):
+            """The per-row losses ``r`` with the rows ``choose`` leaves out detached."""
             mask = torch.from_numpy(np.asarray(self.choose(r.detach().double().numpy()), dtype=bool))
             return torch.where(mask, r, r.detach())
+
+        def uncounted(self):
+            """The loss this one counts rows of (every row's gradient kept)."""
+            return base_type(**{f.name: getattr(self, f.name) for f in dataclasses.fields(base_type)})
 
     return CountedLoss
 

@@ -73,6 +73,8 @@ def run_codesign(
     sources: dict[str, str] | None = None,
     on_step: Callable[[Step], None] | None = None,
     progress: Callable[[str], None] | None = None,
+    variants: dict[str, str | Path] | None = None,
+    robust: str = "worst",
 ) -> tuple[dict, OptimizeResult]:
     """Optimise, re-simulate and write the files (module docstring); returns the JSON and the result.
 
@@ -84,6 +86,12 @@ def run_codesign(
     a held-out one left out and named in ``held_out_without_mass``. ``sources`` maps an object's name
     to the mesh file that loads it (the command's ``--objects`` files): the candidates' clouds and the
     re-simulation use that mesh (:func:`~mjcodesign.codesign.problem.load_pose_set`).
+
+    ``variants`` (name -> checkpoint, each trained on a dataset of one model variant: another tendon
+    routing, friction, …) makes the co-design robust (:mod:`~mjcodesign.codesign.robust`): ``checkpoint``
+    is the nominal model, ``robust`` (``worst`` or ``mean``) combines the variants' losses, and the
+    ground truth is simulated under the nominal model and under each variant's
+    (``ground_truth_variants``).
     """
     from mjcodesign.surrogate import load_surrogate
 
@@ -92,6 +100,9 @@ def run_codesign(
     )
     say = progress or (lambda _msg: None)
     surrogate = load_surrogate(checkpoint)  # first: a checkpoint of another schema is refused in ~1 s
+    variant_models = {}
+    if variants:
+        surrogate, variant_models = _variant_surrogate(surrogate, variants, robust)
     say("reading poses")
     everything = load_pose_set(poses, seed=seed, cache_dir=cache_dir, sources=sources)
     chosen_set = everything.select([object_key(o) for o in objects], per_object)
@@ -116,7 +127,7 @@ def run_codesign(
     root = Path(out)
     say(f"optimising {len(chosen_set.objects)} objects ({config.mode.value})")
     result = optimize(surrogate, chosen_set, density, config, on_step=on_step)
-    truth = None
+    truth, variant_truth = None, {}
     if ground_truth:
         say("re-simulating in MuJoCo")
         object_seed = int((surrogate.meta.get("dataset") or {}).get("object_seed", 0))
@@ -134,10 +145,59 @@ def run_codesign(
             loss=_loss(config),
             progress=say,
         )
+        for name, (scenario, options) in variant_models.items():
+            say(f"re-simulating in MuJoCo under {name}")
+            variant_truth[name] = verify(
+                surrogate,
+                sets,
+                density,
+                object_seed=object_seed,
+                cache_dir=cache_dir,
+                scenario=scenario,
+                options=options,
+                loss=_loss(config),
+                progress=say,
+            )
     record = _record(result, chosen_set, held, truth, checkpoint, poses, density, seed, root)
     record.update(mass=mass, held_out_without_mass=no_mass)
+    if variants:
+        record["robust"] = {
+            "rule": surrogate.rule.value,
+            "variants": {n: str(p) for n, p in variants.items()},
+        }
+        record["ground_truth_variants"] = variant_truth or None
     _write(folder, result, chosen_set, record)
     return record, result
+
+
+def _variant_surrogate(nominal, variants: dict, robust: str):
+    """The nominal and the ``variants``' checkpoints as one :class:`VariantSurrogate`, and the models.
+
+    The models: each variant's (scenario, model options) for its ground truth, read from its dataset's
+    config. Raises :class:`DesignError` for a variant whose checkpoint records no dataset config (its model
+    cannot be simulated) or whose finger model or geometry differs from the nominal's.
+    """
+    from mjcodesign.codesign.robust import VariantSurrogate
+    from mjcodesign.errors import DesignError
+    from mjcodesign.models.types import SimOptions
+    from mjcodesign.surrogate import dataset_config, load_surrogate
+
+    base = dataset_config(nominal)
+    members, models = [("nominal", nominal)], {}
+    for name, path in variants.items():
+        s = load_surrogate(path)
+        c = dataset_config(s)
+        if c is None or base is None:
+            raise DesignError(
+                f"--variant {path}: a robust co-design needs checkpoints that record their dataset"
+            )
+        if (c.model, c.geometry) != (base.model, base.geometry):
+            raise DesignError(
+                f"--variant {path}: its dataset's finger model or geometry is not the nominal's"
+            )
+        members.append((name, s))
+        models[name] = (c.scenario, c.options or SimOptions())
+    return VariantSurrogate(members, robust), models
 
 
 def _loss(config: OptimizeConfig):

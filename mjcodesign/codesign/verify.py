@@ -75,6 +75,7 @@ def verify(
     object_seed: int = 0,
     cache_dir=None,
     scenario: GraspScenario | None = None,
+    options=None,
     loss=None,
     progress=None,
 ) -> dict:
@@ -82,8 +83,9 @@ def verify(
 
     ``sets``: name -> (poses, the optimised design of each object (22 ln E; None: only the presets),
     the optimised design's chosen pose rows (None: the surrogate picks them here)). ``scenario``
-    replaces the dataset's. ``loss`` picks the presets' poses and, when it reads the success head
-    (``needs_success_head``), makes the head's probability the prediction. Returns JSON-ready rows and
+    replaces the dataset's, and ``options`` (:class:`~mjcodesign.models.types.SimOptions`, e.g. the
+    tendon's routing) the dataset's model options. ``loss`` picks the presets' poses and, when it
+    reads the success head (``needs_success_head``), makes the head's probability the prediction. Returns JSON-ready rows and
     rates per (set, design), ``predicted_by`` (``success head`` or ``score``), and ``simulation``: the
     scenario, tendon drive and finger model they ran under, and where those came from.
     """
@@ -93,14 +95,16 @@ def verify(
     config = dataset_config(surrogate)
     if config is None:
         source = "defaults"
-        model, geometry = FingerModel.CHAIN, FingerDesign()
+        model, geometry, dataset_options = FingerModel.CHAIN, FingerDesign(), None
         dataset_scenario = GraspScenario(lift=surrogate.lift, lifted_fraction=surrogate.lifted_fraction)
     else:
         source = "checkpoint"
         model, geometry, dataset_scenario = config.model, config.geometry, config.scenario
+        dataset_options = config.options
     if scenario is not None:
         source, dataset_scenario = "given", scenario
     scenario = dataset_scenario
+    options = dataset_options if options is None else options
     # An object goes by its name (a mesh file's stem); it is loaded from the source its poses recorded
     # (the command's mesh file, the dataset's), else from the checkpoint's dataset, else by its name.
     sources = {object_key(s): s for s in config.objects} if config is not None else {}
@@ -129,7 +133,8 @@ def verify(
                 jobs.append(
                     GraspJob(obj=objs[name], pose=poses.gripper_pose(int(rows[k])), design=design,
                              finger_model=model, scenario=scenario, density=rho_k,
-                             seed=object_seed, geometry=geometry, label=f"{set_name}/{label}/{name}")
+                             seed=object_seed, geometry=geometry, options=options,
+                             label=f"{set_name}/{label}/{name}")
                 )  # fmt: skip
                 p_k = None if p is None else float(p[k])
                 meta.append((set_name, label, name, int(rows[k]), bool(ok[k]), float(score[k]), p_k))
@@ -172,6 +177,7 @@ def verify(
         "source": source,
         "model": model.value,
         "tendon": scenario.tendon.text(),
+        "routing": "guided" if options is None else options.routing,
         "scenario": dataclasses.asdict(scenario),
     }
     return {

@@ -18,7 +18,7 @@ import numpy as np
 
 from mjcodesign.design.finger import FingerDesign
 from mjcodesign.errors import DesignError, MeshError, OutputError, UnsupportedError
-from mjcodesign.models.types import FingerModel, SimOptions
+from mjcodesign.models.types import ROUTINGS, FingerModel, SimOptions
 from mjcodesign.objects import (
     MASS_MODES,
     MESH_SUFFIXES,
@@ -216,6 +216,9 @@ class DatagenConfig:
     None: never extended."""
     perturbation: PerturbationModel = field(default_factory=PerturbationModel)
     """The ranges the draws come from; with :attr:`perturbations` 1, unused and set to the default."""
+    routing: str = "guided"
+    """The chain's tendon path (:attr:`~mjcodesign.models.types.SimOptions.routing`): ``guided`` over every
+    hinge, or ``printed`` through the printed finger's channels. Recorded in ``sim_options``."""
 
     def __post_init__(self) -> None:
         if not self.objects:
@@ -245,6 +248,12 @@ class DatagenConfig:
             raise UnsupportedError(
                 "--perturbations > 1 runs on --backend mujoco (MJWarp shares mass, friction and drive "
                 "across worlds)"
+            )
+        if self.routing not in ROUTINGS:
+            raise DesignError(f"--routing must be one of {', '.join(ROUTINGS)}, got {self.routing!r}")
+        if self.routing != "guided" and self.model is not FingerModel.CHAIN:
+            raise UnsupportedError(
+                f"--routing {self.routing} is the chain's tendon path, not {self.model.value}'s"
             )
         if self.sampler not in SAMPLERS:
             raise DesignError(f"unknown sampler {self.sampler!r}: choose from {', '.join(SAMPLERS)}")
@@ -279,6 +288,11 @@ class DatagenConfig:
         return self.perturbations_max or self.perturbations
 
     @property
+    def options(self) -> SimOptions | None:
+        """The model options every rollout runs with (its tendon :attr:`routing`); None for the defaults."""
+        return None if self.routing == "guided" else SimOptions(routing=self.routing)
+
+    @property
     def coacd(self) -> CoacdSettings:
         """The convex decomposition settings the objects are loaded with."""
         return CoacdSettings(seed=self.object_seed)
@@ -309,7 +323,7 @@ class DatagenConfig:
             "cloud_points": int(self.cloud_points),
             "scenario": _scenario_dict(self.scenario),
             "finger": geometry,
-            "sim_options": dataclasses.asdict(scene_options(self.scenario) or SimOptions()),
+            "sim_options": dataclasses.asdict(scene_options(self.scenario, self.options) or SimOptions()),
             "coacd": dataclasses.asdict(self.coacd),
             "mass": _mass_dict(self.mass),
         }
@@ -325,7 +339,8 @@ class DatagenConfig:
     def from_dict(cls, d: dict) -> DatagenConfig:
         """The config :meth:`as_dict` wrote (a dataset manifest's ``config``): ``from_dict(c.as_dict()) == c``.
 
-        The derived entries (``sim_options``, ``coacd``) are not read: they follow from the rest.
+        The derived entries (``sim_options``, ``coacd``) are not read, but for ``sim_options``'s
+        ``routing``: they follow from the rest.
         Raises :class:`OutputError` when an entry is missing or of the wrong kind, and the config's own
         errors (:class:`DesignError`, :class:`MeshError`) for values it refuses.
         """
@@ -360,6 +375,7 @@ class DatagenConfig:
                 scenario=GraspScenario(**scenario),
                 geometry=FingerDesign(**finger),
                 mass=str(d.get("mass", {"mode": "density"})["mode"]),
+                routing=str(d.get("sim_options", {}).get("routing", "guided")),
                 **draws,
             )
         except (KeyError, TypeError, ValueError, AttributeError) as exc:

@@ -186,6 +186,7 @@ def summarize(ds: Dataset) -> dict:
         "project_version": m.get("project_version"),
         "backend": m["config"]["backend"],
         "regime": m.get("regime") or DatagenConfig.from_dict(m["config"]).regime,
+        "routing": m["config"].get("sim_options", {}).get("routing", "guided"),
         "objects": len(m["objects"]),
         "objects_ready": sum(o["status"] == "ready" for o in m["objects"]),
         "objects_failed": sum(o["status"] == "failed" for o in m["objects"]),

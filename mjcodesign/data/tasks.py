@@ -332,6 +332,7 @@ def _jobs(obj: GraspObject, t: ShardTask) -> list[GraspJob]:
             density=t.density,
             seed=c.seed,
             geometry=c.geometry,
+            options=c.options,
         )
         for d in t.designs()
     ]
