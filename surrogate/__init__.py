@@ -3,7 +3,8 @@
 Importing this package imports torch (``pip install 'mjcodesign[torch]'``); nothing else in mjcodesign
 does. Import from here (``from mjcodesign.surrogate import Surrogate``): each name has this one path.
 
-- :mod:`~mjcodesign.surrogate.data`: the dataset as arrays, splits, normalisation, a torch ``Dataset``;
+- :mod:`~mjcodesign.surrogate.data`: the dataset as arrays, splits (and :func:`first_poses`, a split cut
+  to the first poses of each object), normalisation, a torch ``Dataset``;
 - :mod:`~mjcodesign.surrogate.model`: :class:`GraspNet` and its :class:`ModelConfig` (the paper's);
 - :mod:`~mjcodesign.surrogate.train`: :func:`train` and :class:`TrainConfig`;
 - :mod:`~mjcodesign.surrogate.inference`: :class:`Surrogate` (``predict``, ``loss_and_grad``);
@@ -31,6 +32,7 @@ from mjcodesign.surrogate.data import (
     GraspDataset,
     Normalizer,
     Split,
+    first_poses,
     fold_splits,
     load_grasp_data,
     normalize_clouds,
@@ -87,6 +89,7 @@ __all__ = [
     "checkpoint_smoothness",
     "dataset_config",
     "dataset_warnings",
+    "first_poses",
     "fold_splits",
     "load_any",
     "load_folds",

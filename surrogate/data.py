@@ -21,7 +21,9 @@ Inputs and outputs of the network:
 
 Splits (:func:`split`): ``object`` holds out whole objects for the test (the default: objects the
 network never saw) and early-stops on held-out poses of the training objects; ``random`` is the
-paper's 80/20 split by sample, which leaks poses between training and test.
+paper's 80/20 split by sample, which leaks poses between training and test. :func:`first_poses`
+cuts a split's training and validation rows to the first N poses of each object (a learning curve
+over poses), its test rows left whole.
 """
 
 from __future__ import annotations
@@ -52,11 +54,13 @@ __all__ = [
     "TrainBatch",
     "cloud_frame",
     "design_inputs",
+    "first_poses",
     "fold_splits",
     "frame_inputs",
     "load_grasp_data",
     "normalize_clouds",
     "pose_batches",
+    "pose_rank",
     "split",
     "subsample",
 ]
@@ -352,6 +356,49 @@ def subsample(parts: Split, fraction: float, *, seed: int = 0) -> Split:
     keep = max(1, int(round(fraction * len(parts.train))))
     rows = np.random.default_rng(seed).choice(parts.train, size=keep, replace=False)
     return dataclasses.replace(parts, train=np.sort(rows))
+
+
+def pose_rank(data: GraspData) -> np.ndarray:
+    """Each pose's place among its object's poses with samples, in ``pose_index`` order, shape (P,).
+
+    0 is the object's first sampled pose; a pose without samples (a failed or rejected shard) is -1.
+    """
+    keys = data.pose_keys
+    sampled = np.zeros(len(keys), dtype=bool)
+    sampled[data.pose] = True
+    rows = np.flatnonzero(sampled)
+    rows = rows[np.lexsort((keys[rows, 1], keys[rows, 0]))]
+    obj = keys[rows, 0]
+    starts = np.flatnonzero(np.diff(obj, prepend=-1))
+    first = np.repeat(starts, np.diff(np.append(starts, len(rows))))
+    rank = np.full(len(keys), -1, dtype=np.int64)
+    rank[rows] = np.arange(len(rows)) - first
+    return rank
+
+
+def first_poses(data: GraspData, parts: Split, n: int) -> Split:
+    """``parts`` with its training and validation rows cut to the first ``n`` poses of each object.
+
+    The poses of an object count in :func:`pose_rank` order (``pose_index``, poses with samples only);
+    every sample (design) of a kept pose is kept, and an object of ``n`` poses or fewer keeps all of
+    them. The split (its held-out objects, its validation poses) is drawn before the cut, so it is the
+    same for every ``n``, and a smaller ``n``'s rows are a subset of a larger one's. The test rows are
+    left whole, so that networks trained on different ``n`` are scored on the same held-out rows.
+    :class:`DesignError` for ``n`` not an integer >= 1, or no training or no validation row left (a
+    small ``n`` may keep none of the validation poses).
+    """
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+        raise DesignError(f"poses per object must be an integer >= 1, got {n!r}")
+    keep = pose_rank(data)[data.pose] < n
+    cut = dataclasses.replace(parts, train=parts.train[keep[parts.train]], val=parts.val[keep[parts.val]])
+    empty = [name for name in ("train", "val") if len(getattr(cut, name)) == 0]
+    if empty:
+        raise DesignError(
+            f"the first {n} poses of each object hold no {' and no '.join(empty)} row of the {parts.mode} "
+            f"split (of {len(parts.train)} training and {len(parts.val)} validation rows): more poses per "
+            "object, or another seed"
+        )
+    return cut
 
 
 @dataclass(frozen=True, eq=False)

@@ -3,12 +3,12 @@
 :func:`train_and_report` writes into its output folder:
 
 * the checkpoint (``model.safetensors``, ``config.json`` with the metrics: :mod:`.checkpoint`);
-* ``metrics.json``: the split, the training curve, the held-out metrics of the network, of the
-  training mean and of gradient-boosted trees on the same split (:mod:`.metrics`; with a success
-  head, its probability beside the trees' success classifier), the design-ranking fidelity of each
-  and the labels' own repeatability (:mod:`.ranking`), the success rule's agreement with the
-  simulator on the simulator's own outputs, the 25 % data run, and the smoothness lines
-  (:mod:`.smoothness`);
+* ``metrics.json``: the split (its ``poses_per_object``: the cut of the training rows, or null), the
+  training curve, the held-out metrics of the network, of the training mean and of gradient-boosted
+  trees on the same split (:mod:`.metrics`; with a success head, its probability beside the trees'
+  success classifier), the design-ranking fidelity of each and the labels' own repeatability
+  (:mod:`.ranking`), the success rule's agreement with the simulator on the simulator's own outputs,
+  the 25 % data run, and the smoothness lines (:mod:`.smoothness`);
 * ``summary.md``: the same as tables, with a plain verdict against the baselines;
 * ``curves.png``, ``calibration.png`` and ``smoothness.png``.
 """
@@ -31,8 +31,10 @@ from mjcodesign.surrogate.data import (
     GraspData,
     Normalizer,
     Split,
+    first_poses,
     fold_splits,
     load_grasp_data,
+    pose_rank,
     split,
     subsample,
 )
@@ -244,6 +246,8 @@ def checkpoint_smoothness(
         raise OutputError(
             f"{ckpt}: the rebuilt split holds out {list(parts.test_objects)}, the checkpoint {held_out}"
         )
+    if (n := meta["split"].get("poses_per_object")) is not None:
+        parts = first_poses(data, parts, int(n))
     rows = _smoothness_poses(data, parts, poses, part)
     return {**smoothness(sur, data, rows, lines=lines, seed=seed, cache_dir=cache_dir), "part": part}
 
@@ -263,12 +267,19 @@ def train_and_report(
     on_epoch: Callable[[str, EpochLog], None] | None = None,
     init: str | Path | None = None,
     warn: Callable[[str], None] | None = None,
+    poses_per_object: int | None = None,
 ) -> dict:
     """Train on the dataset in ``data_dir``, write the checkpoint and report into ``out``; the metrics.
 
     ``init``: a checkpoint folder to continue from (fine-tuning, :func:`~.train.train`'s ``init``):
     its architecture and its normaliser are kept (``model_config`` must be None), and the record names
     it. ``warn`` receives one line per :func:`dataset_warnings` finding.
+
+    ``poses_per_object``: train and early-stop on the first N poses of each object only
+    (:func:`~.data.first_poses` of the split; None: all), every design of those poses; the split's
+    objects are the same for every N, and the held-out metrics are taken on all the test rows, so that
+    runs of different N are comparable (a learning curve). The report's ``split`` records N;
+    ``warn`` is told how many training objects have fewer poses than N (they keep all theirs).
 
     ``efficiency``: the share of training data of the second run (0: none). ``smoothness_poses``: test
     poses re-simulated along ``smoothness_lines`` design lines each (0: none). ``on_epoch(run, log)``
@@ -283,9 +294,14 @@ def train_and_report(
     start, mcfg = _initial(init, model_config)
     data = load_grasp_data(data_dir)
     parts = split(data, split_mode, seed=cfg.seed)
-    for line in dataset_warnings(data, parts):
+    lines = dataset_warnings(data, parts)
+    if poses_per_object is not None:
+        lines += _short_objects(data, parts, poses_per_object)  # of the uncut split: all their poses
+        parts = first_poses(data, parts, poses_per_object)
+    for line in lines:
         if warn:
             warn(line)
+    split_record = {**parts.as_dict(), "poses_per_object": poses_per_object}
     runs = {"full": train(data, parts, cfg, None if start else mcfg, init=start,
                           on_epoch=on_epoch and (lambda log: on_epoch("full", log)))}  # fmt: skip
     res = runs["full"]
@@ -306,7 +322,7 @@ def train_and_report(
     (tree_p,) = tree_success(data, parts.train, [parts.test], seed=cfg.seed)
     models = {"surrogate": net, "training mean": _measure("training mean", *mean, data, parts, res.normalizer, mean_p),
               "gradient-boosted trees": _measure("gradient-boosted trees", *tree, data, parts, res.normalizer, tree_p)}  # fmt: skip
-    metrics = {"dataset": dataset, "split": parts.as_dict(), "train_config": cfg.as_dict(), "model": mcfg.as_dict(),
+    metrics = {"dataset": dataset, "split": split_record, "train_config": cfg.as_dict(), "model": mcfg.as_dict(),
                "training": res.summary(), "test": models, "success_rule_on_simulator_outputs": _rule_ceiling(data, parts.test),
                "ranking": _ranking(data, parts, (net_pred, net_head), (tree[0], tree_p))}  # fmt: skip
     if efficiency:
@@ -330,7 +346,7 @@ def train_and_report(
     metrics["verdict"] = verdict(models, metrics["ranking"])
     sur.meta = {
         "dataset": dataset,
-        "split": parts.as_dict(),
+        "split": split_record,
         "train": cfg.as_dict(),
         "metrics": _brief(metrics),
     }
@@ -383,6 +399,21 @@ def _init_record(init) -> dict:
     ds = read_record(init).get("dataset") or {}
     return {"path": str(init), "dataset_manifest_sha256": ds.get("manifest_sha256"),
             "normalizer": "kept from the initial checkpoint (not refitted on this dataset)"}  # fmt: skip
+
+
+def _short_objects(data: GraspData, parts: Split, n: int) -> list[str]:
+    """A line when some of ``parts``' training objects have fewer than ``n`` sampled poses (none otherwise)."""
+    rank = pose_rank(data)
+    rows = np.concatenate([parts.train, parts.val])
+    names = sorted(set(data.objects[data.pose[rows]]))
+    counts = [int(rank[data.objects == name].max()) + 1 for name in names]
+    short = [c for c in counts if c < n]
+    if not short:
+        return []
+    return [
+        f"--poses-per-object {n}: {len(short)} of {len(names)} training objects have fewer poses "
+        f"(min {min(short)}) and train on all of theirs"
+    ]
 
 
 def user_objects(data: GraspData) -> set[str]:
@@ -588,6 +619,8 @@ def summary_markdown(m: dict) -> str:
         f"Dataset `{m['dataset']['path']}` ({m['dataset']['samples']} samples, {m['dataset']['poses']} poses; "
         f"manifest sha256 `{m['dataset']['manifest_sha256'][:12]}`). Split **{m['split']['mode']}**: "
         f"train {m['split']['train']}, validation {m['split']['val']}, test {m['split']['test']}"
+        + (f" (training and validation on the first {n} poses of each object, the test on all)"
+           if (n := m["split"].get("poses_per_object")) is not None else "")
         + (f" (held-out objects: {', '.join(m['split']['test_objects'])})" if m["split"]["test_objects"] else "")
         + ".",
         "",

@@ -37,6 +37,7 @@ from mjcodesign.surrogate import (
     Surrogate,
     TrainConfig,
     dataset_warnings,
+    first_poses,
     fold_splits,
     load_any,
     load_folds,
@@ -48,7 +49,7 @@ from mjcodesign.surrogate import (
     success_score,
     train,
 )
-from mjcodesign.surrogate.data import GraspDataset, pose_batches
+from mjcodesign.surrogate.data import GraspDataset, pose_batches, pose_rank
 from mjcodesign.surrogate.train import PRECISIONS, grasp_loss
 
 cli_main = importlib.import_module("mjcodesign.cli.main")  # the package's `main` attribute is the function
@@ -372,6 +373,7 @@ def test_train_command_writes_checkpoint_and_report(dataset, work, cli):
     assert code == 0, err
     res = json.loads(stdout)
     assert res["split"]["mode"] == "object" and res["epochs"] >= 1
+    assert res["split"]["poses_per_object"] is None and res["train_rows"] == res["split"]["train"]
     assert set(res["test_loss"]) == {"surrogate", "training mean", "gradient-boosted trees"}
     for name in (
         "model.safetensors",
@@ -604,3 +606,104 @@ def test_train_warns_of_a_one_sided_dataset_and_a_held_out_own_object(dataset, w
     code, _, err = cli("train", "--data", str(dataset), "--out", str(work / "warned"), *_TINY_ARGS, "--efficiency", "0",
                        "--smoothness-poses", "0")  # fmt: skip
     assert code == 0 and sum(ln.startswith("warning: your own object") for ln in err) == 1, err
+
+
+# -- a learning curve over poses -------------------------------------------------------------------
+
+
+def _first_pose_indices(data, n: int) -> dict[str, set[int]]:
+    """Per object, the ``n`` smallest pose_index values among its poses with samples."""
+    sampled = np.unique(data.pose)
+    out: dict[str, set[int]] = {}
+    for name in set(data.objects[sampled]):
+        indices = sorted(int(data.pose_keys[p, 1]) for p in sampled if data.objects[p] == name)
+        out[name] = set(indices[:n])
+    return out
+
+
+def _kept(data, rows, n: int) -> np.ndarray:
+    """The rows of ``rows`` whose pose is among the first ``n`` of its object (:func:`_first_pose_indices`)."""
+    first = _first_pose_indices(data, n)
+    p = data.pose[rows]
+    return rows[[int(data.pose_keys[q, 1]) in first[data.objects[q]] for q in p]]
+
+
+def _seed(data, n: int, *, validation: bool) -> int:
+    """The first split seed whose one validation pose is (or is not) among the first ``n`` of its object."""
+    return next(
+        s for s in range(100) if bool(len(_kept(data, split(data, "object", seed=s).val, n))) == validation
+    )
+
+
+def test_first_poses_keep_every_design_of_the_first_poses_and_every_test_row(data):
+    assert np.unique(data.pose_keys[:, 1]).size == 3  # 3 poses of each object
+    parts = split(data, "object", seed=_seed(data, 2, validation=True))
+    cut = first_poses(data, parts, 2)
+    assert_array_equal(cut.train, _kept(data, parts.train, 2))
+    assert_array_equal(cut.val, _kept(data, parts.val, 2))
+    assert 0 < len(cut.train) < len(parts.train)
+    assert_array_equal(cut.test, parts.test)  # the held-out rows: all poses of the held-out objects
+    assert cut.test_objects == parts.test_objects and cut.mode == parts.mode
+    for p in np.unique(data.pose[cut.train]):  # every design row of a kept pose
+        assert np.sum(data.pose[cut.train] == p) == np.sum(data.pose[parts.train] == p)
+    whole = first_poses(data, parts, 3)
+    assert_array_equal(whole.train, parts.train)
+    assert_array_equal(whole.val, parts.val)
+    # The random split: the same cut of its training rows, its test rows whole.
+    r = split(data, "random", seed=0)
+    assert_array_equal(first_poses(data, r, 1).train, _kept(data, r.train, 1))
+    assert_array_equal(first_poses(data, r, 1).test, r.test)
+    for bad in (0, -1, 1.5, True):
+        with pytest.raises(DesignError):
+            first_poses(data, parts, bad)
+    with pytest.raises(DesignError, match="first 2 poses of each object hold no val row"):
+        first_poses(data, split(data, "object", seed=_seed(data, 2, validation=False)), 2)
+    # A pose without samples is not counted: the object's next one is its first.
+    obj0 = np.flatnonzero(data.pose_keys[:, 0] == data.pose_keys[0, 0])
+    gone = dataclasses.replace(data, pose=data.pose[data.pose != obj0[0]])
+    rank = pose_rank(gone)
+    assert rank[obj0[0]] == -1 and list(rank[obj0[1:]]) == [0, 1]
+    assert list(pose_rank(data)[obj0]) == [0, 1, 2]
+
+
+def test_train_on_the_first_poses_keeps_the_held_out_objects_and_rows(dataset, work, cli):
+    data = load_grasp_data(dataset)
+    seed = _seed(data, 2, validation=True)
+    parts = split(data, "object", seed=seed)  # what train does without --poses-per-object
+    out = work / "first2"
+    code, stdout, err = cli("train", "--data", str(dataset), "--out", str(out), *_TINY_ARGS, "--efficiency", "0",
+                            "--smoothness-poses", "0", "--seed", str(seed), "--poses-per-object", "2", "--json")  # fmt: skip
+    assert code == 0 and not any("poses-per-object" in ln for ln in err), err
+    res = json.loads(stdout)
+    m = json.loads((out / "metrics.json").read_text())
+    expected = _kept(data, parts.train, 2)
+    assert res["train_rows"] == m["training"]["train_rows"] == m["split"]["train"] == len(expected)
+    assert m["split"]["val"] == len(_kept(data, parts.val, 2))
+    assert m["split"]["test"] == len(parts.test) and m["split"]["test_objects"] == list(parts.test_objects)
+    assert m["split"]["poses_per_object"] == 2 and load_surrogate(out).meta["split"]["poses_per_object"] == 2
+    assert m["test"]["surrogate"]["success"]["rate"] == pytest.approx(data.success[parts.test].mean())
+    assert "first 2 poses of each object" in (out / "summary.md").read_text()
+    # More poses than an object has: all of them, and one line that says so.
+    code, stdout, err = cli("train", "--data", str(dataset), "--out", str(work / "first5"), *_TINY_ARGS, "--efficiency",
+                            "0", "--smoothness-poses", "0", "--seed", str(seed), "--poses-per-object", "5", "--json")  # fmt: skip
+    said = [ln for ln in err if "poses-per-object" in ln]
+    assert code == 0 and said == ["warning: --poses-per-object 5: 2 of 2 training objects have fewer poses "
+                                  "(min 3) and train on all of theirs"], err  # fmt: skip
+    assert json.loads(stdout)["train_rows"] == len(parts.train)
+
+
+def test_bad_poses_per_object_exits_2_with_one_line(dataset, cli, tmp_path):
+    out = tmp_path / "o"
+    for value in ("0", "-1", "1.5", "two"):
+        code, stdout, err = cli(
+            "train", "--data", str(dataset), "--out", str(out), "--poses-per-object", value
+        )
+        assert code == 2 and len(err) == 1 and "--poses-per-object" in err[0] and not stdout, (value, err)
+        assert not out.exists()
+    code, stdout, err = cli("train", "--data", str(dataset), "--out", str(out), "--folds", "3",
+                            "--poses-per-object", "2", *_TINY_ARGS)  # fmt: skip
+    assert code == 2 and len(err) == 1 and "--poses-per-object" in err[0] and not out.exists(), err
+    seed = str(_seed(load_grasp_data(dataset), 2, validation=False))  # no validation pose left: refused
+    code, stdout, err = cli("train", "--data", str(dataset), "--out", str(out), "--seed", seed,
+                            "--poses-per-object", "2", *_TINY_ARGS)  # fmt: skip
+    assert code == 2 and len(err) == 1 and "no val row" in err[0] and not out.exists(), err

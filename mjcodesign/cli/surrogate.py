@@ -99,6 +99,16 @@ def add_parser(subparsers) -> None:
         help="the paper's inputs: no vertical, cloud centre and radius beside the PointNet feature (ablation)",
     )
     t.add_argument(
+        "--poses-per-object",
+        type=int_at_least(1),
+        default=None,
+        metavar="N",
+        help="train and early-stop on the first N poses of each object only (in the dataset's pose_index "
+        "order), every design of those poses (default: all); the held-out objects are the same for every "
+        "N, and the held-out metrics are taken on all their poses, so that runs of different N compare "
+        "(a learning curve)",
+    )
+    t.add_argument(
         "--efficiency",
         type=_fraction,
         default=0.25,
@@ -267,6 +277,7 @@ def run_train(args: argparse.Namespace) -> int:
                 on_epoch=on_epoch,
                 init=args.init,
                 warn=_warn,
+                poses_per_object=args.poses_per_object,
             )
     finally:
         for board in boards:
@@ -275,6 +286,7 @@ def run_train(args: argparse.Namespace) -> int:
     res = {
         "out": args.out,
         "split": m["split"],
+        "train_rows": m["training"]["train_rows"],
         "epochs": m["training"]["epochs"],
         "best_epoch": m["training"]["best_epoch"],
         "wall_s": m["training"]["wall_s"],
@@ -295,7 +307,8 @@ def _warn(message: str) -> None:
 
 _FOLDS_REFUSES = (("--split", "split", "object"), ("--efficiency", "efficiency", 0.25),
                   ("--smoothness-poses", "smoothness_poses", 16), ("--smoothness-lines", "smoothness_lines", 4),
-                  ("--tensorboard", "tensorboard", None))  # flags whose run --folds does not make, at their defaults  # fmt: skip
+                  ("--tensorboard", "tensorboard", None),
+                  ("--poses-per-object", "poses_per_object", None))  # flags whose run --folds does not make, at their defaults  # fmt: skip
 
 
 def _fold_of(args: argparse.Namespace) -> dict[str, int]:
