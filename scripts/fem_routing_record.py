@@ -10,6 +10,10 @@ The FEM (`FemOptions(routing="printed")`: the tendon through the 18 channel poin
   tension at which the printed chain bends ``--bend`` rad (found on the chain by bisection; all far
   below the chain's buckling tension), bend and tip displacement.
 
+and (``--parts refinement``, one uniform finger, ``--refinement-log-e``) the buckling tension as the mesh is
+refined, `REFINEMENT_MESHES`: linearised and over the global modes, and where the linearised mode's
+energy lies (per block, at the cuts' feet, around the tendon's loaded vertices);
+
 and on ``--path-mesh`` (cheaper: its static solves run to large curls) the equilibrium path of one uniform
 finger, ``--path-log-e``, at increasing fractions of that mesh's linearised buckling tension
 (`FemStability.path_stability`), until its tangent's smallest eigenvalue crosses zero or Newton fails.
@@ -48,6 +52,14 @@ PATH_MESH = {"h": 4e-3, "spine_layers": 2, "order": 2}
 """The path's mesh: quadratic tets within 4% of Euler-Bernoulli on the presets (`mjcodesign.sim.fem.finger`)."""
 PATH_FRACTIONS = (0.02, 0.05, 0.1, 0.2, 0.35, 0.5, 0.75, 1.0, 1.25, 1.5)
 """Tensions of the path, as fractions of its mesh's linearised buckling tension."""
+REFINEMENT_MESHES = (
+    {"h": 4e-3, "spine_layers": 2, "order": 2},
+    {"h": 4e-3, "spine_layers": 4, "order": 2},
+    {"h": 4e-3, "spine_layers": 8, "order": 2},
+    CONVERGED_MESH,
+)
+"""Quadratic tets: the spine's layers (and with them the flexures' and cuts' cells) halved twice at 4 mm
+cells, then the converged mesh (2 mm cells along the segments)."""
 _BISECT_REL = 0.01  # the chain's tension for the target bend, to 1% [N]
 
 
@@ -66,23 +78,41 @@ def _tension_for_bend(stiffness: Stiffness, bend: float, t_max: float) -> float:
     return float(np.sqrt(lo * hi))
 
 
+def _buckling_row(fem: FemFinger, log_e: float) -> dict:
+    """The uniform finger ``log_e``'s buckling (`FemStability.buckling_tension`) and the chain's."""
+    t0 = time.perf_counter()
+    fem.set_log_e([log_e] * 22)
+    b = fem.buckling_tension()
+    return {
+        "log_e": log_e,
+        "fem_follower_eigenvalue_per_n": b.follower_eigenvalue_per_n,
+        "fem_follower_n": b.follower_tension_n,
+        "fem_linearised_n": b.linearised_tension_n,
+        "fem_mode_block": b.mode_block,
+        "fem_mode_block_angles": list(b.mode_block_angles),
+        "fem_mode_block_energy": list(b.mode_block_energy),
+        "fem_mode_energy_at_feet": b.mode_energy_at_feet,
+        "fem_mode_energy_at_tendon": b.mode_energy_at_tendon,
+        "fem_global_n": b.global_tension_n,
+        "fem_global_mode_block_energy": list(b.global_mode_block_energy),
+        "fem_global_mode_energy_at_feet": b.global_mode_energy_at_feet,
+        "chain_n": _chain_t_crit([log_e] * 11),
+        "seconds": time.perf_counter() - t0,
+    }
+
+
 def _buckling(fem: FemFinger, rows: list, log) -> None:
     for log_e in LOG_E:
-        t0 = time.perf_counter()
-        fem.set_log_e([log_e] * 22)
-        b = fem.buckling_tension()
-        rows.append(
-            {
-                "log_e": log_e,
-                "fem_follower_eigenvalue_per_n": b.follower_eigenvalue_per_n,
-                "fem_follower_n": b.follower_tension_n,
-                "fem_linearised_n": b.linearised_tension_n,
-                "fem_mode_block": b.mode_block,
-                "fem_mode_block_angles": list(b.mode_block_angles),
-                "chain_n": _chain_t_crit([log_e] * 11),
-                "seconds": time.perf_counter() - t0,
-            }
+        rows.append(_buckling_row(fem, log_e))
+        log(rows[-1])
+
+
+def _refinement(log_e: float, rows: list, log) -> None:
+    for mesh in REFINEMENT_MESHES:
+        fem = FemFinger(
+            FingerDesign(), Stiffness([log_e] * 11), options=FemOptions(**mesh, routing="printed")
         )
+        rows.append({"mesh": mesh, "free_dofs": int(fem.free_dof.sum()), **_buckling_row(fem, log_e)})
         log(rows[-1])
 
 
@@ -139,7 +169,12 @@ def main(argv=None) -> None:
     p.add_argument("--seeds", default="0..9", help="Stiffness.random seeds of the curl designs, A..B")
     p.add_argument("--bend", type=float, default=1.0, help="the chain's bend [rad] that sets each tension")
     p.add_argument("--path-log-e", type=float, default=13.5, help="ln E of the path's uniform finger")
-    p.add_argument("--parts", default="buckling,curl,path", help="what to record, comma-separated")
+    p.add_argument(
+        "--refinement-log-e", type=float, default=15.0, help="ln E of the mesh refinement's uniform finger"
+    )
+    p.add_argument(
+        "--parts", default="buckling,curl,path", help="what to record (buckling, curl, path, refinement)"
+    )
     p.add_argument(
         "--curl-mesh",
         choices=("converged", "path"),
@@ -181,6 +216,8 @@ def main(argv=None) -> None:
                 FingerDesign(), Stiffness([LOG_E[0]] * 11), options=FemOptions(**curl_mesh, routing="printed")
             )
         _curls(fem, seeds, args.bend, record.setdefault("curl", []), log)
+    if "refinement" in parts:
+        _refinement(args.refinement_log_e, record.setdefault("refinement", []), log)
     if "path" in parts:
         _path(args.path_log_e, record.setdefault("path", {}), log)
         log({"path_critical_tension_n": record["path"]["critical_tension_n"]})

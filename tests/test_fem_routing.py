@@ -33,6 +33,11 @@ _TOL_FD_FORCE = 1e-6  # f·v against −T dℓ/dv by central differences (step 1
 _TOL_FD_JAC = 1e-6  # J v against the central difference of f, relative to |J v|
 _TOL_VIRIAL = 1e-7  # vᵀ K_σ v of a rigid turn vs the virial of the Warp tangent's forces (its finite differences: 1.5e-8 measured, quadratic)
 _TOL_SCALING = 1e-6  # buckling tension ∝ E on uniform fingers (Lanczos tolerance 1e-8)
+# The same over the global modes: the tangent's finite-difference round-off (~1e-9) moves them 1.3e-6
+# (coarse mesh), their Ritz basis being ill-conditioned (singular values 1 to 1.2e-4).
+_TOL_SCALING_GLOBAL = 1e-5
+_TOL_EIG = 1e-8  # a Lanczos eigenvalue's relative accuracy (ARPACK tol, mjcodesign.sim.fem.stability)
+_POINT_SHARE = 0.01  # mode energy around the tendon's loaded vertices (an indentation would hold most)
 _TOL_BUCKLE = 0.15  # chain's buckling tension vs the FEM with the same routing (issue's target)
 _TOL_CURL = 0.10  # chain's curl vs the FEM with the same routing, below buckling (issue's target)
 _LOG_E = (13.5, 14.2, 14.9, 15.6, 16.3, 17.0)  # uniform fingers, those of tests/test_routing.py
@@ -134,8 +139,21 @@ def test_buckling_tension_scales_with_the_modulus_and_the_follower_alone_never_b
     b = fem.buckling_tension()
     fem.set_log_e([15.0] * 22)
     assert b.linearised_tension_n / a.linearised_tension_n == pytest.approx(np.e, rel=_TOL_SCALING)
+    assert b.global_tension_n / a.global_tension_n == pytest.approx(np.e, rel=_TOL_SCALING_GLOBAL)
     assert a.follower_tension_n == np.inf and a.follower_eigenvalue_per_n < 1e-9
     assert a.mode_block == 1  # the first flexure, as the chain's closed form says (tests/test_routing.py)
+
+
+def test_global_buckling_bounds_the_linearised_one_and_bends_the_first_flexure(fem_linear):
+    # Rayleigh–Ritz: over any subspace S, max_{v∈S} vᵀ(−B)v / vᵀK₀v ≤ μ_max of the whole pencil, so the
+    # tension over the global modes (S: responses to the segments' rigid loads) is ≥ the linearised one.
+    b = fem_linear.buckling_tension()
+    assert b.global_tension_n >= b.linearised_tension_n * (1.0 - _TOL_EIG)
+    assert sum(b.mode_block_energy) == pytest.approx(1.0, abs=1e-12)
+    assert sum(b.global_mode_block_energy) == pytest.approx(1.0, abs=1e-12)
+    assert int(np.argmax(b.global_mode_block_energy)) == 1  # flexure 1, as the chain's closed form
+    # The tendon's point forces (all but the tip's are kinks of ~0.015 T) are not where the mode is.
+    assert b.mode_energy_at_tendon < _POINT_SHARE
 
 
 def test_printed_curl_bends_inwards_and_path_stays_stable_well_below_buckling(fem_linear):

@@ -107,7 +107,21 @@ class FemBuckling:
     """The linearised mode's section rotation of each block relative to the previous one, largest
     |entry| 1, (n_blocks,)."""
     mode_block: int
-    """The block that turns most in the mode."""
+    """The block that turns most in the mode. Read at the spine's sections, whose top vertices sit on
+    the cuts' feet: a mode that wrinkles a foot misleads it (``mode_block_energy`` does not)."""
+    mode_block_energy: tuple[float, ...]
+    """The linearised mode's share of its elastic energy ½ vᵀK₀v in each block, summing to 1, (n_blocks,)."""
+    mode_energy_at_feet: float
+    """Its share within 0.5 mm of a cut's foot (a segment's trapezoid cut meeting the spine's top)."""
+    mode_energy_at_tendon: float
+    """Its share in the tets that touch a vertex a tendon point loads (the support of the points' weights)."""
+    global_tension_n: float
+    """The linearised pencil's critical tension [N] over the global modes only: Rayleigh–Ritz on the
+    static responses to each segment's rigid in-plane loads; at least ``linearised_tension_n``."""
+    global_mode_block_energy: tuple[float, ...]
+    """The global mode's share of its elastic energy in each block, (n_blocks,)."""
+    global_mode_energy_at_feet: float
+    """The global mode's share within 0.5 mm of a cut's foot."""
 
 
 @dataclass(frozen=True, eq=False)

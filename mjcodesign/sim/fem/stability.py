@@ -26,6 +26,16 @@ unloaded finger in two ways:
   (central differences of K along u₁) the pencil turned singular at 0.46 mN on the converged mesh
   (ln E 15), a thousandth of the compression's own buckling, with the curl's shape as its mode.
 
+Where the linearised mode lives is read from its elastic energy ½ vᵀK₀v, tet by tet: its share in each
+block, within `_NEAR` of a cut's foot (the edge across the width where a segment's trapezoid cut meets
+the spine's top, a re-entrant corner whose stress is singular) and in the tets around the vertices the
+tendon's points load (where a point force's singular stress would sit).
+**Global modes**: the same pencil restricted (Rayleigh–Ritz) to the static responses K₀⁻¹ f to each
+segment's rigid in-plane loads f (the inertial loads of a unit acceleration along x, along z and about y
+through its centre of mass): the finger's flexures and segments bending as wholes, without the local
+wrinkles a sharp corner's singular prestress admits on a fine mesh. Its tension bounds the linearised
+one from above (a subspace's largest μ is at most the whole pencil's).
+
 `FemStability.path_stability` follows the loaded path instead: static equilibria at increasing T and the
 smallest eigenvalue λ of A(x(T), T) v = λ K₀ v there (1 at rest; it falls fast as the finger curls,
 since a turned block's axial stiffness no longer lies along K₀'s, but it reaches zero only where A is
@@ -38,9 +48,11 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from mjcodesign.design.finger import BlockKind
 from mjcodesign.errors import DesignError, SimulationDiverged
 from mjcodesign.sim.fem.mesh import P2_EDGES
 from mjcodesign.sim.fem.results import FemBuckling, FemPathStability
@@ -56,6 +68,10 @@ _N_MODES = 3
 """Eigenpairs Lanczos converges at once; more than one keeps the largest from being missed."""
 _MODE_STEP = 1e-6
 """Displacement [m] (largest vertex) at which a mode's section rotations are read, linear to 1e-6."""
+_NEAR = 0.5e-3
+"""Radius [m] within which a tet (its centroid) counts as at a cut's foot: a quarter of the 2 mm spine,
+below the printed channel's 0.6 mm radius; a flexure bending as a whole (8 mm long) keeps most of its
+energy farther out."""
 _NO_BUCKLING = 1e-9
 """[1/N]: an eigenvalue below this is a critical tension past 1 GN, i.e. none (the follower eigenvalue's
 round-off is ~1e-12)."""
@@ -65,7 +81,10 @@ class FemStability(FemStatics):
     """A `FemStatics` with the buckling tension of its tendon (frictionless law)."""
 
     def buckling_tension(self) -> FemBuckling:
-        """The unloaded finger's critical tensions [N], follower only and linearised (module docstring)."""
+        """The unloaded finger's critical tensions [N], follower only, linearised and over the global modes.
+
+        With where the linearised and the global mode keep their elastic energy (module docstring).
+        """
         X = self.mesh.vertices
         free = self.free_dof
         K0 = self._free_tangent(X, None, 0.0)
@@ -90,6 +109,16 @@ class FemStability(FemStatics):
         top = int(np.argmax(mu))
         linear = 1.0 / mu[top] if mu[top] > _NO_BUCKLING else float("inf")
         mode = self._mode_rotations(vecs[:, top])
+        # Global modes: Rayleigh–Ritz on the responses to the segments' rigid loads.
+        V = np.linalg.qr(lu.solve(self._segment_loads()[free]))[0]
+        K_r, B_r = V.T @ (K0 @ V), V.T @ (-(B @ V))
+        mu_r, a = sla.eigh(0.5 * (B_r + B_r.T), 0.5 * (K_r + K_r.T))
+        glob = 1.0 / mu_r[-1] if mu_r[-1] > _NO_BUCKLING else float("inf")
+        H = self._tet_hessians(X)
+        shares = self._energy_shares(vecs[:, top], H)
+        global_shares = self._energy_shares(V @ a[:, -1], H)
+        feet, points = self._near_feet_and_tendon()
+        blocks = self.design.n_blocks
         return FemBuckling(
             follower_eigenvalue_per_n=lam,
             follower_tension_n=float(follower),
@@ -97,7 +126,63 @@ class FemStability(FemStatics):
             linearised_tension_n=float(linear),
             mode_block_angles=tuple(float(a) for a in mode),
             mode_block=int(np.argmax(np.abs(mode))),
+            mode_block_energy=tuple(np.bincount(self.mesh.tet_block, shares, minlength=blocks).tolist()),
+            mode_energy_at_feet=float(shares[feet].sum()),
+            mode_energy_at_tendon=float(shares[points].sum()),
+            global_tension_n=float(glob),
+            global_mode_block_energy=tuple(
+                np.bincount(self.mesh.tet_block, global_shares, minlength=blocks).tolist()
+            ),
+            global_mode_energy_at_feet=float(global_shares[feet].sum()),
         )
+
+    def _segment_loads(self) -> np.ndarray:
+        """Each segment's rigid in-plane loads [N], shape (3n, 3·n_segments).
+
+        m_a·e_x, m_a·e_z and m_a·ŷ × (X_a − c) on its vertices a (lumped masses m_a, c its centre of mass).
+        """
+        m = self.mesh
+        loads = []
+        for b in self.design.blocks():
+            if b.kind is not BlockKind.SEGMENT:
+                continue
+            idx = np.unique(m.tets[m.tet_block == b.index])
+            mass = self.mass[idx]
+            r = m.vertices[idx] - mass @ m.vertices[idx] / mass.sum()
+            for field in (np.eye(3)[0], np.eye(3)[2], np.c_[r[:, 2], np.zeros(len(r)), -r[:, 0]]):
+                f = np.zeros((m.n_vertices, 3))
+                f[idx] = mass[:, None] * field
+                loads.append(f.ravel())
+        return np.array(loads).T
+
+    def _energy_shares(self, v_free: np.ndarray, hessians: np.ndarray) -> np.ndarray:
+        """Each tet's share of the elastic energy ½ vᵀK₀v of the free-DOF vector ``v_free``, (n_tets,)."""
+        v = np.zeros(3 * self.mesh.n_vertices)
+        v[self.free_dof] = v_free
+        ve = v.reshape(-1, 3)[self.mesh.tets].reshape(self.mesh.n_tets, -1)
+        e = np.einsum("ti,tij,tj->t", ve, hessians, ve)
+        return e / e.sum()
+
+    def _near_feet_and_tendon(self) -> tuple[np.ndarray, np.ndarray]:
+        """Two boolean masks over the tets, (n_tets,): at a cut's foot; around the tendon's loads.
+
+        The first holds the tets whose centroid lies within `_NEAR` of a cut's foot, the second those that
+        touch a vertex a tendon point loads (the support of ``path_weights``).
+        """
+        X = self.mesh.vertices
+        centroid = X[self.mesh.tets[:, :4]].mean(axis=1)
+        feet = np.array(
+            [
+                (x, b.spine)
+                for b in self.design.blocks()
+                if b.kind is BlockKind.SEGMENT
+                for x, cut in ((b.x0, b.cut0), (b.x1, b.cut1))
+                if cut > 0
+            ]
+        )
+        to_foot = np.linalg.norm(centroid[:, None, [0, 2]] - feet[None], axis=2).min(axis=1)
+        loaded = np.flatnonzero(np.abs(np.asarray(self.path_weights)).sum(axis=0) > 0)
+        return to_foot < _NEAR, np.isin(self.mesh.tets, loaded).any(axis=1)
 
     def path_stability(self, tensions, *, on_point: Callable[[float, float, float], None] | None = None):
         """Equilibria at the increasing ``tensions`` [N] and the smallest eigenvalue of their tangent.
