@@ -16,7 +16,7 @@ from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.errors import DesignError, MeshError
 from mjcodesign.models import build_finger
 from mjcodesign.models.channels import channel_points
-from mjcodesign.models.stability import buckling_tension
+from mjcodesign.models.stability import buckling_tension, string_buckling_tension
 from mjcodesign.models.types import FingerModel, SimOptions
 from mjcodesign.scenarios.static import curl
 
@@ -262,18 +262,9 @@ _TOL_CONTINUOUS = 0.15  # the FEM's global mode vs a continuous flexure under th
 
 
 def _continuous_flexure_t_crit(k: float, flexure, x_a: float, x_b: float, n: int) -> float:
-    """Buckling tension [N] of a flexure of hinge stiffness ``k`` [N·m/rad] as ``n`` equal hinges in series.
-
-    A straight tendon from ``x_a`` before the flexure to ``x_b`` after it (chord along the finger), hinges
-    at x_i with angles θ_i: to second order its length is ℓ₀ − z Σθ_i + ½ θᵀHθ with
-        H_ij = −(x_b − max(x_i, x_j)) + (x_b − x_i)(x_b − x_j) / (x_b − x_a),
-    and each hinge is n·k stiff; T_crit = 1 / λ_max(−H, n k I). n = 1 (one hinge at the middle) is the
-    chain's closed form k (a+b)/(ab); n → ∞ is an Euler–Bernoulli flexure (EI = k · its length).
-    """
-    dx = (flexure.x1 - flexure.x0) / n
-    x = flexure.x0 + dx * (np.arange(n) + 0.5)
-    H = -(x_b - np.maximum.outer(x, x)) + np.outer(x_b - x, x_b - x) / (x_b - x_a)
-    return n * k / np.max(np.linalg.eigvalsh(-H))
+    """Buckling tension [N] of a flexure of hinge stiffness ``k`` [N·m/rad] as ``n`` equal hinges in series
+    under a tendon straight from ``x_a`` to ``x_b`` (:func:`~mjcodesign.models.stability.string_buckling_tension`)."""
+    return string_buckling_tension(k, flexure.x0, flexure.x1, x_a, x_b, n)
 
 
 def test_the_refinement_record_halves_the_spine_layers_then_reaches_the_converged_mesh():

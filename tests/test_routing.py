@@ -111,8 +111,6 @@ def test_channels_lie_in_the_printed_fingers_holes(reference_dir):
 def test_printed_routing_is_refused_where_it_does_not_apply():
     with pytest.raises(DesignError, match="routing"):
         SimOptions(routing="straight")
-    with pytest.raises(DesignError, match="one hinge per block"):
-        SimOptions(routing="printed", hinges_per_block=2)
     with pytest.raises(DesignError, match="6-segment"):
         options = SimOptions(routing="printed", stiffness_model="beam")
         build_finger(

@@ -29,7 +29,22 @@ from mjcodesign.models.types import (
     tendon_exit_site,
 )
 
-__all__ = ["build_finger", "build_gripper", "set_openings", "make_data", "apply_cell_moduli"]
+__all__ = [
+    "build_finger",
+    "build_gripper",
+    "set_openings",
+    "make_data",
+    "apply_cell_moduli",
+    "FLEXURE_HINGES_GRASP_REFUSAL",
+]
+
+FLEXURE_HINGES_GRASP_REFUSAL = (
+    "the printed chain with several hinges per flexure is validated below buckling only (buckling tension "
+    "and curl against the FEM); past buckling a flexure's hinges fold into an S that nothing stops (the "
+    "chain's links never touch each other, and the stops hold the flexure's sum): soft at 10 N turned "
+    "flexure 1's two hinges to +2.9 and -2.5 rad and never came to rest; grasp with hinges_per_block=1"
+)
+"""Why :func:`build_gripper` refuses the printed routing with ``hinges_per_block`` > 1."""
 
 
 def _add_tendon(spec: mujoco.MjSpec, handle: FingerHandle, exit_site: str, options: SimOptions) -> None:
@@ -134,6 +149,8 @@ def build_gripper(
     """Two opposed fingers on a palm: lift slide (world z), palm at ``pose``, prismatic openings."""
     options = options or SimOptions()
     model = FingerModel(model)
+    if options.routing == "printed" and options.hinges_per_block != 1:
+        raise UnsupportedError(FLEXURE_HINGES_GRASP_REFUSAL)
     pose = pose or GripperPose()
     spec = _model_spec("gripper", design, stiffness, model, options, scene)
     # The arm holds the palm: gravity-compensate the palm and carriages, not the soft fingers.

@@ -1,8 +1,9 @@
 """Hinge-chain (pseudo-rigid-body) finger.
 
 Each block's bending compliance is lumped into one hinge at the block's midpoint (hinges at block
-boundaries overshoot by 12–25%). Its stiffness and axis come from
-:attr:`SimOptions.stiffness_model`:
+boundaries overshoot by 12–25%), or into n hinges in series, each n times as stiff
+(:attr:`SimOptions.hinges_per_block`: every block's two, or the printed routing's flexures' n). Its
+stiffness and axis come from :attr:`SimOptions.stiffness_model`:
 
 * ``fem`` (default): ``k_i = 1 / c_i`` with ``c_i`` block i's rotation per unit moment in the calibrated
   FEM (:func:`mjcodesign.design.calibration.block_compliance`, per design in ~0.1 ms), about an axis at
@@ -44,6 +45,7 @@ from mjcodesign.models.types import (
 __all__ = [
     "add_chain_finger",
     "hinge_stiffness",
+    "hinge_counts",
     "joint_stiffness",
     "hinge_axes",
     "contact_solrefs",
@@ -133,18 +135,30 @@ def flexure_stops(design: FingerDesign, axes: np.ndarray) -> np.ndarray:
     return _stops(design, tuple(float(a) for a in axes)).copy()
 
 
+def hinge_counts(design: FingerDesign, options: SimOptions) -> np.ndarray:
+    """How many chain hinges carry every block, shape (n_blocks,).
+
+    ``options.hinges_per_block`` each, or under the printed routing each flexure's (the segments, which
+    carry its channels, keep one).
+    """
+    if options.routing != "printed":
+        return np.full(design.n_blocks, options.hinges_per_block, dtype=int)
+    flexure = np.array([b.kind is BlockKind.FLEXURE for b in design.blocks()])
+    return np.where(flexure, options.hinges_per_block, 1)
+
+
 def joint_stiffness(
     design: FingerDesign, young: np.ndarray, options: SimOptions
 ) -> tuple[np.ndarray, np.ndarray]:
     """Stiffness [N m / rad] and damping [N m s / rad] of each hinge of every block, shape (n_blocks,) each.
 
-    A block carried by n hinges in series (``options.hinges_per_block``) has each at n k
+    A block carried by n hinges in series (:func:`hinge_counts`) has each at n k
     (:func:`hinge_stiffness` k), so the block keeps its compliance 1 / k; the damping is Rayleigh,
     ``options.damping_time`` times the hinge's stiffness. The one rule for a model built
     (:func:`add_chain_finger`) and for another design written into a copy of it
     (``mjcodesign.sim.mujoco_c.with_stiffness``).
     """
-    k = hinge_stiffness(design, young, options.stiffness_model) * float(options.hinges_per_block)
+    k = hinge_stiffness(design, young, options.stiffness_model) * hinge_counts(design, options).astype(float)
     return k, options.damping_time * k
 
 
@@ -229,9 +243,12 @@ class _ChainBuilder:
     """Each hinge's damping per block [N m s / rad]."""
     stops: np.ndarray = field(init=False)
     waypoints: np.ndarray = field(init=False)
+    counts: np.ndarray = field(init=False)
+    """Hinges of every block (:func:`hinge_counts`)."""
 
     def __post_init__(self) -> None:
         self.blocks = self.design.blocks()
+        self.counts = hinge_counts(self.design, self.options)
         self.waypoints = np.asarray(self.design.waypoints(), dtype=float)
         self.stops = flexure_stops(self.design, hinge_axes(self.design, self.options.stiffness_model))
         rows = contact_solrefs(self.blocks, self.young, self.design.density, self.options.timestep)
@@ -254,15 +271,25 @@ class _ChainBuilder:
         )
 
     def split(self, i: int) -> bool:
-        """Whether block ``i`` is carried by two hinges (``SimOptions.hinges_per_block``)."""
-        return self.options.hinges_per_block == 2
+        """Whether block ``i`` is carried by two free hinges (the guided ``SimOptions.hinges_per_block=2``)."""
+        return self.options.routing != "printed" and self.options.hinges_per_block == 2
+
+    def distributed(self, i: int) -> bool:
+        """Whether block ``i`` is a printed chain's flexure carried by several hinges."""
+        return self.options.routing == "printed" and self.counts[i] > 1
 
     def hinge_points(self, i: int) -> tuple[float, ...]:
-        """Where block ``i``'s hinges sit along x: its middle, or a split block's quarter points."""
+        """Where block ``i``'s hinges sit along x.
+
+        Its middle, a split block's quarter points, or a distributed flexure's n equal parts' middles.
+        """
         blk = self.blocks[i]
         if self.split(i):
             quarter = 0.25 * (blk.x1 - blk.x0)
             return (blk.x0 + quarter, blk.x1 - quarter)
+        if self.distributed(i):
+            n = int(self.counts[i])
+            return tuple(blk.x0 + (blk.x1 - blk.x0) * (j + 0.5) / n for j in range(n))
         return (blk.mid,)
 
     def hinge(self, body, name: str, i: int, x: float, axis: float) -> None:
@@ -321,13 +348,18 @@ class _ChainBuilder:
         blk = self.blocks[i]
         p = self.prefix
         points = self.hinge_points(i)
-        if len(points) == 2:  # the middle link of a split block carries the waypoint
-            mid = parent.add_body(name=f"{p}block{i}m", pos=[points[0] - origin_prev, 0, 0])
-            self.hinge(mid, f"{p}hinge{i}m", i, points[0], axis)
-            self.piece(mid, i, points[0], points[1], points[0], "m")
-            self.waypoint(mid, i, points[0], waypoint)
+        # Middle links between a block's hinges, named m, m1, m2, ...; the one distal to the block's
+        # middle carries its waypoint: a split block's only one, link (n-1)//2 of n hinges.
+        carrier = (len(points) - 1) // 2
+        for j, (x, x_next) in enumerate(zip(points[:-1], points[1:], strict=True)):
+            tag = "m" if j == 0 else f"m{j}"
+            mid = parent.add_body(name=f"{p}block{i}{tag}", pos=[x - origin_prev, 0, 0])
+            self.hinge(mid, f"{p}hinge{i}{tag}", i, x, axis)
+            self.piece(mid, i, x, x_next, x, tag)
+            if j == carrier:
+                self.waypoint(mid, i, x, waypoint)
             self.handle.bodies.append(mid.name)
-            parent, origin_prev = mid, points[0]
+            parent, origin_prev = mid, x
         body = parent.add_body(name=f"{p}block{i}", pos=[points[-1] - origin_prev, 0, 0])
         self.hinge(body, f"{p}hinge{i}", i, points[-1], axis)
         self.piece(body, i, points[-1], blk.x1, points[-1], "d")
@@ -340,15 +372,16 @@ class _ChainBuilder:
         return body, points[-1]
 
     def hinge_range(self, i: int) -> np.ndarray | None:
-        """Range [rad] of block ``i``'s single hinge, or None (a split chain's hinges are free).
+        """Range [rad] of block ``i``'s single hinge, or None.
 
-        A flexure's: where its two segments meet (:func:`flexure_stops`). A segment's hinge is its
+        None for a split chain's hinges (free) and a distributed flexure's (held together,
+        :meth:`distributed_stops`). A flexure's: where its two segments meet (:func:`flexure_stops`). A segment's hinge is its
         roots' compliance, fitted on small bends; its roots can turn no further than a gap beside them
         can close, so it is held to ± the smaller inward stop of its flexures. Without that bound a
         soft finger pulled at the servo's 52 N turned a segment hinge to 5.3 rad while its flexure
         turned 2.2 rad outwards, each gap within its stop (docs/benchmarks.md, large-bend curl).
         """
-        if self.split(i):
+        if self.split(i) or self.distributed(i):
             return None
         if self.blocks[i].kind is BlockKind.FLEXURE:
             stop = self.stops[i]
@@ -379,26 +412,44 @@ class _ChainBuilder:
             return 1.0
         return 0.5
 
+    def block_joints(self, i: int) -> list[str]:
+        """Block ``i``'s hinge names, base to tip."""
+        return [n for n, b in zip(self.handle.joints, self.handle.joint_blocks, strict=True) if b == i]
+
+    def stop_tendon(self, name: str, shares: list[tuple[int, float]], stop: np.ndarray) -> None:
+        """A fixed tendon over every hinge of the blocks in ``shares`` (block, weight), held to ``stop``."""
+        ten = self.spec.add_tendon(name=f"{self.prefix}{name}")
+        for j, share in shares:
+            for joint in self.block_joints(j):
+                ten.wrap_joint(joint, share)
+        ten.limited = mujoco.mjtLimited.mjLIMITED_TRUE
+        ten.range = stop.tolist()
+        ten.solref_limit = self.stop_solref()
+
+    def distributed_stops(self) -> None:
+        """Every distributed flexure's stop: the sum of its hinges held to :func:`flexure_stops`.
+
+        As a single hinge's range holds its angle.
+        """
+        for i in range(1, len(self.blocks) - 1):
+            if self.distributed(i) and np.all(np.isfinite(self.stops[i])):
+                self.stop_tendon(f"flex{i}", [(i, 1.0)], self.stops[i])
+
     def gap_stops(self) -> None:
         """Limited fixed tendons that stop every flexure's gap where its segments meet.
 
         A segment's hinge lumps the rotation at its two flexure roots (the calibrated bending axis
         sits 1.4 mm up, at the roots' height), so the gap across flexure ``i`` closes by
-        ``θ_i + w (θ_{i-1} + θ_{i+1})`` (:meth:`gap_share`: w = 1/2, or 1 for an end segment's one root);
-        that sum is held to :func:`flexure_stops` (:meth:`stop_solref`). Without it, the segments
-        beside a flexure held at its stop bend on, 3-14 rad for a soft finger at 10 N in free space.
-        One hinge per block only: a split chain is left free.
+        ``θ_i + w (θ_{i-1} + θ_{i+1})`` (:meth:`gap_share`: w = 1/2, or 1 for an end segment's one root;
+        θ_i the sum of a distributed flexure's hinges); that sum is held to :func:`flexure_stops`
+        (:meth:`stop_solref`). Without it, the segments beside a flexure held at its stop bend on,
+        3-14 rad for a soft finger at 10 N in free space. A split chain is left free.
         """
         for i in range(1, len(self.blocks) - 1):
             stop = self.stops[i]
             if not np.all(np.isfinite(stop)) or any(self.split(j) for j in (i - 1, i, i + 1)):
                 continue
-            ten = self.spec.add_tendon(name=f"{self.prefix}gap{i}")
-            for j in (i - 1, i, i + 1):
-                ten.wrap_joint(self.handle.joints[j], self.gap_share(j))
-            ten.limited = mujoco.mjtLimited.mjLIMITED_TRUE
-            ten.range = stop.tolist()
-            ten.solref_limit = self.stop_solref()
+            self.stop_tendon(f"gap{i}", [(j, self.gap_share(j)) for j in (i - 1, i, i + 1)], stop)
 
     def tip(self, body) -> None:
         """The tip site on the last block's body."""
@@ -415,19 +466,19 @@ class _ChainBuilder:
         )
 
 
-def _add_channels(builder: _ChainBuilder, bodies: list) -> None:
+def _add_channels(builder: _ChainBuilder, bodies: list, origins: list[float]) -> None:
     """The printed routing's sites: each segment's channel entry, middle and exit, in the handle's chain.
 
     ``bodies[i]`` carries block i's proximal half (the finger's parent for block 0, frame at x = 0) and
-    ``bodies[i + 1]`` its middle and distal half (frame at its hinge, the block's middle): the entry rides
-    on the body before the segment's hinge, the middle (just past the hinge, as the channel guides the
-    tendon through the segment) and the exit on the one after it. Between one segment's exit and the
-    next one's entry the tendon crosses its flexure's hinge alone, with nothing on the flexure.
+    ``bodies[i + 1]`` its middle and distal half (frame at x = ``origins[i + 1]``, its last hinge: a
+    segment's middle): the entry rides on the body before the segment's hinge, the middle (just past the
+    hinge, as the channel guides the tendon through the segment) and the exit on the one after it.
+    Between one segment's exit and the next one's entry the tendon crosses its flexure's hinges alone,
+    with nothing on the flexure.
     """
     from mjcodesign.models.channels import channel_points
 
     segments = [b.index for b in builder.blocks if b.kind is BlockKind.SEGMENT]
-    origins = [0.0] + [b.mid for b in builder.blocks]
     sites = []
     for i, points in zip(segments, channel_points(builder.design), strict=True):
         for end, point, k in zip(("in", "mid", "out"), points, (i, i + 1, i + 1), strict=True):
@@ -464,11 +515,14 @@ def add_chain_finger(
     body = parent
     bodies = [parent]
     origin_prev = 0.0
+    origins = [origin_prev]
     for i in range(len(blocks)):
         body, origin_prev = builder.link(body, i, origin_prev, axes[i], builder.waypoints[i])
         bodies.append(body)
+        origins.append(origin_prev)
     if options.routing == "printed":
-        _add_channels(builder, bodies)
+        _add_channels(builder, bodies, origins)
+    builder.distributed_stops()
     builder.gap_stops()
     builder.tip(body)
     return handle

@@ -3,7 +3,8 @@
 A tendon at tension T adds T ∂²ℓ/∂θ² to the hinges' stiffness. Drawn straight across a hinge from a
 before it to b after it, ∂²ℓ/∂θ² = −ab/(a+b), so the printed routing (:attr:`SimOptions.routing`)
 softens every flexure it spans and buckles it past T = k (a+b)/(ab); the guided routing's fixed tendon
-has constant levers and no such term. Both are read here from MuJoCo's own forces, not from a formula.
+has constant levers and no such term. Both are read here from MuJoCo's own forces, not from a formula;
+:func:`string_buckling_tension` is the closed form for one flexure, as one hinge, n hinges or a beam.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 from mjcodesign.errors import DesignError
 from mjcodesign.models.types import Built, FingerModel, TendonMode
 
-__all__ = ["tangent_stiffness", "buckling_tension"]
+__all__ = ["tangent_stiffness", "buckling_tension", "string_buckling_tension"]
 
 _FD = 1e-6  # central-difference step of a hinge angle [rad]: forces are smooth, round-off ~1e-10 relative
 _NO_BUCKLING = 1e-6  # [1/N]: an eigenvalue below it is a critical tension past 1 MN, i.e. none
@@ -74,3 +75,20 @@ def buckling_tension(built: Built) -> tuple[float, np.ndarray]:
         return float("inf"), np.zeros(built.model.nv)
     mode = Li.T @ vecs[:, -1]
     return float(1.0 / mu[-1]), mode / mode[np.argmax(np.abs(mode))]
+
+
+def string_buckling_tension(k: float, x0: float, x1: float, x_a: float, x_b: float, hinges: int) -> float:
+    """Buckling tension [N] of one flexure as ``hinges`` equal hinges under a straight string.
+
+    The flexure runs from ``x0`` to ``x1`` [m] with stiffness ``k`` [N·m/rad], the string from ``x_a``
+    before it to ``x_b`` after it. The hinges sit at the middles of the flexure's n equal parts, each
+    n·k stiff; with the chord along the finger, the string's length to second order in the hinge angles θ
+    is ℓ₀ − z Σθ_i + ½ θᵀHθ with
+        H_ij = −(x_b − max(x_i, x_j)) + (x_b − x_i)(x_b − x_j) / (x_b − x_a),
+    and T_crit = 1 / λ_max(−H, n k I). n = 1 is the single hinge's k (a+b)/(ab); n → ∞ an Euler–Bernoulli
+    flexure with EI = k (x1 − x0), approached as 1/n².
+    """
+    dx = (x1 - x0) / hinges
+    x = x0 + dx * (np.arange(hinges) + 0.5)
+    H = -(x_b - np.maximum.outer(x, x)) + np.outer(x_b - x, x_b - x) / (x_b - x_a)
+    return float(hinges * k / np.max(np.linalg.eigvalsh(-H)))

@@ -25,6 +25,7 @@ __all__ = [
     "PALM_HALF",
     "TENDON_LEVERS",
     "ROUTINGS",
+    "MAX_FLEXURE_HINGES",
     "FLEX_GRASP_REFUSAL",
     "grasp_model",
     "tendon_exit_site",
@@ -49,6 +50,11 @@ TENDON_LEVERS = ("constant", "path")
 
 ROUTINGS = ("guided", "printed")
 """Where the chain's tendon runs (:attr:`SimOptions.routing`)."""
+
+MAX_FLEXURE_HINGES = 16
+"""Most chain hinges per flexure under the printed routing (:attr:`SimOptions.hinges_per_block`): with 16
+the first flexure's buckling tension under the printed tendon is 0.24% short of its Euler–Bernoulli
+limit (the gap falls as 1/n²)."""
 
 
 def tendon_exit_site(design: FingerDesign) -> np.ndarray:
@@ -168,7 +174,16 @@ class SimOptions:
     6.7% at 3.3 rad); the default single hinge gets the same from :attr:`tendon_lever` ``constant``
     (within 7.0% on 30 random designs to 1.6 rad) and has the stops, which the split chain lacks: its
     grasps fold a flexure's middle link and lose the tests' box (docs/benchmarks.md, large-bend curl). An
-    experiment option, kept for the FEM curls recorded with it (docs/validation/experiment-options.md)."""
+    experiment option, kept for the FEM curls recorded with it (docs/validation/experiment-options.md).
+
+    Under the ``printed`` :attr:`routing` it counts each flexure's hinges, 1 to :data:`MAX_FLEXURE_HINGES`;
+    the segments, which carry the channels, keep their one hinge. n hinges sit at the middles of the
+    flexure's n equal parts, each n times as stiff, and the tendon's straight span across the gap crosses
+    all of them, as it crosses a flexure that bends along its length: one hinge at the middle buckles at
+    k (a+b)/(ab), n → ∞ at an Euler–Bernoulli flexure's tension, 1.75× that on the first flexure. A
+    flexure's stop holds the sum of its hinges (a limited fixed tendon) where a single hinge's range
+    holds its angle (:mod:`mjcodesign.models.chain`). For a finger below buckling (statics, stability);
+    :func:`~mjcodesign.models.build_gripper` refuses it (``FLEXURE_HINGES_GRASP_REFUSAL``)."""
     tendon_lever: str = "constant"
     """How the chain's guided native tendon (:attr:`routing`) acts on its hinges. ``constant`` (default): a fixed tendon,
     ``ℓ = Σ_j (dℓ/dθ_j)₀ θ_j``, every hinge's lever frozen at the straight finger's
@@ -187,8 +202,9 @@ class SimOptions:
     STL, :mod:`mjcodesign.models.channels`) and straight across each flexure gap in air: a spatial tendon
     whose lever and geometric stiffness come from its path. A span from a distance a before a flexure's
     hinge to b after it adds −T·ab/(a+b) to that hinge's stiffness, so a flexure of stiffness k buckles
-    past T = k (a+b)/(ab), 2k/d for a = b = d. The segments' stops are the same. One hinge per block,
-    the chain's native tendon only (:class:`UnsupportedError` for a flex model or the point-force mode)."""
+    past T = k (a+b)/(ab), 2k/d for a = b = d. The segments' stops are the same. The chain's native tendon
+    only (:class:`UnsupportedError` for a flex model or the point-force mode), with one hinge per block by
+    default, or several per flexure (:attr:`hinges_per_block`)."""
     stiffness_model: str = "fem"
     """How block moduli become finger stiffness: ``fem``, calibrated to the converged Warp FEM
     (:mod:`mjcodesign.design.calibration`; the default finger geometry only), or ``beam``,
@@ -209,12 +225,21 @@ class SimOptions:
             raise DesignError("poisson must be in [0, 0.5)")
         if self.tendon_lever not in TENDON_LEVERS:
             raise DesignError(f"tendon_lever must be one of {TENDON_LEVERS}, got {self.tendon_lever!r}")
-        if self.hinges_per_block not in (1, 2) or isinstance(self.hinges_per_block, bool):
-            raise DesignError(f"hinges_per_block must be 1 or 2, got {self.hinges_per_block!r}")
         if self.routing not in ROUTINGS:
             raise DesignError(f"routing must be one of {ROUTINGS}, got {self.routing!r}")
-        if self.routing == "printed" and self.hinges_per_block != 1:
-            raise DesignError("the printed routing runs on one hinge per block (hinges_per_block=1)")
+        hinges = self.hinges_per_block
+        if self.routing == "printed":
+            if (
+                isinstance(hinges, bool)
+                or not isinstance(hinges, int)
+                or not 1 <= hinges <= MAX_FLEXURE_HINGES
+            ):
+                raise DesignError(
+                    f"the printed routing's hinges_per_block (hinges per flexure) must be a whole number "
+                    f"from 1 to {MAX_FLEXURE_HINGES}, got {hinges!r}"
+                )
+        elif hinges not in (1, 2) or isinstance(hinges, bool):
+            raise DesignError(f"hinges_per_block must be 1 or 2, got {hinges!r}")
 
 
 @dataclass
@@ -236,7 +261,8 @@ class FingerHandle:
     joints: list[str] = field(default_factory=list)
     """Chain: hinge names, base to tip."""
     joint_blocks: list[int] = field(default_factory=list)
-    """Chain: the block of every hinge in ``joints`` (a block has one, or two with ``hinges_per_block=2``)."""
+    """Chain: the block of every hinge in ``joints`` (a block has one, or ``hinges_per_block``: every block
+    under the guided routing, the flexures under the printed one)."""
     joint_levers: list[float] = field(default_factory=list)
     """Chain: the waypoint tendon's length change per hinge angle on the straight finger [m/rad], one per
     hinge in ``joints`` (negative: bending shortens the tendon); the coefficients of a constant-lever
