@@ -110,7 +110,7 @@ def main(argv=None) -> None:
     p.add_argument("--hinges", default="1,2,3,4,6,8,16", help="hinges per flexure, comma-separated")
     p.add_argument(
         "--fem-curls",
-        default="fem_routing_curl.json,fem_routing_curl13.json",
+        default="fem_routing_curl.json,fem_routing_curl13_seeds0-2.json,fem_routing_curl13_seeds3-9.json",
         help="recorded FEM curl files in tests/data, comma-separated (a missing one is skipped)",
     )
     args = p.parse_args(argv)
