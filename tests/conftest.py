@@ -25,6 +25,16 @@ def reference_dir():
     return REFERENCE
 
 
+@pytest.fixture(scope="module")
+def one_torch_thread():
+    """torch on one thread for a module's tests (a shared 2-core machine: a second thread mostly waits)."""
+    torch = pytest.importorskip("torch")
+    n = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(n)
+
+
 @pytest.fixture(scope="session")
 def tiny_checkpoint(tmp_path_factory):
     """A tiny surrogate trained here on a small generated dataset (two shapes, 2 poses x 6 designs)."""

@@ -114,12 +114,7 @@ def _poses(objects=(0, 1)) -> PoseSet:
     )
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def test_selection_follows_algorithm_1_step_by_step():

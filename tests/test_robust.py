@@ -96,12 +96,7 @@ def _poses() -> PoseSet:
     )
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 def test_mean_rule_reaches_the_midpoint_and_worst_the_dominant_variant():

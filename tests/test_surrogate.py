@@ -75,12 +75,7 @@ _TOL_F32 = 1e-5  # one function summed in another order in float32 (eps 1.2e-7, 
 _MIN_RULE_AGREEMENT = 0.9
 
 
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    n = torch.get_num_threads()
-    torch.set_num_threads(1)  # a shared 2-core machine: a second thread mostly waits
-    yield
-    torch.set_num_threads(n)
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 
 
 @pytest.fixture(scope="module")
