@@ -183,11 +183,15 @@ def _variant_surrogate(nominal, variants: dict, robust: str):
     from mjcodesign.surrogate import dataset_config, load_surrogate
 
     base = dataset_config(nominal)
+    if base is None:
+        raise DesignError(
+            "--robust: the --ckpt checkpoint records no dataset config, so no variant can be compared with it"
+        )
     members, models = [("nominal", nominal)], {}
     for name, path in variants.items():
         s = load_surrogate(path)
         c = dataset_config(s)
-        if c is None or base is None:
+        if c is None:
             raise DesignError(
                 f"--variant {path}: a robust co-design needs checkpoints that record their dataset"
             )
