@@ -50,6 +50,7 @@ __all__ = [
     "DesignLoss",
     "SuccessLoss",
     "DesignGradient",
+    "design_vector",
     "GraspBatch",
     "InputRange",
     "Poses",
@@ -339,6 +340,14 @@ class SuccessLoss:
         return 1.0 - p_success
 
 
+def design_vector(design) -> np.ndarray:
+    """``design`` as 22 finite ln E [ln Pa], shape (22,); :class:`StiffnessError` otherwise."""
+    d = np.asarray(design, dtype=float).ravel()
+    if d.shape != (N_LOG_E,) or not np.all(np.isfinite(d)):
+        raise StiffnessError(f"a design is {N_LOG_E} finite values of ln E, got shape {d.shape}")
+    return d
+
+
 @dataclass(frozen=True)
 class DesignGradient:
     """L_opt of one design over a batch, and its gradient."""
@@ -503,9 +512,7 @@ class Surrogate:
         within the printable range, which the optimiser keeps) or a :class:`SuccessLoss` on a network
         without a head.
         """
-        d = np.asarray(design, dtype=float).ravel()
-        if d.shape != (N_LOG_E,) or not np.all(np.isfinite(d)):
-            raise StiffnessError(f"a design is {N_LOG_E} finite values of ln E, got shape {d.shape}")
+        d = design_vector(design)
         loss = loss or DesignLoss()
         self.check_loss(loss)
         self.check_inputs(None, batch.density)

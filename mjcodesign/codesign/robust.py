@@ -22,8 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mjcodesign.design.stiffness import N_LOG_E
-from mjcodesign.errors import DesignError, StiffnessError
+from mjcodesign.errors import DesignError
 
 __all__ = ["Robust", "VariantSurrogate"]
 
@@ -107,10 +106,9 @@ class VariantSurrogate:
         import torch
 
         from mjcodesign.surrogate import DesignGradient, DesignLoss
+        from mjcodesign.surrogate.inference import design_vector
 
-        d = np.asarray(design, dtype=float).ravel()
-        if d.shape != (N_LOG_E,) or not np.all(np.isfinite(d)):
-            raise StiffnessError(f"a design is {N_LOG_E} finite values of ln E, got shape {d.shape}")
+        d = design_vector(design)
         loss = loss or DesignLoss()
         plain = loss.uncounted() if hasattr(loss, "counted") else loss
         for _, s in self.members:
