@@ -49,7 +49,7 @@ from mjcodesign.surrogate.metrics import (
 )
 from mjcodesign.surrogate.model import ModelConfig
 from mjcodesign.surrogate.plots import plot_calibration, plot_curves, plot_lines
-from mjcodesign.surrogate.ranking import ranking_fidelity, split_half
+from mjcodesign.surrogate.ranking import linear_design_effect, ranking_fidelity, split_half
 from mjcodesign.surrogate.smoothness import smoothness
 from mjcodesign.surrogate.train import (
     EpochLog,
@@ -76,6 +76,7 @@ __all__ = [
 _PREDICT_CHUNK = 8192  # rows per predict call
 _EPS = 1e-6  # probability clip of the cross-entropy
 _RANKING_TARGET = 0.5  # median design-ranking Spearman a surrogate must reach (the co-design's need)
+LINEAR_DESIGN = "linear design effect (training rows)"  # the design-only ranking baseline (surrogate.ranking)
 SUCCESS_RATE_WARN = (0.05, 0.95)
 """A dataset whose success rate is outside this range is one outcome with a few exceptions: the
 success the surrogate learns rests on those few samples (a user's 96/96 at the light density)."""
@@ -181,6 +182,7 @@ def _ranking(data: GraspData, parts: Split, net: tuple, tree: tuple) -> dict:
         preds["surrogate (head)"] = net[1]
     if tree[1] is not None:
         preds["gradient-boosted trees (classifier)"] = tree[1]
+    preds[LINEAR_DESIGN] = linear_design_effect(data, parts.train, rows)
     return {**ranking_fidelity(preds, data, rows), "repeatability": split_half(data, rows)}
 
 
@@ -315,7 +317,9 @@ def train_and_report(
     )
     test_set = training_set(data, parts.test, res.normalizer, res.model.config)
     net, net_pred, net_head = _held_out(sur, data, parts, "surrogate")
-    net["loss_check"] = evaluate_loss(res.model, test_set, success_weight=cfg.success_weight)
+    net["loss_check"] = evaluate_loss(
+        res.model, test_set, success_weight=cfg.success_weight, rank_weight=cfg.rank_weight
+    )
     mean = mean_baseline(data, parts.train, parts.test), mean_baseline(data, parts.train, parts.val)
     mean_p = np.full(len(parts.test), float(success_labels(data, parts.train).mean()))
     tree = tree_baseline(data, parts.train, [parts.test, parts.val], seed=cfg.seed)
@@ -572,6 +576,9 @@ def verdict(models: dict, ranking: dict | None = None) -> dict:
         out["ranking_median"] = mine
         out["ranking_target"] = mine is not None and mine >= _RANKING_TARGET
         out["ranking_beats_trees"] = mine is not None and all(mine > t for t in trees)
+        if LINEAR_DESIGN in ms:
+            lin = ms[LINEAR_DESIGN]["median"]
+            out["ranking_beats_linear"] = mine is not None and (lin is None or mine > lin)
     return out
 
 
@@ -604,7 +611,11 @@ def ranking_markdown(r: dict, v: dict) -> list[str]:
     if "ranking_median" in v:
         lines += ["", f"Median {_fmt(v['ranking_median'])}: "
                   + ("reaches" if v["ranking_target"] else "does not reach") + f" {_RANKING_TARGET}, and "
-                  + ("beats" if v["ranking_beats_trees"] else "does not beat") + " the trees'."]  # fmt: skip
+                  + ("beats" if v["ranking_beats_trees"] else "does not beat") + " the trees'"
+                  + ("" if "ranking_beats_linear" not in v else ", and "
+                     + ("beats" if v["ranking_beats_linear"] else "does not beat")
+                     + " the design-only linear baseline's (one preference for every pose, fitted on the training rows)")
+                  + "."]  # fmt: skip
     return [*lines, ""]
 
 

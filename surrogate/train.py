@@ -6,7 +6,8 @@ validation weights kept. Three changes: the ground contact is a logit under a bi
 that the network gives a probability); a network with a success head
 (:attr:`~mjcodesign.surrogate.model.ModelConfig.success_head`) adds the binary cross-entropy of its
 logit against the soft label ``success_p`` (:func:`success_labels`), weighted by
-:attr:`TrainConfig.success_weight`; and a batch is grouped by pose (:func:`pose_batches`) so that
+:attr:`TrainConfig.success_weight`, and optionally a pairwise ranking term on that logit between the
+designs of one pose (:func:`rank_loss`, :attr:`TrainConfig.rank_weight`); and a batch is grouped by pose (:func:`pose_batches`) so that
 each pose's PointNet feature is computed once and shared by its samples: over 512 random samples the
 PointNet would run ~460 times per step (2.6 s forward and backward on 512 clouds here), about 400 s
 an epoch on 80k samples.
@@ -58,6 +59,7 @@ __all__ = [
     "evaluate_loss",
     "grasp_loss",
     "make_optimizer",
+    "rank_loss",
     "success_labels",
     "train",
     "training_set",
@@ -108,11 +110,19 @@ class TrainConfig:
     seed: int = 0
     success_weight: float = SUCCESS_WEIGHT
     """Weight of the success head's cross-entropy in the loss (unused by a network without a head)."""
+    rank_weight: float = 0.0
+    """Weight of :func:`rank_loss`, the head's pairwise ranking of one pose's designs, in the loss
+    (0: none; needs a success head and batches that keep a pose's designs together)."""
 
     def __post_init__(self) -> None:
-        w = self.success_weight
-        if isinstance(w, bool) or not (isinstance(w, int | float) and 0 <= w < float("inf")):
-            raise DesignError(f"success_weight must be a finite number >= 0, got {self.success_weight!r}")
+        for name in ("success_weight", "rank_weight"):
+            w = getattr(self, name)
+            if isinstance(w, bool) or not (isinstance(w, int | float) and 0 <= w < float("inf")):
+                raise DesignError(f"{name} must be a finite number >= 0, got {w!r}")
+        if self.rank_weight > 0 and self.success_weight <= 0:
+            raise DesignError("rank_weight needs the success head (success_weight > 0)")
+        if self.rank_weight > 0 and self.pose_group == 1:
+            raise DesignError("rank_weight needs a pose's designs in one batch: pose_group 0 or >= 2")
         bad = [n for n, low in (("epochs", 1), ("batch_size", 2), ("early_stop_patience", 1), ("pose_group", 0),
                                 ("seed", 0)) if _bad_count(getattr(self, n), low)]  # fmt: skip
         if bad:
@@ -172,11 +182,36 @@ class TrainResult:
         }
 
 
-def grasp_loss(pred: torch.Tensor, y: torch.Tensor, success_weight: float = SUCCESS_WEIGHT) -> torch.Tensor:
+def rank_loss(logit: torch.Tensor, label: torch.Tensor, pose_of: torch.Tensor) -> torch.Tensor:
+    """Pairwise logistic ranking loss of ``logit`` between samples of one pose, over the label gap.
+
+    For every ordered pair (i, j) of samples with the same ``pose_of`` and ``label[i] > label[j]`` the
+    term is ``log(1 + exp(logit[j] - logit[i]))`` (RankNet), weighted by ``label[i] - label[j]``; the
+    result is the weighted mean (0 when no pose of the batch has two different labels). A constant
+    shift of the logits within a pose leaves it unchanged: it scores the order of a pose's designs
+    only, which is what a co-design uses, not the pose's level, which the cross-entropy fits.
+    """
+    gap = label[:, None] - label[None, :]
+    pair = (pose_of[:, None] == pose_of[None, :]) & (gap > 0)
+    if not bool(pair.any()):
+        return logit.sum() * 0.0
+    margin = logit[:, None] - logit[None, :]
+    w = gap[pair]
+    return (w * nn.functional.softplus(-margin[pair])).sum() / w.sum()
+
+
+def grasp_loss(
+    pred: torch.Tensor,
+    y: torch.Tensor,
+    success_weight: float = SUCCESS_WEIGHT,
+    rank_weight: float = 0.0,
+    pose_of: torch.Tensor | None = None,
+) -> torch.Tensor:
     """Sum of the 9 L1 terms on z-scored outputs and the contact's cross-entropy, over 10.
 
     With a success head (``pred`` and ``y`` of 11 columns) the sum also holds ``success_weight`` times
-    the cross-entropy of the head's logit against the soft label in ``y``'s last column.
+    the cross-entropy of the head's logit against the soft label in ``y``'s last column, and with
+    ``rank_weight`` > 0 that times :func:`rank_loss` of the logit over the poses ``pose_of`` (B,).
     """
     l1 = (pred[:, :N_REGRESSION] - y[:, :N_REGRESSION]).abs().mean(dim=0).sum()
     bce = nn.functional.binary_cross_entropy_with_logits(pred[:, N_REGRESSION], y[:, N_REGRESSION])
@@ -185,6 +220,10 @@ def grasp_loss(pred: torch.Tensor, y: torch.Tensor, success_weight: float = SUCC
         total = total + success_weight * nn.functional.binary_cross_entropy_with_logits(
             pred[:, N_OUTPUTS], y[:, N_OUTPUTS]
         )
+        if rank_weight > 0:
+            if pose_of is None:
+                raise DesignError("the ranking term needs each sample's pose (pose_of)")
+            total = total + rank_weight * rank_loss(pred[:, N_OUTPUTS], y[:, N_OUTPUTS], pose_of)
     return total / (N_REGRESSION + 1)
 
 
@@ -209,13 +248,21 @@ def training_set(data: GraspData, rows: np.ndarray, norm: Normalizer, config: Mo
 
 @torch.no_grad()
 def evaluate_loss(
-    model: GraspNet, dataset: GraspDataset, batch_size: int = 4096, success_weight: float = SUCCESS_WEIGHT
+    model: GraspNet,
+    dataset: GraspDataset,
+    batch_size: int = 4096,
+    success_weight: float = SUCCESS_WEIGHT,
+    rank_weight: float = 0.0,
 ) -> float:
-    """:func:`grasp_loss` over a whole set in eval mode (sample-weighted mean over batches)."""
+    """:func:`grasp_loss` over a whole set in eval mode (sample-weighted mean over batches).
+
+    The batches are pose-contiguous, so a pose is split between two batches at most at their border.
+    """
     model.eval()
     total, n = 0.0, 0
     for b in dataset.batches(batch_size):
-        total += float(grasp_loss(model(b.clouds, b.pose_of, b.x), b.y, success_weight)) * len(b.y)
+        loss = grasp_loss(model(b.clouds, b.pose_of, b.x), b.y, success_weight, rank_weight, b.pose_of)
+        total += float(loss) * len(b.y)
         n += len(b.y)
     return total / max(n, 1)
 
@@ -280,6 +327,7 @@ def train_step(
     b: TrainBatch,
     precision: str = "fp32",
     success_weight: float = SUCCESS_WEIGHT,
+    rank_weight: float = 0.0,
 ) -> float:
     """One optimiser step on batch ``b`` (model in train mode); returns the batch's loss.
 
@@ -288,7 +336,7 @@ def train_step(
     """
     with torch.autocast("cpu", dtype=torch.bfloat16, enabled=precision == "bf16"):
         pred = model(b.clouds, b.pose_of, b.x)
-    loss = grasp_loss(pred.float(), b.y, success_weight)
+    loss = grasp_loss(pred.float(), b.y, success_weight, rank_weight, b.pose_of)
     opt.zero_grad(set_to_none=True)
     loss.backward()
     opt.step()
@@ -308,10 +356,11 @@ def _fit(model, train_set, val_set, cfg: TrainConfig, rng, result: TrainResult, 
         model.train()
         total, n = 0.0, 0
         for idx in pose_batches(train_set.pose, cfg.batch_size, rng, cfg.pose_group):
-            loss = train_step(model, opt, train_set.__getitems__(idx), cfg.precision, cfg.success_weight)
+            b = train_set.__getitems__(idx)
+            loss = train_step(model, opt, b, cfg.precision, cfg.success_weight, cfg.rank_weight)
             total += loss * len(idx)
             n += len(idx)
-        val = evaluate_loss(model, val_set, success_weight=cfg.success_weight)
+        val = evaluate_loss(model, val_set, success_weight=cfg.success_weight, rank_weight=cfg.rank_weight)
         sched.step(val)
         best = val < result.best_val_loss
         if best:

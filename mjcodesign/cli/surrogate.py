@@ -65,6 +65,8 @@ _TRAIN_OPTIONS = (
     ("--success-weight", "success_weight", finite_float(0.0), 1.0,
      "weight of the success head's cross-entropy on success_p against one output's L1 (0: no head, the "
      "paper's 10 outputs)"),
+    ("--rank-weight", "rank_weight", finite_float(0.0), 0.0,
+     "weight of a pairwise ranking term on the success head between one pose's designs (0: none)"),
 )  # fmt: skip
 _OPTIMIZER_OPTIONS = (
     ("--lr", "lr", finite_float(0.0, strict=True), 1e-3, "AdamW learning rate (PointNet: half)"),
