@@ -91,10 +91,13 @@ class FemBody:
         self._cols = np.tile(dofs, (1, nd)).ravel()
         self._wk = sp.kron(sp.csr_matrix(m.waypoint_weights), sp.eye(3), format="csr")
         self._normal_rows = self._section_normal_rows()
+        # The tendon's anchor [m] (3,) on the clamped base face, the weights of its further points
+        # (k, n_vertices) (`tendon_path`) and the block each of those points lies in (k,).
         if o.routing == "printed":
-            self.anchor, self.path_weights = self._channel_path()
+            self.anchor, self.path_weights, self.path_blocks = self._channel_path()
         else:
             self.anchor, self.path_weights = design.tendon_exit(), m.waypoint_weights
+            self.path_blocks = np.arange(design.n_blocks)
         self._free_pattern = None  # built by the first static solve (`_free_tangent`)
 
     def _k(self, name: str):
@@ -245,12 +248,13 @@ class FemBody:
         rows[np.arange(len(pairs)), pairs[:, 1]] = -1.0
         return sp.kron(sp.csr_matrix(rows), sp.eye(3), format="csr")
 
-    def _channel_path(self) -> tuple[np.ndarray, np.ndarray]:
-        """The printed routing: its anchor [m] (3,) and the weights of its other channel points (17, n).
+    def _channel_path(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The printed routing: its anchor [m] (3,), the weights of its other channel points (17, n) and their blocks (17,).
 
         The anchor is the base segment's channel entry, on the clamped base face (its weights touch
-        base vertices only, so it never moves); the rows are the 17 further entry, middle and exit points
-        of `mjcodesign.models.channels.channel_points` embedded in the rest mesh.
+        base vertices only, so it moves with the base alone); the rows are the 17 further entry, middle
+        and exit points of `mjcodesign.models.channels.channel_points` embedded in the rest mesh, each in
+        its segment's tet.
         """
         from mjcodesign.models.channels import channel_points
 
@@ -260,12 +264,12 @@ class FemBody:
                 f"{self.design.routing.value} design has none"
             )
         points = channel_points(self.design).reshape(-1, 3)
-        W, _ = embed_points(self.mesh, points)
+        W, tet = embed_points(self.mesh, points)
         on_base = np.zeros(self.mesh.n_vertices, dtype=bool)
         on_base[self.mesh.base] = True
         if np.any(np.abs(W[0, ~on_base]) > 1e-12):
             raise DesignError("the printed tendon's first channel entry is not on the clamped base face")
-        return points[0], W[1:]
+        return points[0], W[1:], self.mesh.tet_block[tet[1:]]
 
     def tendon_path(self, x: np.ndarray) -> np.ndarray:
         """The tendon's polyline [m] at positions ``x`` (n, 3): the anchor, then its points, (k + 1, 3).
@@ -364,14 +368,24 @@ class FemBody:
     def waypoint_table(self) -> tuple[np.ndarray, np.ndarray]:
         """The waypoint rows as padded tables: vertex indices (int32) and weights, (n_blocks, k).
 
-        The explicit tendon kernels (contact rollouts, two-finger grasp) take these; they run the guided
-        waypoints only, so `DesignError` with ``FemOptions(routing="printed")`` (statics only).
+        The single finger's explicit tendon (the contact rollouts) takes these; it runs the guided
+        waypoints only, so `DesignError` with ``FemOptions(routing="printed")`` (the two-finger grasp
+        takes either routing's `path_table`).
         """
         if self.options.routing != "guided":
             raise DesignError(
-                "the FEM's explicit tendon runs the guided waypoints; the printed routing is statics only"
+                "the single finger's explicit tendon (contact rollouts) runs the guided waypoints; "
+                "its printed routing is statics only (the two-finger grasp runs it)"
             )
-        W = self.mesh.waypoint_weights
+        return self.path_table()
+
+    def path_table(self) -> tuple[np.ndarray, np.ndarray]:
+        """The tendon's points after its anchor as padded tables: vertex indices (int32) and weights, (k, m).
+
+        The rows of `tendon_path` after the anchor: the guided waypoints or the printed channel points
+        (`FemOptions.routing`); unused slots hold vertex 0 with weight 0.
+        """
+        W = self.path_weights
         k = max(int(np.count_nonzero(r)) for r in W)
         idx = np.zeros((len(W), k), dtype=np.int32)
         w = np.zeros((len(W), k))

@@ -61,7 +61,11 @@ def gripper_tendon(
     step_in: int, section_in: wp.array(dtype=wp.vec2i), paper_in: int,
     f_out: _V3,
 ):  # fmt: on
-    """Uniform-tension tendon of each finger [N], one thread per waypoint (finger = waypoint // n_blocks).
+    """Uniform-tension tendon of each finger [N], one thread per waypoint (finger = waypoint // n_blocks_in).
+
+    The waypoints are the rows ``idx_in``, ``w_in`` (``n_blocks_in`` a finger): the guided routing's one
+    per block, or the printed routing's channel points (`mjcodesign.sim.fem.gripper.FemGripper`); the
+    anchor ``exit_in`` is the exit point or the base segment's channel entry.
 
     Frictionless (``paper_in`` 0): waypoint i takes T (u(P_{i−1} − P_i) + u(P_{i+1} − P_i)), the tip
     T u(P_{i−1} − P_i), with T the finger's ``tension_in[step_in]``; the first span starts at the
@@ -154,8 +158,10 @@ def tendon_damping(
     J = ∂ℓ/∂x (at the step's start, ``x_in``) and the step's new velocities v*, the damped rate is
     ℓ̇ = J v* / (1 + dt b J M⁻¹ Jᵀ) (b·dt over the tendon's effective mass is ~100 at 2.5 µs, far past
     the explicit limit of 2), and each free waypoint vertex takes Δv = −dt b ℓ̇ M⁻¹ Jᵀ, Δx = dt Δv.
-    The exit point moves with the base (its known velocity enters J v*). Writes ℓ̇ [m/s] to
-    ``rate_out[step_in]``. Waypoints share no vertices (`FemGripper`), so the update is race-free.
+    The anchor (exit point) moves with the base (its known velocity enters J v*). Writes ℓ̇ [m/s] to
+    ``rate_out[step_in]``. A finger's waypoints share no free vertex (`FemGripper.tendon_points_disjoint`,
+    checked by `mjcodesign.sim.fem.gripper_grasp.FemGrasp`), so J M⁻¹ Jᵀ is the sum of their own terms;
+    the fingers share none, so the update is race-free.
     """
     finger = wp.tid()
     n = n_blocks_in

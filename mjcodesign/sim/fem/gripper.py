@@ -66,7 +66,8 @@ class Placement(NamedTuple):
     vertices: np.ndarray
     """Rest vertex positions [m], both fingers, shape (n_vertices, 3)."""
     exits: np.ndarray
-    """Each finger's tendon exit point [m], shape (2, 3)."""
+    """Each finger's tendon anchor on its base face [m], shape (2, 3): the exit point (guided routing) or
+    the base segment's channel entry (printed; `mjcodesign.sim.fem.body.FemBody.tendon_path`)."""
     axes: np.ndarray
     """Each finger's opening direction (carriage slide) in the world, shape (2, 3)."""
     palm: np.ndarray
@@ -174,16 +175,22 @@ class FemGripper:
         self.pinned[a.mesh.base] = 1
         self.pinned[a.mesh.base + n] = 1
         self.finger_of = np.repeat(np.arange(2, dtype=np.int32), n)
-        idx, w = a.waypoint_table()
-        section = a.section_pairs()
-        if not options.flexure_guides:  # the printed finger: holes through the segments only
-            keep = [b.index for b in design.blocks() if b.kind is BlockKind.SEGMENT]
-            idx, w, section = idx[keep], w[keep], section[keep]
+        if options.routing == "printed":  # the printed finger's channels, the statics' own embedding
+            idx, w = a.path_table()
+            section = a.section_pairs()[a.path_blocks]
+        else:
+            idx, w = a.waypoint_table()
+            section = a.section_pairs()
+            if not options.flexure_guides:  # the segments' waypoints only (`FemOptions.flexure_guides`)
+                keep = [b.index for b in design.blocks() if b.kind is BlockKind.SEGMENT]
+                idx, w, section = idx[keep], w[keep], section[keep]
         self.waypoint_section = np.vstack([section, section + n])
-        """The spine section (top, bottom vertex) at each waypoint's block middle: the axis of the authors'
-        tendon law (`FemOptions.tendon_law`)."""
+        """The spine section (top, bottom vertex) at each tendon point's block middle: the axis of the
+        authors' tendon law (`FemOptions.tendon_law`; guided routing only)."""
         self.n_waypoints = len(idx)
-        """Tendon waypoints per finger (the rows of ``waypoint_idx`` / ``waypoint_w`` for each finger)."""
+        """Tendon points per finger after its anchor (the rows of ``waypoint_idx`` / ``waypoint_w`` for
+        each finger): the guided waypoints, or the printed routing's 17 channel points
+        (`mjcodesign.sim.fem.body.FemBody.path_table`)."""
         self.waypoint_idx = np.vstack([idx, idx + n])
         self.waypoint_w = np.vstack([w, w])
         self.gaps = self._gap_pairs()
@@ -325,12 +332,23 @@ class FemGripper:
         self.wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=self.device)
         return float(e.numpy()[0])
 
+    def tendon_points_disjoint(self) -> bool:
+        """True if no two of a finger's tendon points weigh the same free vertex.
+
+        The position servo's implicit damper (`mjcodesign.sim.fem.grasp_kernels.tendon_damping`) sums
+        each point's own part of the tendon's compliance, which needs it. Both fingers have the same table.
+        """
+        free = self.pinned[: self.n_per_finger] == 0
+        rows = zip(self.waypoint_idx[: self.n_waypoints], self.waypoint_w[: self.n_waypoints], strict=True)
+        used = np.concatenate([np.unique(i[(w != 0) & free[i]]) for i, w in rows])
+        return len(used) == len(np.unique(used))
+
     def place(self, pose: GripperPose, openings) -> Placement:
         """The rest meshes at the palm ``pose`` with the carriages at ``openings`` [m] (lift 0)."""
         R = quat_matrix(pose.quat)
         palm = np.asarray(pose.position, dtype=float)
         rest = self.fingers[0].mesh.vertices
-        exit_point = self.design.tendon_exit()
+        exit_point = self.fingers[0].anchor  # the exit point, or the printed base channel's entry
         verts, exits, axes = [], [], []
         for side, opening in zip(SIDES, openings, strict=True):
             Rf = R @ quat_matrix(finger_frame_quat(side))

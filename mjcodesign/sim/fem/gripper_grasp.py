@@ -7,11 +7,14 @@ object) and a `GraspScenario`, and steps:
   ``FemOptions(order=2)``; stable Neo-Hookean, ν 0.45,
   one E per block), their base faces clamped to carriages that follow the scenario's opening and lift
   commands through the MuJoCo servos' response (`mjcodesign.sim.fem.schedule`);
-* each finger's uniform-tension tendon (frictionless waypoint law, or the authors' law with
-  ``FemOptions(tendon_law="paper")``; a guide on every flexure, or the printed finger's segments only
-  with ``flexure_guides=False``): in force mode the tension ramped as
-  the scenario ramps it; in position mode the XL330 servo's pull-only spring on the FEM's own tendon
-  length, T = clip(k (ℓ − ℓ*), 0, T_max) (`tendon_servo`), plus the motor's back-EMF damper b ℓ̇,
+* each finger's uniform-tension tendon: through one guided waypoint per block (frictionless law, or
+  the authors' law with ``FemOptions(tendon_law="paper")``; the segments' waypoints only with
+  ``flexure_guides=False``), or with ``FemOptions(routing="printed")`` through the printed finger's
+  channels, the statics' own channel points (`mjcodesign.sim.fem.body.FemBody.path_table`), from the
+  base segment's channel entry and straight across every flexure gap (frictionless law): in force mode
+  the tension ramped as the scenario ramps it; in position mode the XL330 servo's pull-only spring on
+  the FEM's own tendon length (the routing's path), T = clip(k (ℓ − ℓ*), 0, T_max) (`tendon_servo`),
+  plus the motor's back-EMF damper b ℓ̇,
   integrated implicitly along the tendon (`tendon_damping`: b·dt over the tendon's effective mass is
   ~100, far past the explicit limit), as MuJoCo's `mjcodesign.scenarios.drive.apply_drive`; and the
   segments' contact across each flexure gap, which carries the tendon's compression once a gap closes;
@@ -177,6 +180,11 @@ class FemGrasp:
         self.position_mode = sch.servo is not None
         """The tendon is the position servo (`TendonPosition`), not a fixed tension."""
         if self.position_mode:
+            if not g.tendon_points_disjoint():
+                raise UnsupportedError(
+                    "the position servo's implicit damper needs each tendon point on its own free vertices; "
+                    "two points of this mesh's tendon share one (another cell size moves them apart)"
+                )
             k, t_max, b = sch.servo
             slack = self.tendon_lengths(pl.vertices, 0)  # ℓ₀: the FEM tendon at rest, straight fingers
             self._servo = [arr(slack[None, :] - sch.wound[:, None], wp.float64), wp.vec2d(k, t_max)]
@@ -487,7 +495,8 @@ class FemGrasp:
     def tendon_lengths(self, x: np.ndarray, s: int) -> np.ndarray:
         """Each finger's tendon length [m] at vertex positions ``x`` (n, 3) and the bases of substep ``s``.
 
-        From the exit point (moved with its base) through the waypoints, as the kernels measure it.
+        From the anchor (the exit point or the base segment's channel entry, moved with its base) through
+        the tendon's points (`FemOptions.routing`), as the kernels measure it.
         """
         g = self.gripper
         nb = g.n_waypoints

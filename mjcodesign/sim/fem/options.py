@@ -44,22 +44,26 @@ class FemOptions:
     finger curls 4.4x less than the converged FEM and the chain calibrated to it. Default finger
     geometry only (the calibration's)."""
     flexure_guides: bool = True
-    """Two-finger grasp: the tendon passes a guide on every flexure (a rigid lever on its mid-section,
-    `mjcodesign.sim.fem.mesh`), as the chain's flexure site does. False: only the segments guide it
-    and it crosses each gap in a straight line, as in the printed finger (holes through the segments
-    only)."""
+    """Two-finger grasp, guided routing only: the tendon passes a guide on every flexure (a rigid lever
+    on its mid-section, `mjcodesign.sim.fem.mesh`), as the chain's flexure site does. False keeps the
+    older, cruder variant of the printed finger: only the segments' guided waypoints, one a segment at
+    the guided heights, and straight across each gap. The printed finger itself is ``routing="printed"``
+    (its channels at their measured heights), which refuses ``flexure_guides=False``."""
     tendon_law: str = "frictionless"
     """Two-finger grasp: ``frictionless``, the exact force of a frictionless tendon at its waypoints (it
     compresses the finger by T); ``paper``, the authors' law (`mjcodesign.design.tendon_law`): middle
     waypoints keep only the part across their section's axis, the first takes nothing and the tip a
     push T along its section's axis, so the finger is not compressed."""
     routing: str = "guided"
-    """Statics (`FemBody.tendon_load`): ``guided``, the tendon through one waypoint per block
-    (`FingerMesh.waypoint_weights`); ``printed``, as in the printed finger, through the entry, middle and
-    exit of every segment's channel (`mjcodesign.models.channels.channel_points`, embedded in the rest
-    mesh by `mjcodesign.sim.fem.mesh.embed_points`) and straight across each flexure gap, anchored at the
-    base segment's channel entry on the clamped base face; frictionless law only. The two-finger grasp
-    and the contact rollouts run the guided waypoints and refuse ``printed``."""
+    """Where the tendon runs, in the statics (`FemBody.tendon_load`) and the two-finger grasp
+    (`mjcodesign.sim.fem.gripper_grasp.FemGrasp`, force and position drives): ``guided``, through one
+    waypoint per block (`FingerMesh.waypoint_weights`); ``printed``, as in the printed finger, through
+    the entry, middle and exit of every segment's channel (`mjcodesign.models.channels.channel_points`,
+    embedded in the rest mesh by `mjcodesign.sim.fem.mesh.embed_points`; both take the same weights,
+    `FemBody.path_table`) and straight across each flexure gap, anchored at the base segment's channel
+    entry on the clamped base face (it moves with the base and its carriage); frictionless law only, and
+    the grasp's servo reads this path's length. The single finger's contact rollouts
+    (`mjcodesign.sim.fem.contact`) run the guided waypoints and refuse ``printed``."""
     waypoint_layers: bool = True
     """Spine layer boundaries through in-spine waypoints (`mjcodesign.sim.fem.mesh.mesh_finger`); turn
     off for explicit dynamics, where their 30 µm layers cut the stable step tenfold."""
@@ -74,6 +78,11 @@ class FemOptions:
         if self.routing == "printed" and self.tendon_law != "frictionless":
             # The paper law needs one section axis per waypoint; a channel has three points per segment.
             raise DesignError("the printed routing runs the frictionless tendon law only")
+        if self.routing == "printed" and not self.flexure_guides:
+            raise DesignError(
+                "flexure_guides=False is a variant of the guided routing; the printed routing runs its "
+                "channels straight across every flexure gap already"
+            )
         if not 0.0 <= self.poisson < 0.5:
             raise DesignError(f"Poisson's ratio must be in [0, 0.5), got {self.poisson}")
 
