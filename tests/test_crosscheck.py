@@ -168,6 +168,9 @@ def test_grasp_study_case_selection():
         (["--tendon-lever", "path"], "unrecognized arguments: --tendon-lever"),
         (["--hinges-per-block", "2"], "unrecognized arguments: --hinges-per-block"),
         (["--fem-order", "2"], "unrecognized arguments: --fem-order"),  # the grasp's tets are linear
+        (["--routing", "straight"], "argument --routing: invalid choice"),
+        (["--routing", "printed", "--fem-tendon-law", "paper"], "frictionless tendon law only"),
+        (["--routing", "printed", "--authors-case"], "--routing printed: the authors' case"),
     ],
 )
 def test_grasp_study_cli_refuses_bad_selection_before_simulating(capsys, argv, says):
@@ -334,3 +337,38 @@ def test_grasp_study_runs_at_the_tension_given(capsys, tmp_path, monkeypatch):
     for cli, lib, four in zip(at_2, direct, at_4, strict=True):
         assert cli["chain"]["body_force"] == list(lib["chain"]["body_force"])  # the same rollout
         assert cli["chain"]["body_force"] != four["chain"]["body_force"]  # and the tension reached it
+
+
+def test_grasp_study_routing_reaches_both_simulators(capsys, tmp_path, monkeypatch):
+    """``crosscheck grasp --routing printed``: the chain's and the FEM's routing, recorded in every case."""
+    import json
+
+    import mjcodesign.crosscheck.grasp as study
+    from mjcodesign.cli.crosscheck import _ROUTINGS
+    from mjcodesign.cli.main import main
+    from mjcodesign.crosscheck import grasp_study, short_settings
+    from mjcodesign.models.types import ROUTINGS
+    from mjcodesign.sim.fem import FemOptions
+
+    assert _ROUTINGS == ROUTINGS
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    seen = []
+    runners = study.model_runners
+
+    def spy(models, fem_options=None, fem_dynamics=None):
+        seen.append(fem_options)
+        return runners(models, fem_options, fem_dynamics)
+
+    monkeypatch.setattr(study, "model_runners", spy)
+    argv = ["crosscheck", "grasp", "--short", "--models", "chain", "--json"]
+    assert main([*argv, "--routing", "printed"]) == 0
+    printed = json.loads(capsys.readouterr().out)["cases"]
+    assert main(argv) == 0
+    guided = json.loads(capsys.readouterr().out)["cases"]
+    assert [c["routing"] for c in printed + guided] == ["printed"] * 2 + ["guided"] * 2
+    assert [o.routing for o in seen] == ["printed", "guided"]  # the FEM's options (the CI mesh) follow it
+    for p, g in zip(printed, guided, strict=True):
+        assert p["chain"]["body_force"] != g["chain"]["body_force"]  # the chain ran the printed tendon
+    cases = short_settings()["cases"]
+    with pytest.raises(DesignError, match="printed routing on both sides"):
+        grasp_study(models=("chain",), routing="printed", fem_options=FemOptions(), cases=cases)

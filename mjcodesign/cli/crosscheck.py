@@ -13,6 +13,7 @@ flags, calls them and prints.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 from pathlib import Path
@@ -39,9 +40,10 @@ from mjcodesign.crosscheck import (
 )
 from mjcodesign.design.tendon_law import TENDON_VARIANTS
 
-# `mjcodesign.models.types.TENDON_LEVERS`, repeated so that registering the command imports no MuJoCo (a
-# test keeps them equal).
+# `mjcodesign.models.types.TENDON_LEVERS` and `ROUTINGS`, repeated so that registering the command imports
+# no MuJoCo (a test keeps them equal).
 _TENDON_LEVERS = ("constant", "path")
+_ROUTINGS = ("guided", "printed")
 
 __all__ = ["add_parser", "add_bench_parser"]
 
@@ -70,6 +72,8 @@ def _cmd_grasp(args) -> int:
             else "the grasp study takes one tension"
         )
         raise DesignError(f"--tensions: {what}, got {len(args.tensions)} value(s)")
+    if args.authors_case and args.routing != _ROUTINGS[0]:
+        raise DesignError(f"--routing {args.routing}: the authors' case runs their guided tendon only")
     if args.authors_case:
         from mjcodesign.crosscheck.authors_case import authors_case
 
@@ -92,6 +96,7 @@ def _cmd_grasp(args) -> int:
         return 0
     if args.short:
         settings = short_settings()
+        settings["fem_options"] = dataclasses.replace(settings["fem_options"], routing=args.routing)
     else:
         settings = {"cases": GRASP_CASES, "fem_options": _grasp_mesh(args)}
         if (dyn := _fem_dynamics(args)) is not None:  # the FEM substep and contact of the study
@@ -99,8 +104,6 @@ def _cmd_grasp(args) -> int:
     if args.cases is not None:
         settings["cases"] = select_cases(settings["cases"], args.cases)
     if args.tensions is not None:  # the study's scenario at another tension (the CI version's phases kept)
-        import dataclasses
-
         from mjcodesign.scenarios.drive import TendonForce
         from mjcodesign.scenarios.grasp import GraspScenario
 
@@ -121,7 +124,9 @@ def _cmd_grasp(args) -> int:
             Path(args.out).write_text(json.dumps({"partial": True, "cases": _plain(done)}))
 
     t0 = time.perf_counter()
-    records, summary = grasp_study(models=args.models, cache_dir=user_cache_dir(), on_case=follow, **settings)
+    records, summary = grasp_study(
+        models=args.models, routing=args.routing, cache_dir=user_cache_dir(), on_case=follow, **settings
+    )
     report = {"wall_time_s": time.perf_counter() - t0, "summary": summary, "cases": _plain(records)}
     if args.out:
         Path(args.out).write_text(json.dumps(report))
@@ -140,6 +145,7 @@ def _grasp_mesh(args):
         waypoint_layers=False,
         locking_correction=args.fem_locking_correction,
         tendon_law=args.fem_tendon_law,
+        routing=args.routing,
     )
 
 
@@ -421,6 +427,14 @@ def _grasp_flags(p) -> None:
         default="frictionless",
         help="the FEM tendon's force, a frictionless tendon's (it compresses the finger) or the "
         "authors' law (across each section, a push at the tip)",
+    )
+    p.add_argument(
+        "--routing",
+        choices=_ROUTINGS,
+        default=_ROUTINGS[0],
+        help="the tendon's path on both sides: guided (default; one waypoint per block) or printed (through "
+        "the printed finger's channels, straight across each flexure gap: the chain's and the FEM's "
+        "routing='printed'); recorded in every case",
     )
     p.add_argument(
         "--authors-case",

@@ -6,7 +6,8 @@ soft and semi-rigid at the sampler's best pose, ``random:0`` and ``random:1`` at
 (`mjcodesign.poses.sample_poses`, seed 0): 24 cases. (The potted-meat can was a first choice: both its
 sampler poses were 109–114 mm across the closing axis, wider than the stroke.) Each runs the same `GraspScenario` in both
 simulators from the same MuJoCo scene (`mjcodesign.sim.fem.FemBackend` reads the design, pose and
-object from it).
+object from it), with the tendon routed the same way in both: the guided waypoints (default) or the
+printed finger's channels (``routing="printed"``).
 
 `grasp_study` reports, per case and model, the outcome and three physical checks, and over the cases:
 
@@ -28,7 +29,7 @@ from __future__ import annotations
 
 import tempfile
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -135,19 +136,23 @@ def grasp_study(
     fem_options=None,
     fem_dynamics=None,
     density: str = "light",
+    routing: str = "guided",
     cache_dir: Path | None = None,
     on_case: Callable[[dict], None] | None = None,
 ) -> tuple[list[dict], dict]:
     """Run every case in every model; (one record per case, the summary of `study_summary`).
 
     ``scenario`` defaults to `GraspScenario` at `STUDY_TENSION`; ``fem_options``/``fem_dynamics`` mesh and step the FEM
-    (defaults: `mjcodesign.sim.fem.gripper_grasp.GRASP_OPTIONS`, the paper's 2.5 µs). ``on_case`` hears
-    every record as it is finished (a long study can be followed and kept).
+    (defaults: `mjcodesign.sim.fem.gripper_grasp.GRASP_OPTIONS`, the paper's 2.5 µs). ``routing``
+    (`mjcodesign.models.types.ROUTINGS`) is where the tendon runs on both sides: the chain's
+    ``SimOptions(routing=...)`` and the FEM's ``FemOptions(routing=...)`` (`DesignError` if ``fem_options``
+    names another); every record keeps it. ``on_case`` hears every record as it is finished (a long study
+    can be followed and kept).
     """
     from mjcodesign.design.finger import FingerDesign
     from mjcodesign.design.stiffness import Stiffness
     from mjcodesign.errors import DesignError, PoseError
-    from mjcodesign.models.types import FingerModel
+    from mjcodesign.models.types import FingerModel, SimOptions
     from mjcodesign.poses import sample_poses, to_gripper_pose
     from mjcodesign.scenarios.drive import TendonForce
     from mjcodesign.scenarios.grasp import GraspScenario, build_scene
@@ -155,6 +160,8 @@ def grasp_study(
     for m in models:
         if m not in GRASP_MODELS:
             raise DesignError(f"the grasp study compares {GRASP_MODELS}, not {m!r}")
+    chain_options = None if routing == "guided" else SimOptions(routing=routing)  # refuses an unknown one
+    fem_options = _fem_routing(fem_options, routing)
     scenario = scenario or GraspScenario(tendon=TendonForce(tension=STUDY_TENSION))
     design = FingerDesign()
     objects, poses, records = {}, {}, []
@@ -172,10 +179,12 @@ def grasp_study(
             "mass_kg": obj.mass,
             "lift": scenario.lift,
             "tension": scenario.tension,
+            "routing": routing,
         }
         try:
             pose = to_gripper_pose(poses[case.obj], case.pose)
-            scene = build_scene(obj, design, Stiffness.parse(case.design), FingerModel.CHAIN, pose)
+            stiffness = Stiffness.parse(case.design)
+            scene = build_scene(obj, design, stiffness, FingerModel.CHAIN, pose, options=chain_options)
         except PoseError as exc:  # the sampler's pose does not fit the stroke: no simulator runs it
             rec["bad_pose"] = str(exc)
         else:
@@ -187,6 +196,23 @@ def grasp_study(
         if on_case is not None:
             on_case(rec)
     return records, study_summary(records, models)
+
+
+def _fem_routing(fem_options, routing: str):
+    """The FEM's options for the study's ``routing``: ``fem_options`` as given, or the grasp's default mesh."""
+    from mjcodesign.errors import DesignError
+
+    if fem_options is None:
+        if routing == "guided":
+            return None  # the FEM backend's default, `GRASP_OPTIONS`
+        from mjcodesign.sim.fem.gripper_grasp import GRASP_OPTIONS
+
+        return replace(GRASP_OPTIONS, routing=routing)
+    if fem_options.routing != routing:
+        raise DesignError(
+            f"the study runs the {routing} routing on both sides; its FEM options name {fem_options.routing!r}"
+        )
+    return fem_options
 
 
 def chain_margin(scene, scenario, shift: float = MARGIN_SHIFT, *, nominal: bool | None = None) -> dict:
