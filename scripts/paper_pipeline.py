@@ -1,0 +1,233 @@
+"""The paper-scale pipeline as one resumable command sequence: data, surrogate, co-designs, oracle, Table 1.
+
+    python3 scripts/paper_pipeline.py --work DIR [--scale paper|smoke] [--oracle-budget N] [--record FILE]
+
+Runs, in order, from ``DIR`` (each step's command is printed, and recorded with its exit code, start,
+end and wall time in ``DIR/steps/NAME.json``; a rerun skips the steps that finished and resumes the
+dataset, so an interrupted run goes on where it stopped):
+
+1. ``datagen``: the 46 in-domain YCB objects x 50 poses x 8 designs, labels of 3 perturbed rollouts
+   extended to 12 where they disagree (about 80k rollouts, the paper's scale), in the default regime;
+2. ``train``: the surrogate with its success head, one object split (10 in-domain objects held out);
+3. ``optimize``: Algorithm 1 through it on the 36 training objects: joint under L_opt (the paper), joint
+   under the success objective, and individual (one design per object) under the success objective;
+4. ``hybrid``: surrogate then simulator: CMA-ES on the simulator from the joint (success) design, for
+   ``--hybrid-budget`` rollouts (default 10 % of the dataset's);
+5. ``oracle`` (with ``--oracle-budget N``): CMA-ES on the simulator alone from semi-rigid, N rollouts;
+6. ``evaluate``: every design against soft, semi-rigid and paper-optimized by perturbed re-simulation
+   on the frozen suite (46 in-domain, 42 out-of-domain objects), both pose policies, the disturbance
+   sweep;
+7. ``groups``: the evaluation split into the surrogate's training objects, its held-out objects and
+   out of domain, each co-design paired against each preset (``scripts/object_groups.py``).
+
+``--scale smoke`` runs the same steps on five objects, two poses and tiny budgets (a minute or two):
+what the tests run. ``--record FILE`` writes the steps, their times and the headline numbers, with
+the provenance of the installed code. ``--dry-run`` prints the commands only.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+@dataclass(frozen=True)
+class Scale:
+    """The sizes of one pipeline run."""
+
+    objects: str
+    poses: int
+    designs: int
+    perturbations: str
+    workers: int
+    threads: int
+    epochs: int
+    iterations: int
+    eval_objects: str  # "suite" (the frozen default suite) or ad-hoc objects for ``evaluate --objects``
+    eval_poses: int
+    eval_perturbations: int
+    impulses: str
+    hybrid_fraction: float
+    population: int  # CMA-ES's population in the hybrid and the oracle (13: the oracle's default)
+    hybrid_floor: int  # the hybrid's least budget [rollouts]
+
+
+SCALES = {
+    "paper": Scale(objects="ycb-in-domain", poses=50, designs=8, perturbations="3:12", workers=2, threads=2,
+                   epochs=200, iterations=2000, eval_objects="suite", eval_poses=10, eval_perturbations=4,
+                   impulses="0.1,0.4", hybrid_fraction=0.1, population=13, hybrid_floor=0),
+    "smoke": Scale(objects="013_apple,014_lemon,017_orange,055_baseball,056_tennis_ball", poses=2, designs=8,
+                   perturbations="1", workers=1, threads=1, epochs=2, iterations=20, eval_objects="smoke",
+                   eval_poses=1, eval_perturbations=1, impulses="0.1", hybrid_fraction=0.0, population=4,
+                   hybrid_floor=40),
+}  # fmt: skip
+PRESETS = ("soft", "semi-rigid", "paper-optimized")
+
+
+def _done(work: Path, name: str) -> bool:
+    f = work / "steps" / f"{name}.json"
+    return f.is_file() and json.loads(f.read_text()).get("exit_code") == 0
+
+
+def _run(work: Path, name: str, argv: list[str], dry: bool) -> dict:
+    """Run one step (or report it as done); its record; exit the script on a failure."""
+    text = shlex.join(argv)
+    rec_file = work / "steps" / f"{name}.json"
+    if _done(work, name):
+        print(f"pipeline: {name}: done before, skipped", file=sys.stderr)
+        return json.loads(rec_file.read_text())
+    print(f"pipeline: {name}: {text}", file=sys.stderr)
+    if dry:
+        return {"command": text}
+    start = datetime.now(UTC).isoformat(timespec="seconds")
+    t0 = time.perf_counter()
+    proc = subprocess.run(argv, cwd=work, stdout=subprocess.PIPE, text=True)
+    rec = {"command": text, "exit_code": proc.returncode, "start": start,
+           "end": datetime.now(UTC).isoformat(timespec="seconds"), "wall_s": round(time.perf_counter() - t0, 1)}  # fmt: skip
+    (work / "logs").mkdir(exist_ok=True)
+    (work / "logs" / f"{name}.out").write_text(proc.stdout)
+    rec_file.parent.mkdir(exist_ok=True)
+    rec_file.write_text(json.dumps(rec, indent=1))
+    print(f"pipeline: {name}: exit {proc.returncode} after {rec['wall_s']} s", file=sys.stderr)
+    if proc.returncode != 0:
+        raise SystemExit(f"pipeline: step {name} failed (exit {proc.returncode}); fix it and rerun to resume")
+    return rec
+
+
+def _objects(work: Path) -> tuple[list[str], list[str]]:
+    """(training objects, held-out objects) of the surrogate's split, from its report."""
+    m = json.loads((work / "surrogate" / "metrics.json").read_text())
+    held = list(m["split"]["test_objects"])
+    manifest = json.loads((work / "data" / "manifest.json").read_text())
+    names = [o["name"] for o in manifest["objects"] if o["status"] == "ready"]
+    return [n for n in names if n not in held], held
+
+
+def _rollouts(work: Path) -> int:
+    """The dataset's rollouts (its samples when each cell is one rollout)."""
+    counts = json.loads((work / "data" / "manifest.json").read_text())["counts"]
+    return int(counts.get("rollouts", counts["samples"]))
+
+
+def step_commands(
+    s: Scale, *, seed: int, train: list[str], held: list[str], hybrid_budget: int, oracle_budget: int
+) -> dict[str, list[str]]:
+    """Every step's command line (argv) after ``datagen`` and ``train``, in order, run from the work folder.
+
+    ``train`` / ``held``: the surrogate's training and held-out objects. ``suite`` appears only at a
+    scale that evaluates an ad-hoc suite (``smoke``).
+    """
+    sd = str(seed)
+    out: dict[str, list[str]] = {}
+    base = ["mjcodesign", "optimize", "--ckpt", "surrogate", "--objects", ",".join(train), "--poses", "data",
+            "--poses-per-object", str(s.poses), "--max-iterations", str(s.iterations), "--threads", str(s.threads),
+            "--seed", sd, "--json"]  # fmt: skip
+    codesigns = {"joint_lopt": ["--mode", "joint", "--objective", "lopt"],
+                 "joint_success": ["--mode", "joint", "--objective", "success"],
+                 "individual": ["--mode", "individual", "--objective", "success"]}  # fmt: skip
+    for name, extra in codesigns.items():
+        out[name] = [*base, *extra, "--out", name]
+    suite = [] if s.eval_objects == "suite" else ["--suite", "suite.json"]
+    if suite:  # an ad-hoc suite of the objects and one procedural shape, posed once, frozen for every step
+        out["suite"] = ["mjcodesign", "evaluate", "--objects", s.objects, "--egad-like", "1", "--poses-per-object",
+                        str(s.eval_poses), "--designs", "soft", "--perturbations", "1", "--save-suite", "suite.json",
+                        "--out", "suite_check"]  # fmt: skip
+    oracle = ["mjcodesign", "bench", "oracle", *suite, "--only", ",".join(train), "--perturbations", "1",
+              "--population", str(s.population), "--seed", sd, "--json"]  # fmt: skip
+    out["hybrid"] = [*oracle, "--start", "joint:joint_success/design.txt", "--budget", str(hybrid_budget),
+                     "--out", "hybrid"]  # fmt: skip
+    designs = [
+        *PRESETS,
+        "joint:joint_lopt/design.txt",
+        "joint:joint_success/design.txt",
+        "joint:hybrid/design.json",
+    ]
+    if oracle_budget:
+        out["oracle"] = [*oracle, "--start", "semi-rigid", "--budget", str(oracle_budget), "--out", "oracle"]
+        designs.append("joint:oracle/design.json")
+    out["evaluate"] = ["mjcodesign", "evaluate", *suite, "--designs", ",".join(designs), "--perturbations",
+                       str(s.eval_perturbations), "--pose-sampling", "fixed,oracle", "--impulse", s.impulses,
+                       "--seed", sd, "--out", "evaluation", "--json"]  # fmt: skip
+    compare = [arg for m in designs if m not in PRESETS for p in PRESETS for arg in ("--compare", f"{m},{p}")]
+    for policy in ("fixed", "oracle"):
+        out[f"groups_{policy}"] = [sys.executable, str(HERE / "object_groups.py"), "evaluation", "--group",
+                                   "train=train_objects.txt", "--group", "held-out=held_out_objects.txt", *compare,
+                                   "--policy", policy, "--out", f"groups_{policy}.json"]  # fmt: skip
+    return out
+
+
+def first_commands(s: Scale, *, seed: int, resume: bool) -> dict[str, list[str]]:
+    """The ``datagen`` and ``train`` command lines (``resume``: continue the dataset in ``data``)."""
+    sd = str(seed)
+    data = ["mjcodesign", "datagen", "--objects", s.objects, "--poses-per-object", str(s.poses), "--designs-per-pose",
+            str(s.designs), "--perturbations", s.perturbations, "--workers", str(s.workers), "--seed", sd,
+            "--out", "data", *(["--resume"] if resume else [])]  # fmt: skip
+    train = ["mjcodesign", "train", "--data", "data", "--out", "surrogate", "--epochs", str(s.epochs), "--seed", sd,
+             "--threads", str(s.threads), "--efficiency", "0", "--smoothness-poses", "0", "--json"]  # fmt: skip
+    return {"datagen": data, "train": train}
+
+
+def main() -> int:
+    """Run the pipeline's steps in order; write the record."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--work", required=True, help="folder of every step's output (made if missing)")
+    ap.add_argument("--scale", choices=sorted(SCALES), default="paper")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--hybrid-budget", type=int, default=None, help="rollouts (default: 10 %% of the dataset's)"
+    )
+    ap.add_argument("--oracle-budget", type=int, default=0, help="rollouts of the oracle (0: no oracle)")
+    ap.add_argument("--record", default=None, help="write the record (JSON) here")
+    ap.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
+    a = ap.parse_args()
+    s = SCALES[a.scale]
+    work = Path(a.work).resolve()
+    work.mkdir(parents=True, exist_ok=True)
+    steps: dict[str, dict] = {}
+    t_all = time.perf_counter()
+    resume = (work / "data" / "manifest.json").is_file() and not _done(work, "datagen")
+    for name, argv in first_commands(s, seed=a.seed, resume=resume).items():
+        steps[name] = _run(work, name, argv, a.dry_run)
+    if a.dry_run:
+        train, held, budget = ["<training objects>"], ["<held-out objects>"], a.hybrid_budget or 0
+    else:
+        train, held = _objects(work)
+        (work / "train_objects.txt").write_text("\n".join(train) + "\n")
+        (work / "held_out_objects.txt").write_text("\n".join(held) + "\n")
+        budget = a.hybrid_budget or max(s.hybrid_floor, int(s.hybrid_fraction * _rollouts(work)))
+    later = step_commands(
+        s, seed=a.seed, train=train, held=held, hybrid_budget=budget, oracle_budget=a.oracle_budget
+    )
+    for name, argv in later.items():
+        steps[name] = _run(work, name, argv, a.dry_run)
+    if a.record and not a.dry_run:
+        from mjcodesign.bench.record import provenance
+
+        read = lambda f: json.loads((work / f).read_text())  # noqa: E731
+        rec = {
+            "provenance": provenance("paper_pipeline", command=shlex.join([sys.executable, *sys.argv])),
+            "scale": a.scale,
+            "settings": s.__dict__,
+            "steps": steps,
+            "wall_s_this_call": round(time.perf_counter() - t_all, 1),
+            "wall_s_steps": round(sum(r.get("wall_s", 0.0) for r in steps.values()), 1),
+            "objects": {"train": train, "held_out": held},
+            "dataset": read("data/manifest.json")["counts"],
+            "surrogate": {k: read("surrogate/metrics.json").get(k) for k in ("verdict", "split")},
+            "groups": {p: read(f"groups_{p}.json") for p in ("fixed", "oracle")},
+        }
+        Path(a.record).write_text(json.dumps(rec, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
