@@ -150,6 +150,7 @@ def step_commands(
         "joint:joint_lopt/design.txt",
         "joint:joint_success/design.txt",
         "joint:hybrid/design.json",
+        "individual:individual",
     ]
     if oracle_budget:
         out["oracle"] = [*oracle, "--start", "semi-rigid", "--budget", str(oracle_budget), "--out", "oracle"]

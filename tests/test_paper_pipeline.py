@@ -44,7 +44,7 @@ def test_every_step_parses_and_the_groups_compare_what_is_evaluated(pipeline, sc
     assert (("suite" in cmds) == (scale == "smoke")) and "--resume" in cmds["datagen"]
     ev = cmds["evaluate"]
     designs = ev[ev.index("--designs") + 1].split(",")
-    assert designs[:3] == list(pipeline.PRESETS) and len(designs) == 6 + bool(oracle)
+    assert designs[:3] == list(pipeline.PRESETS) and len(designs) == 7 + bool(oracle)
     for policy in ("fixed", "oracle"):
         g = cmds[f"groups_{policy}"]
         pairs = [g[i + 1].split(",", 1) for i, a in enumerate(g) if a == "--compare"]
@@ -80,6 +80,7 @@ def test_the_smoke_scale_runs_end_to_end_and_resumes(tmp_path):
     for policy in ("fixed", "oracle"):
         groups = r["groups"][policy]["groups"]
         assert {"train", "held-out", "in-domain", "out-of-domain"} <= set(groups)
-        assert len(groups["held-out"]["paired"]) == 9  # three co-designs against three presets
+        # three joint co-designs against three presets; the individual designs only on their own objects
+        assert len(groups["held-out"]["paired"]) == 9 and len(groups["train"]["paired"]) == 12
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert again.returncode == 0 and again.stderr.count("done before, skipped") == len(names)
