@@ -28,6 +28,7 @@ can maximise it (:class:`SuccessLoss`).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from dataclasses import dataclass
 
@@ -44,13 +45,14 @@ from mjcodesign.surrogate.data import (
     frame_inputs,
     normalize_clouds,
 )
-from mjcodesign.surrogate.model import GraspNet
+from mjcodesign.surrogate.model import Dropout, GraspNet
 
 __all__ = [
     "DesignLoss",
     "SuccessLoss",
     "DesignGradient",
     "design_vector",
+    "dropout_draws",
     "GraspBatch",
     "InputRange",
     "Poses",
@@ -331,13 +333,65 @@ class SuccessLoss:
     Summed over the rows it is the expected number of failed grasps; minimising it maximises the
     mean predicted success probability. A network without a head has no ``p_success`` and is refused
     (:meth:`Surrogate.loss_and_grad`).
+
+    With ``samples`` = K ≥ 2 the head is read K times with the network's dropout on (Monte Carlo
+    dropout; BatchNorm stays in its inference mode) and a row's loss is ``1 − mean_k p_k + uncertainty
+    · std_k p_k``: the mean is the prediction, the spread over the draws its uncertainty, which
+    ``uncertainty`` > 0 penalises (a design the network is unsure of costs more). The K dropout masks
+    come from ``seed`` and are the same at every call, so the loss is a deterministic, differentiable
+    function of the design (common random numbers for the optimiser).
     """
 
     needs_success_head = True
+    samples: int = 0
+    """Monte Carlo dropout draws (0: one deterministic pass, the default)."""
+    uncertainty: float = 0.0
+    """Weight of the draws' standard deviation in a row's loss (needs ``samples`` >= 2)."""
+    seed: int = 0
+    """Seed of the dropout masks."""
+
+    def __post_init__(self) -> None:
+        k, lam = self.samples, self.uncertainty
+        if isinstance(k, bool) or not isinstance(k, int) or k < 0 or k == 1:
+            raise DesignError(f"Monte Carlo dropout needs 0 (off) or >= 2 samples, got {k!r}")
+        if isinstance(lam, bool) or not (isinstance(lam, int | float) and 0 <= lam < float("inf")):
+            raise DesignError(f"the uncertainty weight must be a finite number >= 0, got {lam!r}")
+        if lam > 0 and k == 0:
+            raise DesignError("an uncertainty penalty needs Monte Carlo dropout samples (>= 2)")
 
     def rows(self, body_force, displacement, p_contact, up, p_success: torch.Tensor) -> torch.Tensor:
         """Per-row loss (B,): ``1 − p_success`` (torch, differentiable)."""
         return 1.0 - p_success
+
+    def draw_rows(self, p_draws: torch.Tensor) -> torch.Tensor:
+        """Per-row loss (B,) from K dropout draws of the head, shape (K, B) (class docstring)."""
+        out = 1.0 - p_draws.mean(dim=0)
+        if self.uncertainty > 0:
+            out = out + self.uncertainty * p_draws.std(dim=0, correction=0)
+        return out
+
+    def as_dict(self) -> dict:
+        """JSON-ready fields."""
+        return {"samples": self.samples, "uncertainty": self.uncertainty, "seed": self.seed}
+
+
+@contextlib.contextmanager
+def dropout_draws(model: torch.nn.Module, seed: int):
+    """Within the block, ``model``'s dropout layers are on (all else in inference mode) under ``seed``.
+
+    The global torch generator is forked, so the caller's random state is left as it was.
+    """
+    layers = [m for m in model.modules() if isinstance(m, Dropout | torch.nn.Dropout)]
+    was = [m.training for m in layers]
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        try:
+            for m in layers:
+                m.train()
+            yield
+        finally:
+            for m, t in zip(layers, was, strict=True):
+                m.train(t)
 
 
 def design_vector(design) -> np.ndarray:
@@ -498,7 +552,12 @@ class Surrogate:
         :class:`SuccessLoss` on a network without a head.
         """
         head = self.check_loss(loss)
-        force, disp, p, up, ps = self._outputs(batch, log_e.expand(len(batch), N_LOG_E))
+        design = log_e.expand(len(batch), N_LOG_E)
+        if head and getattr(loss, "samples", 0):
+            with dropout_draws(self.model, loss.seed):
+                draws = torch.stack([self._outputs(batch, design)[4] for _ in range(loss.samples)])
+            return loss.draw_rows(draws)
+        force, disp, p, up, ps = self._outputs(batch, design)
         return loss.rows(force, disp, p, up, ps) if head else loss.rows(force, disp, p, up)
 
     def loss_and_grad(

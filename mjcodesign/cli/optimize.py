@@ -16,6 +16,7 @@ from mjcodesign.cli.common import (
     add_out_folder,
     check_output_link,
     emit,
+    finite_float,
     int_at_least,
     output_file,
     path_text,
@@ -81,6 +82,13 @@ def add_parser(subparsers) -> None:
     p.add_argument("--max-iterations", type=int_at_least(1), default=2000, help="N of Algorithm 1")
     p.add_argument("--patience", type=int_at_least(1), default=100, help="T_p of Algorithm 1 (paper: 100)")
     p.add_argument("--top-b", type=int_at_least(1), default=5, help="B of Algorithm 1 (paper: 5)")
+    for flag, kind, default, meta, text in (
+        ("--mc-samples", int_at_least(0), 0, "K", "--objective success: read the success head K times with dropout "
+         "on (Monte Carlo dropout) and optimise the mean; 0: one deterministic pass"),
+        ("--uncertainty", finite_float(0.0), 0.0, "LAMBDA", "--objective success: add LAMBDA times the K draws' "
+         "standard deviation to each pose's loss (a penalty on what the network is unsure of; needs --mc-samples >= 2)"),
+    ):  # fmt: skip
+        p.add_argument(flag, type=kind, default=default, metavar=meta, help=text)
     p.add_argument("--no-ground-truth", action="store_true", help="skip re-simulating the designs in MuJoCo")
     p.add_argument(
         "--robust",
@@ -136,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
         top_b=args.top_b,
         patience=args.patience,
         max_iterations=args.max_iterations,
+        mc_samples=args.mc_samples,
+        uncertainty=args.uncertainty,
     )
     with contextlib.ExitStack() as stack:
         bar: list = []  # the progress bar, started at the first iteration: a refusal before it is one line

@@ -119,6 +119,11 @@ class OptimizeConfig:
     within 0.1 % of the reference for T_p iterations (:mod:`~mjcodesign.codesign.selection`). (The authors stop when the total
     changes by < 1e-6 per iteration for 1000 iterations, which on our smooth surrogate never happens
     before their 10k cap.)"""
+    mc_samples: int = 0
+    """Success objective: Monte Carlo dropout draws of the head per evaluation (0: one deterministic
+    pass; :class:`~mjcodesign.surrogate.SuccessLoss`)."""
+    uncertainty: float = 0.0
+    """Success objective: weight of the draws' spread in each row's loss (needs ``mc_samples`` >= 2)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mode", Mode(self.mode))
@@ -132,8 +137,18 @@ class OptimizeConfig:
             raise DesignError(f"top_b, patience and max_iterations must be integers >= 1, got {ints}")
         if not (math.isfinite(self.lr) and self.lr > 0 and self.weight_decay >= 0 and self.tol >= 0):
             raise DesignError("lr > 0, weight_decay >= 0 and tol >= 0 required")
+        if (self.mc_samples or self.uncertainty) and self.objective is not Objective.SUCCESS:
+            raise DesignError("Monte Carlo dropout and its uncertainty penalty are for --objective success")
+        if self.objective is Objective.SUCCESS:
+            self.success_loss()  # refuses a bad sample count or weight now, not at the first iteration
         if not LOG_E_MIN < self.init_log_e < LOG_E_MAX:
             raise DesignError(f"init_log_e must be inside ({LOG_E_MIN}, {LOG_E_MAX}), got {self.init_log_e}")
+
+    def success_loss(self):
+        """The :class:`~mjcodesign.surrogate.SuccessLoss` of the success objective under these settings."""
+        from mjcodesign.surrogate import SuccessLoss
+
+        return SuccessLoss(samples=self.mc_samples, uncertainty=self.uncertainty)
 
     def as_dict(self) -> dict:
         """JSON-ready fields."""
@@ -147,6 +162,8 @@ class OptimizeConfig:
             "weight_decay": self.weight_decay,
             "init_log_e": self.init_log_e,
             "tol": self.tol,
+            "mc_samples": self.mc_samples,
+            "uncertainty": self.uncertainty,
         }
 
 
@@ -267,7 +284,7 @@ def optimize(
     """
     import torch
 
-    from mjcodesign.surrogate import DesignLoss, GraspBatch, Poses, SuccessLoss
+    from mjcodesign.surrogate import DesignLoss, GraspBatch, Poses
 
     cfg = config or OptimizeConfig()
     success = cfg.objective is Objective.SUCCESS
@@ -282,7 +299,7 @@ def optimize(
     if k_objects == 0 or any(len(r) == 0 for r in rows_of):
         empty = [poses.objects[k] for k, r in enumerate(rows_of) if len(r) == 0]
         raise DesignError(f"every object needs a candidate pose; none for {empty or 'any object'}")
-    base = loss or (SuccessLoss() if success else DesignLoss())
+    base = loss or (cfg.success_loss() if success else DesignLoss())
     sur_poses = Poses.of(poses)
     joint = cfg.mode is Mode.JOINT
     groups = [np.arange(k_objects)] if joint else [np.array([k]) for k in range(k_objects)]

@@ -207,9 +207,7 @@ def _variant_surrogate(nominal, variants: dict, robust: str):
 def _loss(config: OptimizeConfig):
     """The loss the optimisation used, for the presets' poses and the prediction (None: the paper's)."""
     if config.objective is Objective.SUCCESS:
-        from mjcodesign.surrogate import SuccessLoss
-
-        return SuccessLoss()
+        return config.success_loss()
     return None
 
 
