@@ -65,6 +65,9 @@ def main() -> None:
                     "bin": b,
                     "rows": int(s.sum()),
                     "spearman_std_err": float(spearmanr(std[s], err[s]).correlation),
+                    "spearman_bernoulli_err": float(
+                        spearmanr(np.sqrt(mean[s] * (1 - mean[s])), err[s]).correlation
+                    ),
                 }
             )
     rank = ranking_fidelity(
