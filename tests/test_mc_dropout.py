@@ -119,7 +119,7 @@ class _Planted(nn.Module):
         return torch.zeros(len(clouds), 1, dtype=torch.float64)
 
     def head(self, features, x):
-        m = self.drop(torch.ones(len(x), dtype=x.dtype))
+        m = self.drop(torch.ones(1, dtype=x.dtype)).expand(len(x))  # one draw for every row
         q = -_A * ((x[:, :22] - _C) ** 2).mean(dim=1) - _A0 * (x[:, 0] - _C) ** 2
         q = q + (m - 1.0) * _S * (x[:, 0] - _C - _DELTA)
         zero = torch.zeros(len(x), dtype=x.dtype)
@@ -144,8 +144,10 @@ def test_the_penalty_moves_the_optimum_towards_what_the_network_is_sure_of():
         "max_iterations": 400,
         "weight_decay": 0.0,
     }
-    x0 = {lam: optimize(sur, _planted_poses(), 200.0, OptimizeConfig(**cfg, mc_samples=8, uncertainty=lam))
-          .designs[0][0] for lam in (0.0, 3.0)}  # fmt: skip
+    runs = {lam: optimize(sur, _planted_poses(), 200.0, OptimizeConfig(**cfg, mc_samples=16, uncertainty=lam))
+            for lam in (0.0, 3.0)}  # fmt: skip
+    assert all(r.total_curve[-1] > 0 for r in runs.values())  # the counted loss is the draws' (not unset)
+    x0 = {lam: r.designs[0][0] for lam, r in runs.items()}
     assert abs(x0[0.0] - _C) < 0.3 * _DELTA  # the mean alone stays near its optimum
     assert x0[3.0] - x0[0.0] > 0.3 * _DELTA  # the penalty pulls block 0 towards where the spread vanishes
 
@@ -170,3 +172,31 @@ def test_optimize_config_and_the_command_line_refuse_a_penalty_without_the_succe
         assert code == 2 and len(err) == 1 and err[0].startswith("error:"), (extra, err)
         assert "dropout" in err[0] or "uncertainty" in err[0], err  # refused for the flags, not the poses
         assert not out.exists()
+
+
+@pytest.mark.parametrize("counted", [False, True])
+def test_algorithm_1_counts_the_draws_rows_it_chooses(counted):
+    # The optimiser's loss detaches the rows its pose selection leaves out; the draws' rows go through it
+    from mjcodesign.codesign.optimize import _counted_loss
+
+    sur = _tiny()
+    b = _batch(sur)
+    base = SuccessLoss(samples=4, uncertainty=0.5, seed=2)
+    seen = []
+
+    def choose(values):
+        seen.append(values)
+        return np.arange(len(values)) < (4 if counted else 0)
+
+    full = sur.loss_and_grad(_D, b, base)
+    got = sur.loss_and_grad(_D, b, _counted_loss(base, choose))
+    assert len(seen) == 1
+    np.testing.assert_allclose(seen[0], full.rows, rtol=1e-12)  # the selection ranks the draws' rows
+    np.testing.assert_allclose(got.rows, full.rows, rtol=1e-12)
+    if not counted:
+        assert np.all(got.grad == 0.0)
+    else:  # the gradient of the first four rows alone
+        step = _FD_STEP
+        fd = np.array([(sur.loss_and_grad(_D + e, b, base).rows[:4].sum() - sur.loss_and_grad(_D - e, b, base).rows[:4].sum())
+                       / (2 * step) for e in np.eye(22) * step])  # fmt: skip
+        np.testing.assert_allclose(got.grad, fd, rtol=_TOL_FD, atol=_TOL_FD * np.abs(fd).max())

@@ -245,6 +245,11 @@ def _counted_type(base_type: type) -> type:
         def rows(self, *outputs):
             return self.counted(super().rows(*outputs))
 
+        if hasattr(base_type, "draw_rows"):  # the success loss on Monte Carlo dropout draws
+
+            def draw_rows(self, draws):
+                return self.counted(super().draw_rows(draws))
+
         def counted(self, r):
             """The per-row losses ``r`` with the rows ``choose`` leaves out detached."""
             mask = torch.from_numpy(np.asarray(self.choose(r.detach().double().numpy()), dtype=bool))
