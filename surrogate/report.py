@@ -237,13 +237,15 @@ def checkpoint_smoothness(
             meta["split"]["mode"],
             int(meta["train"]["seed"]),
         )
+        split_seed = meta["train"].get("split_seed")
+        split_seed = seed if split_seed is None else int(split_seed)
         held_out = list(meta["split"]["test_objects"])
     except (KeyError, TypeError, ValueError) as exc:
         raise OutputError(f"{ckpt}: the checkpoint records no dataset split ({exc})") from exc
     if recorded != data.manifest_sha256:
         raise OutputError(f"{ckpt} was trained on another dataset (manifest sha256 {recorded[:12]}, "
                           f"{data_dir} has {data.manifest_sha256[:12]})")  # fmt: skip
-    parts = split(data, mode, seed=seed)
+    parts = split(data, mode, seed=split_seed)
     if list(parts.test_objects) != held_out:
         raise OutputError(
             f"{ckpt}: the rebuilt split holds out {list(parts.test_objects)}, the checkpoint {held_out}"
@@ -295,7 +297,7 @@ def train_and_report(
     )
     start, mcfg = _initial(init, model_config)
     data = load_grasp_data(data_dir)
-    parts = split(data, split_mode, seed=cfg.seed)
+    parts = split(data, split_mode, seed=cfg.data_seed)
     lines = dataset_warnings(data, parts)
     if poses_per_object is not None:
         lines += _short_objects(data, parts, poses_per_object)  # of the uncut split: all their poses

@@ -108,6 +108,9 @@ class TrainConfig:
     network's step at batch 512 takes 88 ms against 160 ms (``bench surrogate``, alternated, 2 threads);
     see docs/benchmarks.md for what it does to the metrics."""
     seed: int = 0
+    split_seed: int | None = None
+    """Seed of the held-out objects' draw (None: ``seed``). Networks that differ only in ``seed`` and share
+    it hold out the same objects: an ensemble, or seeds compared on the same rows."""
     success_weight: float = SUCCESS_WEIGHT
     """Weight of the success head's cross-entropy in the loss (unused by a network without a head)."""
     rank_weight: float = 0.0
@@ -129,10 +132,17 @@ class TrainConfig:
             raise DesignError(
                 f"{', '.join(bad)}: integers required (batch_size >= 2, epochs and patience >= 1)"
             )
+        if self.split_seed is not None and _bad_count(self.split_seed, 0):
+            raise DesignError(f"split_seed must be None or an integer >= 0, got {self.split_seed!r}")
         if not isinstance(self.optimizer, OptimizerConfig):
             raise DesignError(f"optimizer must be an OptimizerConfig, got {self.optimizer!r}")
         if self.precision not in PRECISIONS:
             raise DesignError(f"unknown precision {self.precision!r}: choose from {', '.join(PRECISIONS)}")
+
+    @property
+    def data_seed(self) -> int:
+        """The seed of the object split: ``split_seed``, else ``seed``."""
+        return self.seed if self.split_seed is None else self.split_seed
 
     def as_dict(self) -> dict:
         """JSON-ready fields."""

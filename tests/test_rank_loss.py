@@ -111,3 +111,12 @@ def test_linear_design_effect_recovers_a_shared_preference_whatever_the_pose_lev
     # fitted to the opposite preference, it ranks the first one backwards
     data.success_p = level - (log_e - 15.25) @ preference
     assert np.all(group_spearman(linear_design_effect(data, train, test), p[test], groups) < -0.95)
+
+
+def test_the_split_seed_holds_the_split_while_the_seed_changes_the_network():
+    assert TrainConfig(seed=3).data_seed == 3
+    assert TrainConfig(seed=3, split_seed=0).data_seed == 0 and TrainConfig(seed=3, split_seed=0).seed == 3
+    assert TrainConfig(seed=1, split_seed=0).as_dict()["split_seed"] == 0
+    for bad in (-1, 1.5, True):
+        with pytest.raises(DesignError, match="split_seed"):
+            TrainConfig(split_seed=bad)

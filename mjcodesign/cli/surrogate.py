@@ -58,6 +58,9 @@ def _precision(text: str) -> str:
 _TRAIN_OPTIONS = (
     ("--epochs", "epochs", int_at_least(1), 200, "most epochs (early stopping ends sooner)"),
     ("--seed", "seed", int_at_least(0), 0, "seeds the split, weights and shuffles"),
+    ("--split-seed", "split_seed", int_at_least(0), None,
+     "seeds the held-out objects' draw instead of --seed (networks of one --split-seed and several --seed: "
+     "an ensemble on the same split)"),
     ("--batch-size", "batch_size", int_at_least(2), 512, "samples per step (paper: 512)"),
     ("--patience", "early_stop_patience", int_at_least(1), 20, "early stopping [epochs]"),
     ("--pose-group", "pose_group", int_at_least(0), 0, "samples of a pose kept together in a batch (0: all)"),
