@@ -10,12 +10,17 @@ mean itself (what any probability "knows" of its error); and the same Spearman w
 (0–0.2, …, 0.8–1), where p alone cannot explain it. An uncertainty worth penalising ranks the errors
 within a bin. And the design ranking (:func:`~mjcodesign.surrogate.ranking.ranking_fidelity`) of the
 mean and of mean ∓ std.
+
+With ``--member CKPT`` (repeatable; checkpoints of the same dataset and held-out objects, e.g. ``train
+--split-seed 0 --seed 1``) the draws are the deterministic heads of ``--ckpt`` and the members instead:
+an ensemble's mean and spread, measured the same way.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +36,7 @@ def main() -> None:
     ap.add_argument("--data", required=True)
     ap.add_argument("--samples", type=int, default=16)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--member", action="append", default=[], help="ensemble member checkpoint (repeat)")
     ap.add_argument("--out", required=True)
     a = ap.parse_args()
     import torch
@@ -50,8 +56,15 @@ def main() -> None:
     rows = np.array([i for i in range(len(d.pose)) if str(d.objects[d.pose[i]]) in held])
     sur = load_surrogate(a.ckpt)
     p0 = predict_success(sur, d, rows)
-    with dropout_draws(sur.model, a.seed):
-        draws = np.array([predict_success(sur, d, rows) for _ in range(a.samples)])
+    if a.member:
+        for m in a.member:
+            theirs = json.loads((Path(m) / "metrics.json").read_text())["split"]["test_objects"]
+            if set(theirs) != held:
+                raise SystemExit(f"{m} holds out other objects than {a.ckpt}")
+        draws = np.array([p0, *(predict_success(load_surrogate(m), d, rows) for m in a.member)])
+    else:
+        with dropout_draws(sur.model, a.seed):
+            draws = np.array([predict_success(sur, d, rows) for _ in range(a.samples)])
     mean, std = draws.mean(axis=0), draws.std(axis=0)
     y, label = d.success[rows], d.success_p[rows]
     err = np.abs(mean - label)
@@ -74,7 +87,7 @@ def main() -> None:
         {"deterministic": p0, "mean": mean, "mean - std": mean - std, "mean + std": mean + std}, d, rows
     )
     out = {
-        "ckpt": a.ckpt, "data": a.data, "rows": len(rows), "samples": a.samples,
+        "ckpt": a.ckpt, "data": a.data, "rows": len(rows), "samples": len(draws), "members": a.member,
         "deterministic": {"roc_auc": float(roc_auc_score(y, p0)), "brier": float(np.mean((p0 - y) ** 2))},
         "mc_mean": {"roc_auc": float(roc_auc_score(y, mean)), "brier": float(np.mean((mean - y) ** 2))},
         "std_median": float(np.median(std)),
@@ -82,7 +95,7 @@ def main() -> None:
         "spearman_bernoulli_err": float(spearmanr(np.sqrt(mean * (1 - mean)), err).correlation),
         "within_mean_bins": within,
         "ranking_median": {k: v["median"] for k, v in rank["models"].items()},
-        "provenance": provenance("mc_dropout_calibration", command=f"python3 scripts/mc_dropout_calibration.py --ckpt {a.ckpt} --data {a.data} --samples {a.samples} --out {a.out}"),
+        "provenance": provenance("mc_dropout_calibration", command=" ".join(["python3", "scripts/mc_dropout_calibration.py", *sys.argv[1:]])),
     }  # fmt: skip
     Path(a.out).write_text(json.dumps(out, indent=1))
     print(json.dumps({k: v for k, v in out.items() if k != "provenance"}, indent=1))
