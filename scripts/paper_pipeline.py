@@ -223,6 +223,9 @@ def main() -> int:
             "wall_s_steps": round(sum(r.get("wall_s", 0.0) for r in steps.values()), 1),
             "objects": {"train": train, "held_out": held},
             "dataset": read("data/manifest.json")["counts"],
+            # every datagen call that wrote the dataset (a resumed one has several) and when it last wrote
+            "dataset_runs": read("data/manifest.json")["runs"],
+            "dataset_updated": read("data/manifest.json")["updated"],
             "surrogate": {k: read("surrogate/metrics.json").get(k) for k in ("verdict", "split")},
             "groups": {p: read(f"groups_{p}.json") for p in ("fixed", "oracle")},
         }
