@@ -544,7 +544,13 @@ def test_datagen_and_data_info(small_cli, work, capsys):
     cap = capsys.readouterr()
     summary = json.loads(cap.out)
     assert summary["complete"] and summary["samples"] + summary["rejected"] == 2
-    assert {"samples_per_s", "wall_s", "success_rate", "computed", "short_poses"} <= set(summary)
+    assert {"samples_per_s", "rollouts_per_s", "wall_s", "success_rate", "computed", "short_poses"} <= set(
+        summary
+    )
+    # one rollout per sample or rejected row here: the rates are the computed rows' over the same wall time
+    comp, wall = summary["computed"], summary["wall_s"]
+    assert summary["samples_per_s"] == pytest.approx(comp["samples"] / wall, rel=1e-12)
+    assert summary["rollouts_per_s"] == pytest.approx((comp["samples"] + comp["rejected"]) / wall, rel=1e-12)
     # stderr is no terminal here: one line as the object is posed and one per shard written.
     lines = cap.err.splitlines()
     assert any(ln.startswith("datagen: posing objects 1/1 ") for ln in lines), cap.err

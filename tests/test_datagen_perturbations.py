@@ -62,6 +62,11 @@ def _config(work: Path, **kw) -> DatagenConfig:
 def _make(work: Path, name: str, config: DatagenConfig, **kw):
     res = generate(config, work / name, cache_dir=work / "cache", **kw)
     assert res["complete"]
+    # the summary's rates: rows per second and perturbed rollouts per second, over the same wall time
+    comp = res["computed"]
+    assert res["samples_per_s"] == pytest.approx(comp["samples"] / res["wall_s"], rel=1e-12)
+    assert res["rollouts_per_s"] == pytest.approx(comp["rollouts"] / res["wall_s"], rel=1e-12)
+    assert comp["rollouts"] >= config.perturbations * (comp["samples"] + comp["rejected"])
     return open_dataset(work / name)
 
 
