@@ -162,3 +162,15 @@ def test_bad_input_exits_2_with_one_line_and_no_folder(tmp_path, args, says):
     assert p.returncode == 2
     assert says in p.stderr and len(p.stderr.strip().splitlines()) == 1
     assert p.stdout == "" and not out.exists()
+
+
+def test_only_takes_a_list_longer_than_a_file_name_and_a_file(tmp_path):
+    # 36 names joined by commas are longer than a path component may be: a list, not an OSError
+    from mjcodesign.cli.oracle import _only
+
+    names = [f"{i:03d}_an_object_with_a_long_name" for i in range(36)]
+    assert len(",".join(names)) > 255
+    assert _only(",".join(names)) == set(names)
+    listed = tmp_path / "train_objects.txt"
+    listed.write_text("\n".join(names) + "\n")
+    assert _only(str(listed)) == set(names)

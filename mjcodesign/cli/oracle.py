@@ -77,7 +77,11 @@ def _only(text: str | None) -> set[str] | None:
     if text is None:
         return None
     p = Path(text)
-    if p.is_file():
+    try:
+        is_file = p.is_file()
+    except OSError:  # a long list of names is no path the system can stat (ENAMETOOLONG)
+        is_file = False
+    if is_file:
         try:
             text = p.read_text(encoding="utf-8")
             names = [s.strip() for s in text.replace(",", "\n").splitlines() if s.strip()]
