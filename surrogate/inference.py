@@ -370,10 +370,6 @@ class SuccessLoss:
             out = out + self.uncertainty * p_draws.std(dim=0, correction=0)
         return out
 
-    def as_dict(self) -> dict:
-        """JSON-ready fields."""
-        return {"samples": self.samples, "uncertainty": self.uncertainty, "seed": self.seed}
-
 
 @contextlib.contextmanager
 def dropout_draws(model: torch.nn.Module, seed: int):
