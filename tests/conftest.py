@@ -1,5 +1,7 @@
+import importlib.util
 import os
 import signal
+import sys
 from pathlib import Path
 
 import pytest
@@ -23,6 +25,27 @@ def reference_dir():
     if not REFERENCE.is_dir():
         pytest.skip("shared/reference/codesign-soft-gripper is absent")
     return REFERENCE
+
+
+SCRIPTS = Path(__file__).resolve().parents[1] / "scripts"
+
+
+@pytest.fixture(scope="session")
+def script_module():
+    """A loader of ``scripts/NAME.py`` as a module (registered in ``sys.modules`` for its dataclasses)."""
+    loaded = []
+
+    def load(name: str):
+        spec = importlib.util.spec_from_file_location(name, SCRIPTS / f"{name}.py")
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[name] = mod
+        loaded.append(name)
+        spec.loader.exec_module(mod)
+        return mod
+
+    yield load
+    for name in loaded:
+        sys.modules.pop(name, None)
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,6 @@ compare the designs the evaluation runs.
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 from pathlib import Path
 
@@ -19,13 +18,8 @@ SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "paper_pipeline.py"
 
 
 @pytest.fixture(scope="module")
-def pipeline():
-    spec = importlib.util.spec_from_file_location("paper_pipeline", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["paper_pipeline"] = mod
-    spec.loader.exec_module(mod)
-    yield mod
-    sys.modules.pop("paper_pipeline", None)
+def pipeline(script_module):
+    return script_module("paper_pipeline")
 
 
 @pytest.mark.parametrize("scale", ["paper", "smoke"])
