@@ -51,8 +51,10 @@ def test_predict_without_ckpt_reads_them(tmp_path):
 
 _HELD_OUT = Path(__file__).parent / "data" / "shipped_held_out.npz"  # scripts/held_out_sample.py
 _METRIC_TOL = 1e-4
-"""AUC and Brier recomputed on the same 480 rows: float32 inference may differ in its last bits between
+"""AUC and Brier recomputed on the sample's rows: float32 inference may differ in its last bits between
 CPUs, which moves a Brier score by ~1e-7 and a rank-based AUC only where two rows' scores swap."""
+_CARD_ROUNDING = 0.5e-4
+"""The card prints the sample's metrics to four decimals."""
 
 
 def test_the_recorded_held_out_metrics_are_what_the_weights_give():
@@ -63,20 +65,22 @@ def test_the_recorded_held_out_metrics_are_what_the_weights_give():
 
     folder = shipped_checkpoint()
     config = json.loads((folder / "config.json").read_text(encoding="utf-8"))
+    card = (folder / "README.md").read_text(encoding="utf-8")
     with np.load(_HELD_OUT, allow_pickle=False) as z:
         s = {k: z[k] for k in z.files}
     assert str(s["manifest_sha256"]) == config["dataset"]["manifest_sha256"]
-    assert (
-        set(s["objects"]) == set(config["split"]["test_objects"])
-        and len(s["pose"]) == config["split"]["test"]
+    assert set(s["objects"]) == set(config["split"]["test_objects"])
+    line = re.search(
+        r"held-out sample, ([\d,]+) rows .*head AUC ([\d.]+), Brier ([\d.]+); score AUC ([\d.]+)", card
     )
+    assert line, "the card gives no metrics on the shipped held-out sample"
+    rows, head_auc, head_brier, score_auc = int(line[1].replace(",", "")), *map(float, line.groups()[1:])
+    assert len(s["pose"]) == rows <= config["split"]["test"]
     sur = load_surrogate(folder)
     poses = Poses(s["clouds"], s["com"], s["up"], s["volume"])
     pred = sur.predict(GraspBatch(poses, s["pose"], s["density"], s["log_e"]))
     truth = s["success"].astype(float)
-    recorded = config["metrics"]["success_head"]
-    assert roc_auc_score(truth, pred.success_p) == pytest.approx(recorded["roc_auc"], abs=_METRIC_TOL)
-    assert np.mean((pred.success_p - truth) ** 2) == pytest.approx(recorded["brier"], abs=_METRIC_TOL)
-    assert roc_auc_score(truth, pred.success_score) == pytest.approx(
-        config["metrics"]["success"]["roc_auc"], abs=_METRIC_TOL
-    )
+    tol = _METRIC_TOL + _CARD_ROUNDING
+    assert roc_auc_score(truth, pred.success_p) == pytest.approx(head_auc, abs=tol)
+    assert np.mean((pred.success_p - truth) ** 2) == pytest.approx(head_brier, abs=tol)
+    assert roc_auc_score(truth, pred.success_score) == pytest.approx(score_auc, abs=tol)
