@@ -1,6 +1,7 @@
 """The paper-scale pipeline as one resumable command sequence: data, surrogate, co-designs, oracle, Table 1.
 
-    python3 scripts/paper_pipeline.py --work DIR [--scale paper|smoke] [--oracle-budget N] [--record FILE]
+    python3 scripts/paper_pipeline.py --work DIR [--scale paper|smoke] [--oracle-budget N | --oracle-design FILE]
+        [--record FILE]
 
 Runs, in order, from ``DIR`` (each step's command is printed, and recorded with its exit code, start,
 end and wall time in ``DIR/steps/NAME.json``; a rerun skips the steps that finished and resumes the
@@ -14,11 +15,16 @@ dataset, so an interrupted run goes on where it stopped):
 4. ``hybrid``: surrogate then simulator: CMA-ES on the simulator from the joint (success) design, for
    ``--hybrid-budget`` rollouts (default 10 % of the dataset's);
 5. ``oracle`` (with ``--oracle-budget N``): CMA-ES on the simulator alone from semi-rigid, N rollouts;
+   or (with ``--oracle-design FILE``) the design of an earlier oracle run on the same training objects,
+   regime and suite (``bench oracle``'s ``design.json`` or its record), copied to ``oracle/design.json``;
 6. ``evaluate``: every design against soft, semi-rigid and paper-optimized by perturbed re-simulation
-   on the frozen suite (46 in-domain, 42 out-of-domain objects), both pose policies, the disturbance
-   sweep;
+   on the frozen suite (46 in-domain, 41 out-of-domain objects), both pose policies, the disturbance
+   sweep; ``evaluate_oracle``: the oracle with semi-rigid on the same draws (a second evaluation, so
+   the oracle can come after the first; semi-rigid must agree rollout by rollout, which checks the
+   pairing);
 7. ``groups``: the evaluation split into the surrogate's training objects, its held-out objects and
-   out of domain, each co-design paired against each preset (``scripts/object_groups.py``).
+   out of domain, each co-design paired against each preset and the oracle, per pose policy and per
+   disturbance (``scripts/object_groups.py``).
 
 ``--scale smoke`` runs the same steps on five objects, two poses and tiny budgets (a minute or two):
 what the tests run. ``--record FILE`` writes the steps, their times and the headline numbers, with
@@ -118,13 +124,17 @@ def _rollouts(work: Path) -> int:
     return int(counts.get("rollouts", counts["samples"]))
 
 
+ORACLE = "joint:oracle/design.json"
+
+
 def step_commands(
-    s: Scale, *, seed: int, train: list[str], held: list[str], hybrid_budget: int, oracle_budget: int
+    s: Scale, *, seed: int, train: list[str], held: list[str], hybrid_budget: int, oracle: str | int
 ) -> dict[str, list[str]]:
     """Every step's command line (argv) after ``datagen`` and ``train``, in order, run from the work folder.
 
     ``train`` / ``held``: the surrogate's training and held-out objects. ``suite`` appears only at a
-    scale that evaluates an ad-hoc suite (``smoke``).
+    scale that evaluates an ad-hoc suite (``smoke``). ``oracle``: its budget in rollouts (0: no oracle)
+    or an earlier oracle's design file (its step copies it, see :func:`adopt_oracle`).
     """
     sd = str(seed)
     out: dict[str, list[str]] = {}
@@ -141,9 +151,9 @@ def step_commands(
         out["suite"] = ["mjcodesign", "evaluate", "--objects", s.objects, "--egad-like", "1", "--poses-per-object",
                         str(s.eval_poses), "--designs", "soft", "--perturbations", "1", "--save-suite", "suite.json",
                         "--out", "suite_check"]  # fmt: skip
-    oracle = ["mjcodesign", "bench", "oracle", *suite, "--only", ",".join(train), "--perturbations", "1",
+    cma = ["mjcodesign", "bench", "oracle", *suite, "--only", ",".join(train), "--perturbations", "1",
               "--population", str(s.population), "--seed", sd, "--json"]  # fmt: skip
-    out["hybrid"] = [*oracle, "--start", "joint:joint_success/design.txt", "--budget", str(hybrid_budget),
+    out["hybrid"] = [*cma, "--start", "joint:joint_success/design.txt", "--budget", str(hybrid_budget),
                      "--out", "hybrid"]  # fmt: skip
     designs = [
         *PRESETS,
@@ -152,18 +162,48 @@ def step_commands(
         "joint:hybrid/design.json",
         "individual:individual",
     ]
-    if oracle_budget:
-        out["oracle"] = [*oracle, "--start", "semi-rigid", "--budget", str(oracle_budget), "--out", "oracle"]
-        designs.append("joint:oracle/design.json")
-    out["evaluate"] = ["mjcodesign", "evaluate", *suite, "--designs", ",".join(designs), "--perturbations",
-                       str(s.eval_perturbations), "--pose-sampling", "fixed,oracle", "--impulse", s.impulses,
-                       "--seed", sd, "--out", "evaluation", "--json"]  # fmt: skip
+    if isinstance(oracle, str):
+        out["oracle"] = [
+            sys.executable,
+            str(HERE / "paper_pipeline.py"),
+            "--work",
+            ".",
+            "--adopt-oracle",
+            oracle,
+        ]
+    elif oracle:
+        out["oracle"] = [*cma, "--start", "semi-rigid", "--budget", str(oracle), "--out", "oracle"]
+    evaluate = ["mjcodesign", "evaluate", *suite, "--perturbations", str(s.eval_perturbations), "--pose-sampling",
+                "fixed,oracle", "--impulse", s.impulses, "--seed", sd, "--json"]  # fmt: skip
+    out["evaluate"] = [*evaluate, "--designs", ",".join(designs), "--out", "evaluation"]
     compare = [arg for m in designs if m not in PRESETS for p in PRESETS for arg in ("--compare", f"{m},{p}")]
-    for policy in ("fixed", "oracle"):
-        out[f"groups_{policy}"] = [sys.executable, str(HERE / "object_groups.py"), "evaluation", "--group",
-                                   "train=train_objects.txt", "--group", "held-out=held_out_objects.txt", *compare,
-                                   "--policy", policy, "--out", f"groups_{policy}.json"]  # fmt: skip
+    also = []
+    if oracle:
+        out["evaluate_oracle"] = [
+            *evaluate,
+            "--designs",
+            f"semi-rigid,{ORACLE}",
+            "--out",
+            "evaluation_oracle",
+        ]
+        also = ["--also", "evaluation_oracle"]
+        compare += [a for m in (*PRESETS, *designs[len(PRESETS) :]) for a in ("--compare", f"{ORACLE},{m}")]
+    for i, impulse in enumerate(s.impulses.split(",")):
+        for policy in ("fixed", "oracle"):
+            name = f"groups_{policy}" + (f"_impulse{impulse}" if i else "")
+            out[name] = [sys.executable, str(HERE / "object_groups.py"), "evaluation", *also, "--group",
+                         "train=train_objects.txt", "--group", "held-out=held_out_objects.txt", *compare,
+                         "--policy", policy, "--impulse", impulse, "--out", f"{name}.json"]  # fmt: skip
     return out
+
+
+def adopt_oracle(work: Path, source: str) -> None:
+    """Copy an earlier oracle's design (any file ``joint:FILE`` reads) to ``work/oracle/design.json``."""
+    from mjcodesign.design.stiffness import read_design_file, write_design_file
+
+    design = read_design_file(source)
+    (work / "oracle").mkdir(parents=True, exist_ok=True)
+    write_design_file(work / "oracle" / "design.json", design, source=str(Path(source).resolve()))
 
 
 def first_commands(s: Scale, *, seed: int, resume: bool) -> dict[str, list[str]]:
@@ -186,10 +226,18 @@ def main() -> int:
     ap.add_argument(
         "--hybrid-budget", type=int, default=None, help="rollouts (default: 10 %% of the dataset's)"
     )
-    ap.add_argument("--oracle-budget", type=int, default=0, help="rollouts of the oracle (0: no oracle)")
+    oracle = ap.add_mutually_exclusive_group()
+    oracle.add_argument("--oracle-budget", type=int, default=0, help="rollouts of the oracle (0: no oracle)")
+    oracle.add_argument(
+        "--oracle-design", default=None, help="an earlier oracle's design file instead (above)"
+    )
+    ap.add_argument("--adopt-oracle", default=None, help=argparse.SUPPRESS)  # the oracle step itself
     ap.add_argument("--record", default=None, help="write the record (JSON) here")
     ap.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
     a = ap.parse_args()
+    if a.adopt_oracle:
+        adopt_oracle(Path(a.work), a.adopt_oracle)
+        return 0
     s = SCALES[a.scale]
     work = Path(a.work).resolve()
     work.mkdir(parents=True, exist_ok=True)
@@ -206,7 +254,12 @@ def main() -> int:
         (work / "held_out_objects.txt").write_text("\n".join(held) + "\n")
         budget = a.hybrid_budget or max(s.hybrid_floor, int(s.hybrid_fraction * _rollouts(work)))
     later = step_commands(
-        s, seed=a.seed, train=train, held=held, hybrid_budget=budget, oracle_budget=a.oracle_budget
+        s,
+        seed=a.seed,
+        train=train,
+        held=held,
+        hybrid_budget=budget,
+        oracle=str(Path(a.oracle_design).resolve()) if a.oracle_design else a.oracle_budget,
     )
     for name, argv in later.items():
         steps[name] = _run(work, name, argv, a.dry_run)
@@ -227,7 +280,7 @@ def main() -> int:
             "dataset_runs": read("data/manifest.json")["runs"],
             "dataset_updated": read("data/manifest.json")["updated"],
             "surrogate": {k: read("surrogate/metrics.json").get(k) for k in ("verdict", "split")},
-            "groups": {p: read(f"groups_{p}.json") for p in ("fixed", "oracle")},
+            "groups": {n: read(f"{n}.json") for n in later if n.startswith("groups_")},
         }
         Path(a.record).write_text(json.dumps(rec, indent=1) + "\n")
     return 0

@@ -23,26 +23,39 @@ def pipeline(script_module):
 
 
 @pytest.mark.parametrize("scale", ["paper", "smoke"])
-@pytest.mark.parametrize("oracle", [0, 40_000])
+@pytest.mark.parametrize("oracle", [0, 40_000, "/somewhere/oracle.json"])
 def test_every_step_parses_and_the_groups_compare_what_is_evaluated(pipeline, scale, oracle):
     s = pipeline.SCALES[scale]
     cmds = {**pipeline.first_commands(s, seed=0, resume=True),
             **pipeline.step_commands(s, seed=0, train=["013_apple", "014_lemon"], held=["017_orange"],
-                                     hybrid_budget=8000, oracle_budget=oracle)}  # fmt: skip
+                                     hybrid_budget=8000, oracle=oracle)}  # fmt: skip
     parser = build_parser()
     for name, argv in cmds.items():
         if argv[0] == "mjcodesign":
             args = parser.parse_args(argv[1:])  # a flag the CLI no longer takes exits here
             assert callable(args.func), name
-    assert ("oracle" in cmds) == bool(oracle)
+    assert ("oracle" in cmds) == ("evaluate_oracle" in cmds) == bool(oracle)
+    if isinstance(oracle, str):
+        assert cmds["oracle"][-2:] == ["--adopt-oracle", oracle]
     assert (("suite" in cmds) == (scale == "smoke")) and "--resume" in cmds["datagen"]
     ev = cmds["evaluate"]
     designs = ev[ev.index("--designs") + 1].split(",")
-    assert designs[:3] == list(pipeline.PRESETS) and len(designs) == 7 + bool(oracle)
-    for policy in ("fixed", "oracle"):
-        g = cmds[f"groups_{policy}"]
-        pairs = [g[i + 1].split(",", 1) for i, a in enumerate(g) if a == "--compare"]
-        assert {a for a, _ in pairs} == set(designs[3:]) and {b for _, b in pairs} == set(pipeline.PRESETS)
+    assert designs[:3] == list(pipeline.PRESETS) and len(designs) == 7
+    if oracle:  # the oracle's evaluation shares every setting but the designs and the folder
+        eo = cmds["evaluate_oracle"]
+        assert eo[eo.index("--designs") + 1] == f"semi-rigid,{pipeline.ORACLE}"
+        assert eo[: eo.index("--designs")] == ev[: ev.index("--designs")]
+    impulses = s.impulses.split(",")
+    groups = [n for n in cmds if n.startswith("groups_")]
+    assert len(groups) == 2 * len(impulses)
+    for name in groups:
+        g = cmds[name]
+        assert g[g.index("--impulse") + 1] in impulses and ("--also" in g) == bool(oracle)
+        pairs = {tuple(g[i + 1].split(",", 1)) for i, a in enumerate(g) if a == "--compare"}
+        expected = {(m, p) for m in designs[3:] for p in pipeline.PRESETS}
+        if oracle:
+            expected |= {(pipeline.ORACLE, m) for m in designs}
+        assert pairs == expected
     # the hybrid starts from the success co-design the optimize step writes
     assert "joint:joint_success/design.txt" in cmds["hybrid"] and cmds["joint_success"][-1] == "joint_success"
 
@@ -54,6 +67,8 @@ def test_the_smoke_scale_runs_end_to_end_and_resumes(tmp_path):
     import subprocess
 
     rec = tmp_path / "record.json"
+    oracle = tmp_path / "oracle.txt"  # an earlier oracle's design, as --oracle-design takes it
+    oracle.write_text(",".join(["15.5"] * 22))
     cmd = [
         sys.executable,
         str(SCRIPT),
@@ -63,18 +78,22 @@ def test_the_smoke_scale_runs_end_to_end_and_resumes(tmp_path):
         "smoke",
         "--record",
         str(rec),
+        "--oracle-design",
+        str(oracle),
     ]
     first = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
     assert first.returncode == 0, first.stderr[-2000:]
     r = json.loads(rec.read_text())
-    names = ["datagen", "train", "joint_lopt", "joint_success", "individual", "suite", "hybrid", "evaluate",
-             "groups_fixed", "groups_oracle"]  # fmt: skip
+    names = ["datagen", "train", "joint_lopt", "joint_success", "individual", "suite", "hybrid", "oracle",
+             "evaluate", "evaluate_oracle", "groups_fixed", "groups_oracle"]  # fmt: skip
     assert list(r["steps"]) == names and all(s["exit_code"] == 0 for s in r["steps"].values())
     assert r["objects"]["held_out"] and set(r["objects"]["train"]).isdisjoint(r["objects"]["held_out"])
+    assert json.loads((tmp_path / "w" / "oracle" / "design.json").read_text())["design"] == [15.5] * 22
     for policy in ("fixed", "oracle"):
-        groups = r["groups"][policy]["groups"]
+        groups = r["groups"][f"groups_{policy}"]["groups"]
         assert {"train", "held-out", "in-domain", "out-of-domain"} <= set(groups)
-        # three joint co-designs against three presets; the individual designs only on their own objects
-        assert len(groups["held-out"]["paired"]) == 9 and len(groups["train"]["paired"]) == 12
+        # three joint co-designs against three presets, the oracle against every other design; the
+        # individual designs only on their own objects
+        assert len(groups["held-out"]["paired"]) == 9 + 6 and len(groups["train"]["paired"]) == 12 + 7
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert again.returncode == 0 and again.stderr.count("done before, skipped") == len(names)
