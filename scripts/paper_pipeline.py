@@ -23,8 +23,8 @@ dataset, so an interrupted run goes on where it stopped):
    the oracle can come after the first; semi-rigid must agree rollout by rollout, which checks the
    pairing);
 7. ``groups``: the evaluation split into the surrogate's training objects, its held-out objects and
-   out of domain, each co-design paired against each preset and the oracle, per pose policy and per
-   disturbance (``scripts/object_groups.py``).
+   out of domain, each co-design paired against each preset and the oracle, per pose policy (every
+   pose, the first, each design's best) and per disturbance (``scripts/object_groups.py``).
 
 ``--scale smoke`` runs the same steps on five objects, two poses and tiny budgets (a minute or two):
 what the tests run. ``--record FILE`` writes the steps, their times and the headline numbers, with
@@ -125,6 +125,8 @@ def _rollouts(work: Path) -> int:
 
 
 ORACLE = "joint:oracle/design.json"
+POLICIES = ("all", "fixed", "oracle")
+"""The groups' pose policies: every pose of the suite, its first (fixed), each design's best (oracle)."""
 
 
 def step_commands(
@@ -189,7 +191,7 @@ def step_commands(
         also = ["--also", "evaluation_oracle"]
         compare += [a for m in (*PRESETS, *designs[len(PRESETS) :]) for a in ("--compare", f"{ORACLE},{m}")]
     for i, impulse in enumerate(s.impulses.split(",")):
-        for policy in ("fixed", "oracle"):
+        for policy in POLICIES:
             name = f"groups_{policy}" + (f"_impulse{impulse}" if i else "")
             out[name] = [sys.executable, str(HERE / "object_groups.py"), "evaluation", *also, "--group",
                          "train=train_objects.txt", "--group", "held-out=held_out_objects.txt", *compare,

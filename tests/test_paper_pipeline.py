@@ -47,7 +47,7 @@ def test_every_step_parses_and_the_groups_compare_what_is_evaluated(pipeline, sc
         assert eo[: eo.index("--designs")] == ev[: ev.index("--designs")]
     impulses = s.impulses.split(",")
     groups = [n for n in cmds if n.startswith("groups_")]
-    assert len(groups) == 2 * len(impulses)
+    assert len(groups) == len(pipeline.POLICIES) * len(impulses)
     for name in groups:
         g = cmds[name]
         assert g[g.index("--impulse") + 1] in impulses and ("--also" in g) == bool(oracle)
@@ -85,11 +85,11 @@ def test_the_smoke_scale_runs_end_to_end_and_resumes(tmp_path):
     assert first.returncode == 0, first.stderr[-2000:]
     r = json.loads(rec.read_text())
     names = ["datagen", "train", "joint_lopt", "joint_success", "individual", "suite", "hybrid", "oracle",
-             "evaluate", "evaluate_oracle", "groups_fixed", "groups_oracle"]  # fmt: skip
+             "evaluate", "evaluate_oracle", "groups_all", "groups_fixed", "groups_oracle"]  # fmt: skip
     assert list(r["steps"]) == names and all(s["exit_code"] == 0 for s in r["steps"].values())
     assert r["objects"]["held_out"] and set(r["objects"]["train"]).isdisjoint(r["objects"]["held_out"])
     assert json.loads((tmp_path / "w" / "oracle" / "design.json").read_text())["design"] == [15.5] * 22
-    for policy in ("fixed", "oracle"):
+    for policy in ("all", "fixed", "oracle"):
         groups = r["groups"][f"groups_{policy}"]["groups"]
         assert {"train", "held-out", "in-domain", "out-of-domain"} <= set(groups)
         # three joint co-designs against three presets, the oracle against every other design; the
