@@ -199,6 +199,53 @@ def step_commands(
     return out
 
 
+_GROUP_COLUMNS = ("train", "held-out", "out-of-domain")
+
+
+def _pct(iv: dict | None) -> str:
+    return "—" if not iv else f"{100 * iv['value']:.1f} [{100 * iv['low']:.1f}, {100 * iv['high']:.1f}]"
+
+
+def table_markdown(groups: dict[str, dict]) -> str:
+    """Table 1 from the groups records (``object_groups.py``'s output, by step name).
+
+    Per disturbance and pose policy: each design's success [%] with its interval on the training,
+    held-out and out-of-domain objects, then each design's paired difference to the best preset of
+    that column.
+    """
+    lines = []
+    for name, rec in groups.items():
+        g = rec["groups"]
+        lines += [f"### {name}: pose policy {rec['policy']}, disturbance {rec.get('impulse_paper_ns')} N·s", "",
+                  "| design | " + " | ".join(_GROUP_COLUMNS) + " |", "|---|" + "---|" * len(_GROUP_COLUMNS)]  # fmt: skip
+        designs = list(next(iter(g.values()))["designs"])
+        for d in designs:
+            lines.append(
+                f"| {d} | " + " | ".join(_pct(g[c]["designs"].get(d)) for c in _GROUP_COLUMNS) + " |"
+            )
+        lines += ["", "| design − best preset | " + " | ".join(_GROUP_COLUMNS) + " |",
+                  "|---|" + "---|" * len(_GROUP_COLUMNS)]  # fmt: skip
+        best = {
+            c: max(PRESETS, key=lambda p: (g[c]["designs"].get(p) or {"value": -1.0})["value"])
+            for c in _GROUP_COLUMNS
+        }
+        for d in designs:
+            if d in PRESETS:
+                continue
+            cells = []
+            for c in _GROUP_COLUMNS:
+                pair = next((q for q in g[c]["paired"] if q["a"] == d and q["b"] == best[c]), None)
+                cells.append("—" if pair is None else f"{_signed(pair['difference'])} vs {best[c]}")
+            lines.append(f"| {d} | " + " | ".join(cells) + " |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _signed(iv: dict) -> str:
+    v, lo, hi = (round(100 * iv[k], 1) + 0.0 for k in ("value", "low", "high"))  # + 0.0: no "-0.0"
+    return f"{v:+.1f} [{lo:+.1f}, {hi:+.1f}]"
+
+
 def adopt_oracle(work: Path, source: str) -> None:
     """Copy an earlier oracle's design (any file ``joint:FILE`` reads) to ``work/oracle/design.json``."""
     from mjcodesign.design.stiffness import read_design_file, write_design_file
@@ -284,6 +331,7 @@ def main() -> int:
             "surrogate": {k: read("surrogate/metrics.json").get(k) for k in ("verdict", "split")},
             "groups": {n: read(f"{n}.json") for n in later if n.startswith("groups_")},
         }
+        rec["table_md"] = table_markdown(rec["groups"])
         Path(a.record).write_text(json.dumps(rec, indent=1) + "\n")
     return 0
 

@@ -97,3 +97,27 @@ def test_the_smoke_scale_runs_end_to_end_and_resumes(tmp_path):
         assert len(groups["held-out"]["paired"]) == 9 + 6 and len(groups["train"]["paired"]) == 12 + 7
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert again.returncode == 0 and again.stderr.count("done before, skipped") == len(names)
+
+
+def test_table_one_pairs_each_design_with_the_best_preset_of_each_column(pipeline):
+    iv = lambda v: {"value": v, "low": v - 0.1, "high": v + 0.1, "n": 10}  # noqa: E731
+    cols = {
+        "train": {"soft": 0.5, "semi-rigid": 0.8, "paper-optimized": 0.7, "joint:j.txt": 0.9},
+        "held-out": {"soft": 0.6, "semi-rigid": 0.6, "paper-optimized": 0.7, "joint:j.txt": 0.65},
+        "out-of-domain": {"soft": 0.4, "semi-rigid": 0.5, "paper-optimized": 0.3, "joint:j.txt": 0.5},
+    }
+    groups = {
+        c: {
+            "designs": {d: iv(v) for d, v in vals.items()},
+            "paired": [
+                {"a": "joint:j.txt", "b": p, "difference": iv(vals["joint:j.txt"] - vals[p])}
+                for p in pipeline.PRESETS
+            ],
+        }
+        for c, vals in cols.items()
+    }
+    md = pipeline.table_markdown({"groups_all": {"policy": "all", "impulse_paper_ns": 0.1, "groups": groups}})
+    row = next(line for line in md.splitlines() if line.startswith("| joint:j.txt") and " vs " in line)
+    assert row.split(" | ")[1:] == ["+10.0 [+0.0, +20.0] vs semi-rigid", "-5.0 [-15.0, +5.0] vs paper-optimized",
+                                    "+0.0 [-10.0, +10.0] vs semi-rigid |"]  # fmt: skip
+    assert "| soft | 50.0 [40.0, 60.0] | 60.0 [50.0, 70.0] | 40.0 [30.0, 50.0] |" in md
