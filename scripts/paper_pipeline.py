@@ -218,7 +218,8 @@ def table_markdown(groups: dict[str, dict]) -> str:
         g = rec["groups"]
         lines += [f"### {name}: pose policy {rec['policy']}, disturbance {rec.get('impulse_paper_ns')} N·s", "",
                   "| design | " + " | ".join(_GROUP_COLUMNS) + " |", "|---|" + "---|" * len(_GROUP_COLUMNS)]  # fmt: skip
-        designs = list(next(iter(g.values()))["designs"])
+        found = list(next(iter(g.values()))["designs"])
+        designs = [d for d in PRESETS if d in found] + [d for d in found if d not in PRESETS]
         for d in designs:
             lines.append(
                 f"| {d} | " + " | ".join(_pct(g[c]["designs"].get(d)) for c in _GROUP_COLUMNS) + " |"

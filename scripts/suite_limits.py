@@ -1,11 +1,12 @@
 """What limits every design of an evaluation: the objects none of them ever holds, and their failures.
 
-    python3 scripts/suite_limits.py RESULTS.json --out benchmarks/records/DATE_NAME.json
+    python3 scripts/suite_limits.py RESULTS.json [--impulse X] --out benchmarks/records/DATE_NAME.json
 
 Reads an ``evaluate`` run's ``results.json`` (every rollout) and writes, per split: the objects that no
 design holds at any pose or draw, the failure kinds of their rollouts, the objects whose best design
 holds under half of its rollouts, the ceiling those never-held objects put on any design's success
 over objects, and each object's success difference between two designs (``--compare A,B``).
+``--impulse`` keeps one disturbance of an evaluation that swept several (default: every rollout).
 """
 
 from __future__ import annotations
@@ -56,11 +57,16 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("results", help="an evaluate run's results.json")
     parser.add_argument("--compare", default=None, help="two designs A,B: per-object success of A − B")
+    parser.add_argument("--impulse", type=float, default=None, help="keep this disturbance [N s] only")
     parser.add_argument("--out", required=True, help="the record (JSON)")
     args = parser.parse_args()
     from mjcodesign.bench.record import provenance
 
     rows = json.loads(Path(args.results).read_text(encoding="utf-8"))["rows"]
+    if args.impulse is not None:
+        rows = [r for r in rows if r["impulse_paper_ns"] == args.impulse]
+        if not rows:
+            raise SystemExit(f"suite_limits: no rollout at impulse {args.impulse}")
     compare = tuple(args.compare.split(",", 1)) if args.compare else None
     record = {
         "provenance": provenance("suite_limits", command=" ".join(["python3", *sys.argv])),
