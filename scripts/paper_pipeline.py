@@ -24,7 +24,8 @@ dataset, so an interrupted run goes on where it stopped):
    pairing);
 7. ``groups``: the evaluation split into the surrogate's training objects, its held-out objects and
    out of domain, each co-design paired against each preset and the oracle, per pose policy (every
-   pose, the first, each design's best) and per disturbance (``scripts/object_groups.py``).
+   pose, the first, each design's best) and per disturbance (``scripts/object_groups.py``);
+8. ``limits``: the objects no design holds at any pose, and their failure kinds (``scripts/suite_limits.py``).
 
 ``--scale smoke`` runs the same steps on five objects, two poses and tiny budgets (a minute or two):
 what the tests run. ``--record FILE`` writes the steps, their times and the headline numbers, with
@@ -196,6 +197,21 @@ def step_commands(
             out[name] = [sys.executable, str(HERE / "object_groups.py"), "evaluation", *also, "--group",
                          "train=train_objects.txt", "--group", "held-out=held_out_objects.txt", *compare,
                          "--policy", policy, "--impulse", impulse, "--out", f"{name}.json"]  # fmt: skip
+    out["limits"] = [sys.executable, str(HERE / "suite_limits.py"), "evaluation/results.json", "--impulse",
+                     s.impulses.split(",")[0], "--out", "limits.json"]  # fmt: skip
+    return out
+
+
+def oracle_gaps(groups: dict[str, dict]) -> dict:
+    """Per groups record and object group: each design's paired difference to the oracle (design − oracle)."""
+    out: dict = {}
+    for name, rec in groups.items():
+        for group, entry in rec["groups"].items():
+            for q in entry["paired"]:
+                if q["a"] == ORACLE and q["b"] not in PRESETS:
+                    d = q["difference"]
+                    iv = {"value": -d["value"], "low": -d["high"], "high": -d["low"], "n": d["n"]}
+                    out.setdefault(name, {}).setdefault(group, {})[q["b"]] = iv
     return out
 
 
@@ -333,6 +349,9 @@ def main() -> int:
             "groups": {n: read(f"{n}.json") for n in later if n.startswith("groups_")},
         }
         rec["table_md"] = table_markdown(rec["groups"])
+        rec["oracle_gaps"] = oracle_gaps(rec["groups"])
+        limits = read("limits.json")
+        rec["limits"] = {k: v for k, v in limits.items() if k != "provenance"}
         Path(a.record).write_text(json.dumps(rec, indent=1) + "\n")
     return 0
 

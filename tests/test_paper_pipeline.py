@@ -85,10 +85,13 @@ def test_the_smoke_scale_runs_end_to_end_and_resumes(tmp_path):
     assert first.returncode == 0, first.stderr[-2000:]
     r = json.loads(rec.read_text())
     names = ["datagen", "train", "joint_lopt", "joint_success", "individual", "suite", "hybrid", "oracle",
-             "evaluate", "evaluate_oracle", "groups_all", "groups_fixed", "groups_oracle"]  # fmt: skip
+             "evaluate", "evaluate_oracle", "groups_all", "groups_fixed", "groups_oracle", "limits"]  # fmt: skip
     assert list(r["steps"]) == names and all(s["exit_code"] == 0 for s in r["steps"].values())
     assert r["objects"]["held_out"] and set(r["objects"]["train"]).isdisjoint(r["objects"]["held_out"])
     assert json.loads((tmp_path / "w" / "oracle" / "design.json").read_text())["design"] == [15.5] * 22
+    assert set(r["oracle_gaps"]["groups_all"]["train"]) == {"joint:joint_lopt/design.txt",
+        "joint:joint_success/design.txt", "joint:hybrid/design.json", "individual:individual"}  # fmt: skip
+    assert set(r["limits"]["splits"]) == {"in-domain", "out-of-domain"}
     for policy in ("all", "fixed", "oracle"):
         groups = r["groups"][f"groups_{policy}"]["groups"]
         assert {"train", "held-out", "in-domain", "out-of-domain"} <= set(groups)
