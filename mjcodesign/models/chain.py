@@ -466,30 +466,41 @@ class _ChainBuilder:
         )
 
 
-def _add_channels(builder: _ChainBuilder, bodies: list, origins: list[float]) -> None:
-    """The printed routing's sites: each segment's channel entry, middle and exit, in the handle's chain.
+def _add_channels(builder: _ChainBuilder, bodies: list, origins: list[float], axes: np.ndarray) -> None:
+    """The printed routing's sites in the handle's chain: channel entries, middles and exits, flexure guides.
 
     ``bodies[i]`` carries block i's proximal half (the finger's parent for block 0, frame at x = 0) and
     ``bodies[i + 1]`` its middle and distal half (frame at x = ``origins[i + 1]``, its last hinge: a
     segment's middle): the entry rides on the body before the segment's hinge, the middle (just past the
     hinge, as the channel guides the tendon through the segment) and the exit on the one after it.
-    Between one segment's exit and the next one's entry the tendon crosses its flexure's hinges alone,
-    with nothing on the flexure.
+    Between one segment's exit and the next one's entry the tendon crosses its flexure's hinges alone: a
+    flexure of one hinge through its guides on the chord (:func:`~mjcodesign.models.channels.flexure_guides`,
+    on the bodies before and after the hinge), so that the hinge buckles as the flexure bending along its
+    length; a flexure of several hinges bends along its length itself and is crossed from exit to entry.
     """
-    from mjcodesign.models.channels import channel_points
+    from mjcodesign.models.channels import channel_points, flexure_guides
 
     segments = [b.index for b in builder.blocks if b.kind is BlockKind.SEGMENT]
+    guides = flexure_guides(builder.design, axes)
     sites = []
-    for i, points in zip(segments, channel_points(builder.design), strict=True):
+
+    def add(k: int, name: str, point: np.ndarray) -> None:
+        site = bodies[k].add_site(
+            name=f"{builder.prefix}{name}",
+            pos=point - [origins[k], 0.0, 0.0],
+            size=[0.0006, 0, 0],
+            rgba=[0.9, 0.6, 0.1, 1],
+            group=3,
+        )
+        sites.append(site.name)
+
+    for j, (i, points) in enumerate(zip(segments, channel_points(builder.design), strict=True)):
         for end, point, k in zip(("in", "mid", "out"), points, (i, i + 1, i + 1), strict=True):
-            site = bodies[k].add_site(
-                name=f"{builder.prefix}ch{i}_{end}",
-                pos=point - [origins[k], 0.0, 0.0],
-                size=[0.0006, 0, 0],
-                rgba=[0.9, 0.6, 0.1, 1],
-                group=3,
-            )
-            sites.append(site.name)
+            add(k, f"ch{i}_{end}", point)
+        f = i + 1  # the flexure after this segment
+        if j < len(guides) and builder.counts[f] == 1:
+            add(f, f"guide{f}_p", guides[j, 0])
+            add(f + 1, f"guide{f}_d", guides[j, 1])
     builder.handle.site_chains = [sites]
 
 
@@ -521,7 +532,7 @@ def add_chain_finger(
         bodies.append(body)
         origins.append(origin_prev)
     if options.routing == "printed":
-        _add_channels(builder, bodies, origins)
+        _add_channels(builder, bodies, origins, axes)
     builder.distributed_stops()
     builder.gap_stops()
     builder.tip(body)

@@ -11,16 +11,21 @@ each line as its height above the finger's back at the default design's segment 
 segment's proximal face (the base face for the first segment, the trapezoid cut otherwise) and leaves
 where it meets the distal one (the tip face for the last). On the default design these ends lie within 0.53 mm of
 where the STL's channels open (its segment ends are rounded, the design's cuts straight).
+
+:func:`flexure_guides` places the chain's guides across each flexure: its one hinge buckles under the
+tendon as the flexure does bending along its length.
 """
 
 from __future__ import annotations
+
+import functools
 
 import numpy as np
 
 from mjcodesign.design.finger import Block, BlockKind, FingerDesign
 from mjcodesign.errors import DesignError
 
-__all__ = ["PRINTED_CHANNELS", "channel_points"]
+__all__ = ["PRINTED_CHANNELS", "channel_points", "flexure_guides"]
 
 PRINTED_CHANNELS = np.array(
     [
@@ -75,4 +80,48 @@ def channel_points(design: FingerDesign) -> np.ndarray:
         x_out = blk.x1 if blk.cut1 == 0 else _crossing(blk, line, blk.x1, blk.x1 - blk.cut1)
         for j, x in enumerate((x_in, blk.mid, x_out)):
             out[k, j] = (x, 0.0, line(x))
+    return out
+
+
+def flexure_guides(design: FingerDesign, axes: np.ndarray) -> np.ndarray:
+    """The tendon's two guides across each flexure in the finger frame [m], shape (n_segments − 1, 2, 3).
+
+    The tendon runs straight from one segment's channel exit A to the next one's entry B. Along that chord
+    (unit vector t), the flexure's hinge (block middle, height ``axes[i]`` above the back) has the foot of
+    its perpendicular α from A and β from B, so a hinge there buckles at k (α+β)/(αβ)
+    (:mod:`mjcodesign.models.stability`); the flexure bending along its length, its ends' feet on the
+    chord, at :func:`~mjcodesign.models.stability.beam_string_buckling_tension`, r times that (geometry
+    alone: k cancels). The guides lie on the chord α/r before the foot and β/r after it,
+        P = A + α (1 − 1/r) t,   Q = B − β (1 − 1/r) t,
+    so the one hinge between them buckles at the flexure's tension; on the straight finger the tendon's
+    path, length and every hinge's lever are the chord's. r is 1.74, 1.86, 2.01, 2.18 and 2.33 on the
+    default finger's flexures, base to tip; :class:`DesignError` where a flexure's feet leave the chord.
+    """
+    return _guides(design, tuple(float(h) for h in axes)).copy()
+
+
+@functools.lru_cache(maxsize=32)
+def _guides(design: FingerDesign, axes: tuple[float, ...]) -> np.ndarray:
+    """:func:`flexure_guides` with the axes as a tuple, cached per design (builds of a batch share it)."""
+    from mjcodesign.models.stability import beam_string_buckling_tension
+
+    points = channel_points(design)
+    flexures = [b for b in design.blocks() if b.kind is BlockKind.FLEXURE]  # one between two segments
+    out = np.zeros((len(flexures), 2, 3))
+    for j, blk in enumerate(flexures):
+        a, b = points[j, 2], points[j + 1, 0]
+        span = float(np.linalg.norm(b - a))
+        t = (b - a) / span
+
+        def foot(x: float, blk=blk, a=a, t=t) -> float:
+            """Distance [m] along the chord from A to the foot of the flexure's axis point at ``x``."""
+            return float((np.array([x, 0.0, axes[blk.index]]) - a) @ t)
+
+        alpha = foot(blk.mid)
+        beta = span - alpha
+        ratio = beam_string_buckling_tension(1.0, foot(blk.x0), foot(blk.x1), 0.0, span) * (
+            alpha * beta / span
+        )
+        shrink = 1.0 - 1.0 / ratio
+        out[j] = (a + alpha * shrink * t, b - beta * shrink * t)
     return out

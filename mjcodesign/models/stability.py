@@ -1,10 +1,12 @@
 """Stability of a clamped chain finger under its tendon: tangent stiffness and buckling tension.
 
 A tendon at tension T adds T ∂²ℓ/∂θ² to the hinges' stiffness. Drawn straight across a hinge from a
-before it to b after it, ∂²ℓ/∂θ² = −ab/(a+b), so the printed routing (:attr:`SimOptions.routing`)
-softens every flexure it spans and buckles it past T = k (a+b)/(ab); the guided routing's fixed tendon
-has constant levers and no such term. Both are read here from MuJoCo's own forces, not from a formula;
-:func:`string_buckling_tension` is the closed form for one flexure, as one hinge, n hinges or a beam.
+before it to b after it (along the string), ∂²ℓ/∂θ² = −ab/(a+b), so the printed routing
+(:attr:`SimOptions.routing`) softens every flexure it spans and buckles it past T = k (a+b)/(ab), a and
+b its guides' distances (:func:`~mjcodesign.models.channels.flexure_guides`); the guided routing's
+fixed tendon has constant levers and no such term. Both are read here from MuJoCo's own forces, not from a formula;
+:func:`string_buckling_tension` is the closed form for one flexure as one hinge or n hinges, and
+:func:`beam_string_buckling_tension` its limit, the flexure as an Euler–Bernoulli beam.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 from mjcodesign.errors import DesignError
 from mjcodesign.models.types import Built, FingerModel, TendonMode
 
-__all__ = ["tangent_stiffness", "buckling_tension", "string_buckling_tension"]
+__all__ = ["tangent_stiffness", "buckling_tension", "string_buckling_tension", "beam_string_buckling_tension"]
 
 _FD = 1e-6  # central-difference step of a hinge angle [rad]: forces are smooth, round-off ~1e-10 relative
 _NO_BUCKLING = 1e-6  # [1/N]: an eigenvalue below it is a critical tension past 1 MN, i.e. none
@@ -92,3 +94,29 @@ def string_buckling_tension(k: float, x0: float, x1: float, x_a: float, x_b: flo
     x = x0 + dx * (np.arange(hinges) + 0.5)
     H = -(x_b - np.maximum.outer(x, x)) + np.outer(x_b - x, x_b - x) / (x_b - x_a)
     return float(hinges * k / np.max(np.linalg.eigvalsh(-H)))
+
+
+def beam_string_buckling_tension(k: float, x0: float, x1: float, x_a: float, x_b: float) -> float:
+    """Buckling tension [N] of one flexure as an Euler–Bernoulli beam under a straight string.
+
+    The limit n → ∞ of :func:`string_buckling_tension`, same arguments (``x_a ≤ x0 < x1 ≤ x_b``), with
+    EI = k l, l = x1 − x0. There −H is the Green's function of −d²/dx² on (x_a, x_b) with zero ends, so a
+    buckling mode θ(x) on the flexure is u/μ with −u'' = θ: u is a sine of wavenumber ω = √(T/EI) on the
+    flexure and straight from there to zero at both string ends. Matching u'/u at the flexure's ends,
+        ω l = atan(1 / (ω a₀)) + atan(1 / (ω b₁)),   a₀ = x0 − x_a,  b₁ = x_b − x1,
+    whose left side rises from 0 and right side falls from π: one root in (0, π/l), T_crit = EI ω².
+    l → 0 gives the single hinge's k (a+b)/(ab). :class:`DesignError` where the flexure leaves the span.
+    """
+    from scipy.optimize import brentq  # lazily: importing this package stays numpy-only
+
+    length, a0, b1 = x1 - x0, x0 - x_a, x_b - x1
+    if not (length > 0 and a0 >= 0 and b1 >= 0):
+        raise DesignError(
+            f"the flexure [{x0:.6g}, {x1:.6g}] m must lie within the string's span [{x_a:.6g}, {x_b:.6g}] m"
+        )
+
+    def mismatch(w: float) -> float:
+        return w * length - np.arctan2(1.0, w * a0) - np.arctan2(1.0, w * b1)
+
+    omega = brentq(mismatch, 1e-12 / length, np.pi / length, xtol=1e-15, rtol=4 * np.finfo(float).eps)
+    return float(k * length * omega**2)

@@ -179,8 +179,9 @@ class SimOptions:
     Under the ``printed`` :attr:`routing` it counts each flexure's hinges, 1 to :data:`MAX_FLEXURE_HINGES`;
     the segments, which carry the channels, keep their one hinge. n hinges sit at the middles of the
     flexure's n equal parts, each n times as stiff, and the tendon's straight span across the gap crosses
-    all of them, as it crosses a flexure that bends along its length: one hinge at the middle buckles at
-    k (a+b)/(ab), n → ∞ at an Euler–Bernoulli flexure's tension, 1.75× that on the first flexure. A
+    all of them, as it crosses a flexure that bends along its length: one hinge at the middle would buckle
+    at k (a+b)/(ab), n → ∞ at an Euler–Bernoulli flexure's tension, 1.75× that on the first flexure (the
+    single hinge's guides give it that tension: :attr:`routing`). A
     flexure's stop holds the sum of its hinges (a limited fixed tendon) where a single hinge's range
     holds its angle (:mod:`mjcodesign.models.chain`). For a finger below buckling (statics, stability);
     :func:`~mjcodesign.models.build_gripper` refuses it (``FLEXURE_HINGES_GRASP_REFUSAL``)."""
@@ -200,11 +201,15 @@ class SimOptions:
     flexures included, acting as :attr:`tendon_lever` says. ``printed``: as in the printed finger, through
     each segment's channel (sites at its entry, middle and exit at the heights measured on the authors'
     STL, :mod:`mjcodesign.models.channels`) and straight across each flexure gap in air: a spatial tendon
-    whose lever and geometric stiffness come from its path. A span from a distance a before a flexure's
-    hinge to b after it adds −T·ab/(a+b) to that hinge's stiffness, so a flexure of stiffness k buckles
-    past T = k (a+b)/(ab), 2k/d for a = b = d. The segments' stops are the same. The chain's native tendon
-    only (:class:`UnsupportedError` for a flex model or the point-force mode), with one hinge per block by
-    default, or several per flexure (:attr:`hinges_per_block`)."""
+    whose lever and geometric stiffness come from its path. A span from α before a flexure's hinge to β
+    after it (along the span) adds −T·αβ/(α+β) to that hinge's stiffness, so a hinge of stiffness k
+    buckles past T = k (α+β)/(αβ), 2k/d for α = β = d. A flexure of one hinge is crossed through two
+    guides on the span, placed so that it buckles as the flexure bending along its length
+    (:func:`~mjcodesign.models.channels.flexure_guides`, 1.74× the span's ends on the first flexure); their
+    short span lines up with the hinge at large bends (flexure 1's lever reverses at 0.8 rad). The
+    segments' stops are the same. The chain's native tendon only (:class:`UnsupportedError` for a flex
+    model or the point-force mode), with one hinge per block by default, or several per flexure
+    (:attr:`hinges_per_block`), which bend along its length themselves and are crossed end to end."""
     stiffness_model: str = "fem"
     """How block moduli become finger stiffness: ``fem``, calibrated to the converged Warp FEM
     (:mod:`mjcodesign.design.calibration`; the default finger geometry only), or ``beam``,
