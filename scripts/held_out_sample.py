@@ -24,7 +24,7 @@ def _first_poses(data, held: set, n: int | None) -> np.ndarray:
     for name in sorted(held):
         poses = np.flatnonzero(data.objects == name)
         keep.update(int(p) for p in (poses if n is None else poses[:n]))
-    return np.flatnonzero([int(p) in keep for p in data.pose])
+    return np.flatnonzero(np.isin(data.pose, sorted(keep)))
 
 
 def sample_metrics(ckpt: str, sample: str) -> dict:
@@ -74,7 +74,7 @@ def main(dataset: str, ckpt: str, out: str, poses_per_object: int | None = None)
     print(f"{len(rows)} rows over {len(poses)} poses of {len(held)} objects -> {out}")
     m = sample_metrics(ckpt, out)
     print(
-        f"on these rows: head AUC {m['head_auc']:.3f}, Brier {m['head_brier']:.3f}; score AUC {m['score_auc']:.3f}"
+        f"on these rows: head AUC {m['head_auc']:.4f}, Brier {m['head_brier']:.4f}; score AUC {m['score_auc']:.4f}"
     )
 
 
