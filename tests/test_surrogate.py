@@ -499,7 +499,7 @@ def test_fold_splits_hold_each_object_out_once(dataset):
 
 
 def test_train_folds_writes_one_checkpoint_per_fold_and_evaluate_uses_the_one_that_never_saw_it(
-    dataset, work, cli
+    dataset, work, cli, script_module
 ):
     out = work / "folds"
     code, stdout, err = cli(
@@ -520,6 +520,15 @@ def test_train_folds_writes_one_checkpoint_per_fold_and_evaluate_uses_the_one_th
     for k, f in enumerate(manifest["folds"]):
         assert all(folds.fold_for(n) == k and folds.held_out_for(n) for n in f["held_out"])
     assert folds.fold_for("013_apple") == 0 and not folds.held_out_for("013_apple")  # no fold saw it
+    # scripts/kfold_compare.py pools the same held-out predictions the manifest scored, beside the trees'
+    rec = script_module("kfold_compare").compare(out, str(dataset))
+    pooled = manifest["held_out"]["success_head"]
+    assert rec["pooled"]["head"]["roc_auc"] == pytest.approx(pooled["roc_auc"], abs=1e-9)
+    assert rec["pooled"]["head"]["brier"] == pytest.approx(pooled["brier"], abs=1e-9)
+    assert rec["pooled"]["objects"] == 3 and [f["held_out"] for f in rec["folds"]] == [
+        f["held_out"] for f in manifest["folds"]
+    ]
+    assert 0.0 <= rec["pooled"]["trees"]["brier"] <= 1.0
 
     files = [str(dataset.parent / f"{n}.stl") for n in names[:2]]
     suite = build_suite(files, poses_per_object=2, seed=0)
