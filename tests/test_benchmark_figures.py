@@ -4,7 +4,6 @@
 ``benchmarks/records/``; these checks read its figure list without drawing all of them again.
 """
 
-import importlib.util
 import json
 import re
 from pathlib import Path
@@ -19,13 +18,9 @@ _MAX_BYTES = 150 * 1024  # images stay small enough for the repository and a pag
 _EMBED = re.compile(r"!\[[^\]]*\]\(([^)\s]+)\)|```\{(?:figure|image)\}\s+(\S+)")
 
 
-def _script():
-    spec = importlib.util.spec_from_file_location(
-        "benchmark_figures", ROOT / "scripts" / "benchmark_figures.py"
-    )
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+@pytest.fixture(scope="module")
+def figures(script_module):
+    return script_module("benchmark_figures")
 
 
 def _embedded() -> list[str]:
@@ -41,8 +36,8 @@ def test_every_embedded_image_exists_and_is_small():
         assert path.stat().st_size <= _MAX_BYTES, f"{rel}: {path.stat().st_size} bytes"
 
 
-def test_figure_list_names_existing_records_and_every_figure_is_embedded():
-    mod = _script()
+def test_figure_list_names_existing_records_and_every_figure_is_embedded(figures):
+    mod = figures
     assert mod.FIGURES
     embedded = {Path(rel).name for rel in _embedded() if Path(rel).parent.name == "benchmarks"}
     for file, (record, draw) in mod.FIGURES.items():
@@ -53,8 +48,8 @@ def test_figure_list_names_existing_records_and_every_figure_is_embedded():
     assert set(embedded) == set(mod.FIGURES), "an image under _static/benchmarks/ is embedded but not drawn"
 
 
-def test_footer_names_record_commit_and_date():
-    mod = _script()
+def test_footer_names_record_commit_and_date(figures):
+    mod = figures
     for record, _ in mod.FIGURES.values():
         _, prov = mod.load(record)
         line = mod.footer(record, prov)
@@ -63,8 +58,8 @@ def test_footer_names_record_commit_and_date():
         assert re.search(r"commit [0-9a-f]{7} · \d{4}-\d{2}-\d{2}", line), line
 
 
-def test_load_reads_both_record_layouts(tmp_path, monkeypatch):
-    mod = _script()
+def test_load_reads_both_record_layouts(figures, tmp_path, monkeypatch):
+    mod = figures
     (tmp_path / "nested.json").write_text(json.dumps({"provenance": {"date": "d"}, "record": {"x": 1}}))
     (tmp_path / "flat.json").write_text(json.dumps({"provenance": {"date": "d"}, "x": 2}))
     monkeypatch.setattr(mod, "RECORDS", tmp_path)
@@ -72,9 +67,9 @@ def test_load_reads_both_record_layouts(tmp_path, monkeypatch):
     assert mod.load("flat.json") == ({"x": 2}, {"date": "d"})
 
 
-def test_one_figure_renders(tmp_path):
+def test_one_figure_renders(figures, tmp_path):
     pytest.importorskip("matplotlib")
-    mod = _script()
+    mod = figures
     record, draw = mod.FIGURES["finger_speed.png"]
     path = draw(record, tmp_path / "finger_speed.png")
     data = path.read_bytes()
