@@ -2,10 +2,12 @@
 
     python3 scripts/tied_flexure_hinges.py [--log-e 15.0] [--hinges 2,3,4,8]
 
-The printed chain with n hinges per flexure (``SimOptions(routing="printed", hinges_per_block=n)``)
+The printed chain with n free hinges per flexure (``SimOptions(routing="printed", hinges_per_block=n)``)
 buckles close to the converged FEM but folds into an S past buckling, so grippers refuse it. Tying a
-flexure's hinges to one angle (a joint equality in MuJoCo) would forbid the S. This measures what the
-tie does to the buckling tension without building it: the chain's tangent stiffness K(T) = K₀ + T H
+flexure's hinges to one angle (MuJoCo joint equalities, ``tied_flexures=True``, the printed routing's
+default with two hinges) forbids the S. This computes the tied chain's buckling tension from the free
+chain alone, the closed form the built ties are checked against (tests/test_tied_flexures.py): the
+chain's tangent stiffness K(T) = K₀ + T H
 (:func:`mjcodesign.models.stability.tangent_stiffness`, MuJoCo's own spring and tendon forces)
 projected on the tied coordinates (one angle per block, a flexure's split equally over its hinges),
 C^T K(T) C, and the smallest T that makes it singular; beside it the free chain's

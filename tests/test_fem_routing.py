@@ -27,7 +27,7 @@ from mjcodesign.sim.fem.mesh import embed_points, mesh_finger, to_quadratic  # n
 
 _DATA = Path(__file__).parent / "data"
 _COARSE = {"h": 4e-3, "spine_layers": 2}
-_PRINTED = SimOptions(routing="printed", gravity=False)
+_PRINTED = SimOptions(routing="printed", gravity=False, hinges_per_block=1)  # one hinge between guides
 _TOL_EMBED = 1e-15  # [m]: W @ X against the channel points, round-off of positions ~0.1 m
 _TOL_FD_FORCE = 1e-6  # f·v against −T dℓ/dv by central differences (step 1e-6 m on 10 mm spans)
 _TOL_FD_JAC = 1e-6  # J v against the central difference of f, relative to |J v|

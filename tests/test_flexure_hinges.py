@@ -195,13 +195,19 @@ def _curl_cases() -> list:
     ]
 
 
-@pytest.mark.parametrize("n", [2, 4])
+# Two and four free hinges per flexure, and the printed routing's default: two tied to one angle.
+_CURL_OPTIONS = {"2": _options(2), "4": _options(4), "2-tied": SimOptions(routing="printed", gravity=False)}
+
+
+@pytest.mark.parametrize("hinges", list(_CURL_OPTIONS))
 @pytest.mark.parametrize("row", _curl_cases())
-def test_chain_curl_matches_the_fem_below_buckling(row, n):
+def test_chain_curl_matches_the_fem_below_buckling(row, hinges):
     # Free curl (gravity off) at the record's tension, below buckling; bend (sum of hinge angles against
     # the FEM's tip-section rotation) and |tip| against the FEM's.
-    assert row["tension_n"] < row["chain_t_crit_n"]
-    r = curl(FingerDesign(), Stiffness.parse(row["design"]), "chain", row["tension_n"], options=_options(n))
+    options = _CURL_OPTIONS[hinges]
+    built = build_finger(FingerDesign(), Stiffness.parse(row["design"]), FingerModel.CHAIN, options=options)
+    assert row["tension_n"] < min(row["chain_t_crit_n"], buckling_tension(built)[0])
+    r = curl(FingerDesign(), Stiffness.parse(row["design"]), "chain", row["tension_n"], options=options)
     assert r["bend_angle_rad"] == pytest.approx(row["fem_bend_angle_rad"], rel=_TOL_CURL)
     fem_tip = np.linalg.norm(row["fem_tip_displacement_m"])
     assert np.linalg.norm(r["tip_displacement_m"]) == pytest.approx(fem_tip, rel=_TOL_CURL)

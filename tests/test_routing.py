@@ -20,7 +20,9 @@ from mjcodesign.models.stability import (
 )
 from mjcodesign.models.types import FingerModel, SimOptions
 
-_PRINTED = SimOptions(routing="printed", gravity=False)
+# The printed chain with one hinge per flexure between its guides (the printed default ties two per flexure:
+# tests/test_tied_flexures.py).
+_PRINTED = SimOptions(routing="printed", gravity=False, hinges_per_block=1)
 # One-hinge chain vs the 400-hinge closed form in the chord's frame: the form's own gap to the beam (1/n²,
 # measured 3.7e-6 to 4.9e-6); the chain is within 5e-10 of the beam's (stability.beam_string_buckling_tension).
 _TOL_BEAM = 1e-5
@@ -258,6 +260,11 @@ def test_grasp_routing_flag_reaches_the_model(tmp_path, monkeypatch, capsys):
     assert outs["guided"]["displacement"] != outs["printed"]["displacement"]
 
 
+# This config's fingerprint before SimOptions had tied flexures (computed at commit 567b356): its rows
+# are unchanged, so its fingerprint must be too.
+_GUIDED_FINGERPRINT = "f088e2529672d23c73c291c01ecc82cfb46972c8bfbc7ca744b68840a1259778"
+
+
 def test_datagen_routing_is_recorded_and_reaches_every_rollout(tmp_path, monkeypatch):
     import dataclasses
     import json
@@ -273,7 +280,9 @@ def test_datagen_routing_is_recorded_and_reaches_every_rollout(tmp_path, monkeyp
     )
     printed = dataclasses.replace(base, routing="printed")
     assert base.options is None and printed.options == SimOptions(routing="printed")
-    assert base.as_dict()["sim_options"] == dataclasses.asdict(SimOptions())  # guided keeps its fingerprint
+    assert base.fingerprint() == _GUIDED_FINGERPRINT  # guided keeps its fingerprint
+    assert "tied_flexures" not in base.as_dict()["sim_options"]
+    assert printed.as_dict()["sim_options"]["tied_flexures"] is True  # the rows are the tied chain's
     assert printed.fingerprint() != base.fingerprint()
     assert DatagenConfig.from_dict(printed.as_dict()) == printed
     with pytest.raises(DesignError, match="--routing"):
@@ -344,7 +353,7 @@ def test_printed_curl_is_the_minimum_of_spring_and_tendon_energy(seed):
         stiffness,
         FingerModel.CHAIN,
         tension,
-        options=SimOptions(routing="printed"),
+        options=SimOptions(routing="printed", hinges_per_block=1),
         observe=lambda b, d: rest.update(q=d.qpos.copy(), constraints=d.nefc),
     )
     assert rest["constraints"] == 0  # no stop reached: the energy below is the whole story

@@ -21,7 +21,7 @@ def tied(script_module):
 
 @pytest.mark.parametrize("log_e", [13.5, 15.7])
 def test_one_hinge_per_block_tied_is_the_free_chain(tied, log_e):
-    opts = SimOptions(routing="printed", gravity=False)
+    opts = SimOptions(routing="printed", gravity=False, hinges_per_block=1)
     built = build_finger(FingerDesign(), Stiffness([log_e] * 11), FingerModel.CHAIN, options=opts)
     assert tied(built, np.ones(11, dtype=int)) == pytest.approx(buckling_tension(built)[0], rel=_SAME)
 

@@ -14,7 +14,8 @@ __all__ = ["grasp_model_name", "add_routing", "routing_options"]
 
 _ROUTING_HELP = (
     "chain tendon path: guided (default; over every hinge, constant levers) or printed (through the "
-    "segments' channels at the printed finger's heights, straight across each flexure gap)"
+    "segments' channels at the printed finger's heights, straight across each flexure gap; each flexure "
+    "two hinges tied to one angle, at a 1 ms step)"
 )
 
 

@@ -323,7 +323,7 @@ class DatagenConfig:
             "cloud_points": int(self.cloud_points),
             "scenario": _scenario_dict(self.scenario),
             "finger": geometry,
-            "sim_options": dataclasses.asdict(scene_options(self.scenario, self.options) or SimOptions()),
+            "sim_options": _sim_options_dict(scene_options(self.scenario, self.options) or SimOptions()),
             "coacd": dataclasses.asdict(self.coacd),
             "mass": _mass_dict(self.mass),
         }
@@ -399,6 +399,17 @@ def _scenario_dict(scenario: GraspScenario) -> dict:
     for key in ("delta_v", "friction"):
         if d[key] is None:
             del d[key]
+    return d
+
+
+def _sim_options_dict(options: SimOptions) -> dict:
+    """The manifest's ``sim_options``; ``tied_flexures`` only when set.
+
+    A dataset whose chain has no tied flexures (every guided one) keeps its fingerprint.
+    """
+    d = dataclasses.asdict(options)
+    if not d["tied_flexures"]:
+        del d["tied_flexures"]
     return d
 
 

@@ -20,6 +20,7 @@ from mjcodesign.models.types import (
     LIFT_KP,
     MAX_OPENING,
     PALM_HALF,
+    PRINTED_FLEXURE_HINGES,
     Built,
     FingerHandle,
     FingerModel,
@@ -39,12 +40,33 @@ __all__ = [
 ]
 
 FLEXURE_HINGES_GRASP_REFUSAL = (
-    "the printed chain with several hinges per flexure is validated below buckling only (buckling tension "
+    "the printed chain with several free hinges per flexure is validated below buckling only (buckling tension "
     "and curl against the FEM); past buckling a flexure's hinges fold into an S that nothing stops (the "
     "chain's links never touch each other, and the stops hold the flexure's sum): soft at 10 N turned "
-    "flexure 1's two hinges to +2.9 and -2.5 rad and never came to rest; grasp with hinges_per_block=1"
+    "flexure 1's two hinges to +2.9 and -2.5 rad and never came to rest; grasp with them tied "
+    "(tied_flexures=True, the printed routing's default)"
 )
-"""Why :func:`build_gripper` refuses the printed routing with ``hinges_per_block`` > 1."""
+"""Why :func:`build_gripper` refuses the printed routing with ``hinges_per_block`` > 1 free hinges."""
+
+
+def _grasp_refusal(options: SimOptions) -> str | None:
+    """Why a gripper of the chain ``options`` describe cannot grasp, in one line; None if it can.
+
+    Several free hinges per flexure fold into an S (:data:`FLEXURE_HINGES_GRASP_REFUSAL`); tied ones grasp
+    as :data:`PRINTED_FLEXURE_HINGES`, the count the grasps were checked with and the one whose single
+    middle link per flexure the batched design rewrite (``mjcodesign.sim.mujoco_c``) covers.
+    """
+    if options.routing != "printed" or options.hinges_per_block == 1:
+        return None
+    if not options.tied_flexures:
+        return FLEXURE_HINGES_GRASP_REFUSAL
+    if options.hinges_per_block != PRINTED_FLEXURE_HINGES:
+        return (
+            f"the printed chain grasps with {PRINTED_FLEXURE_HINGES} tied hinges per flexure (checked in "
+            f"grasps, with one middle link per flexure that a batch's design rewrite covers), not "
+            f"{options.hinges_per_block}"
+        )
+    return None
 
 
 def _add_tendon(spec: mujoco.MjSpec, handle: FingerHandle, exit_site: str, options: SimOptions) -> None:
@@ -149,8 +171,9 @@ def build_gripper(
     """Two opposed fingers on a palm: lift slide (world z), palm at ``pose``, prismatic openings."""
     options = options or SimOptions()
     model = FingerModel(model)
-    if options.routing == "printed" and options.hinges_per_block != 1:
-        raise UnsupportedError(FLEXURE_HINGES_GRASP_REFUSAL)
+    refusal = _grasp_refusal(options)
+    if refusal is not None:
+        raise UnsupportedError(refusal)
     pose = pose or GripperPose()
     spec = _model_spec("gripper", design, stiffness, model, options, scene)
     # The arm holds the palm: gravity-compensate the palm and carriages, not the soft fingers.

@@ -19,7 +19,8 @@ neighbouring segments' root rotation), end where the flexure's two segments meet
 
 The tendon (:attr:`SimOptions.tendon_lever`) acts on the hinges with the levers it has on the straight
 finger (:attr:`FingerHandle.joint_levers`), as the FEM's tendon does through each block's middle section,
-or through the waypoint sites as a spatial tendon.
+or through the waypoint sites as a spatial tendon. Under the printed routing a flexure's several hinges
+may be tied to one angle by joint equalities (:attr:`SimOptions.tied_flexures`, the routing's default).
 """
 
 from __future__ import annotations
@@ -50,11 +51,31 @@ __all__ = [
     "hinge_axes",
     "contact_solrefs",
     "flexure_stops",
+    "tie_solref",
+    "TIE_SOLIMP",
 ]
 
 # Contact stiffness of a block face: a flat punch of the block's width, k_c = E w (N/m), and a
 # time constant from the block's mass, tau = 2 pi sqrt(m / k_c), floored at MuJoCo's stable 2 dt.
 _CONTACT_DAMPRATIO = 1.0
+
+
+TIE_SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
+"""Solimp of the joint equalities that tie a printed flexure's hinges (:attr:`SimOptions.tied_flexures`).
+
+A constant impedance at MuJoCo's ceiling, 0.9999: a soft constraint held at rest gives way in proportion
+to (1 − d)/d, so random:21 curled at 10 N rests with its pairs 5e-6 rad apart (0.99: 6e-4 rad, MuJoCo's
+default 0.95: 3e-3 rad). While the finger moves the pairs part by up to ~0.1 rad whatever d is (the
+implicit hinge damping acts after the constraint solve; docs/concepts/models.md)."""
+
+
+def tie_solref(timestep: float) -> list[float]:
+    """Solref of the ties of a flexure's hinges: (2 ``timestep`` [s], critical).
+
+    MuJoCo's stiffest stable time constant (it clamps shorter ones to two steps), so the hinges of one
+    flexure stay as equal as the step allows.
+    """
+    return [2.0 * timestep, _CONTACT_DAMPRATIO]
 
 
 def hinge_stiffness(design: FingerDesign, young: np.ndarray, model: str = "fem") -> np.ndarray:
@@ -435,6 +456,26 @@ class _ChainBuilder:
             if self.distributed(i) and np.all(np.isfinite(self.stops[i])):
                 self.stop_tendon(f"flex{i}", [(i, 1.0)], self.stops[i])
 
+    def tie_flexures(self) -> None:
+        """Every distributed flexure's hinges tied to one angle (:attr:`SimOptions.tied_flexures`).
+
+        A joint equality per consecutive pair, ``θ_j − θ_{j+1} = 0`` (polynomial 0 + 1·θ_{j+1}), as stiff as
+        :func:`tie_solref` and :data:`TIE_SOLIMP` make it.
+        """
+        if not self.options.tied_flexures:
+            return
+        for i in range(len(self.blocks)):
+            if not self.distributed(i):
+                continue
+            joints = self.block_joints(i)
+            for j, (a, b) in enumerate(zip(joints[:-1], joints[1:], strict=True)):
+                eq = self.spec.add_equality(name=f"{self.prefix}tie{i}_{j}")
+                eq.type = mujoco.mjtEq.mjEQ_JOINT
+                eq.name1, eq.name2 = a, b
+                eq.data[:5] = [0.0, 1.0, 0.0, 0.0, 0.0]
+                eq.solref = tie_solref(self.options.timestep)
+                eq.solimp = list(TIE_SOLIMP)
+
     def gap_stops(self) -> None:
         """Limited fixed tendons that stop every flexure's gap where its segments meet.
 
@@ -534,6 +575,7 @@ def add_chain_finger(
     if options.routing == "printed":
         _add_channels(builder, bodies, origins, axes)
     builder.distributed_stops()
+    builder.tie_flexures()
     builder.gap_stops()
     builder.tip(body)
     return handle

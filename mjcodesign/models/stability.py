@@ -17,10 +17,17 @@ import numpy as np
 from mjcodesign.errors import DesignError
 from mjcodesign.models.types import Built, FingerModel, TendonMode
 
-__all__ = ["tangent_stiffness", "buckling_tension", "string_buckling_tension", "beam_string_buckling_tension"]
+__all__ = [
+    "tangent_stiffness",
+    "equality_basis",
+    "buckling_tension",
+    "string_buckling_tension",
+    "beam_string_buckling_tension",
+]
 
 _FD = 1e-6  # central-difference step of a hinge angle [rad]: forces are smooth, round-off ~1e-10 relative
 _NO_BUCKLING = 1e-6  # [1/N]: an eigenvalue below it is a critical tension past 1 MN, i.e. none
+_RANK = 1e-12  # singular values of the equalities' Jacobian below this share of the largest are zero
 
 
 def _check(built: Built) -> None:
@@ -62,20 +69,44 @@ def tangent_stiffness(built: Built, tension: float, q: np.ndarray | None = None)
     return 0.5 * (K + K.T)
 
 
+def equality_basis(built: Built) -> np.ndarray:
+    """Hinge-angle directions [rad] the model's joint equalities allow at the straight finger, shape (nv, r).
+
+    Orthonormal columns spanning the null space of the equalities' Jacobian at θ = 0, each row
+    e_{j1} − a₁ e_{j2} for MuJoCo's θ_{j1} = a₀ + a₁ θ_{j2} + … (``eq_data``'s polynomial); the identity
+    without equalities. :class:`DesignError` for an equality of another kind.
+    """
+    m = built.model
+    rows = []
+    for e in range(m.neq):
+        if m.eq_type[e] != mujoco.mjtEq.mjEQ_JOINT or m.eq_obj2id[e] < 0:
+            raise DesignError("stability reads joint equalities between two hinges only")
+        row = np.zeros(m.nv)
+        row[m.jnt_dofadr[m.eq_obj1id[e]]] += 1.0
+        row[m.jnt_dofadr[m.eq_obj2id[e]]] -= m.eq_data[e, 1]
+        rows.append(row)
+    if not rows:
+        return np.eye(m.nv)
+    _, sing, vt = np.linalg.svd(np.array(rows))
+    return vt[int(np.sum(sing > _RANK * sing[0])) :].T
+
+
 def buckling_tension(built: Built) -> tuple[float, np.ndarray]:
     """Smallest tension [N] at which the straight finger's tangent stiffness turns singular, and its mode.
 
-    K(T) = K₀ + T H is linear in T (H from the difference at 1 N), so T_crit = 1/μ_max with μ the
-    eigenvalues of −L⁻¹ H L⁻ᵀ (K₀ = L Lᵀ). The mode is the hinge angles, largest |entry| 1, shape (nv,).
-    ``inf`` and zeros when no tension buckles it (a fixed tendon: H = 0).
+    K(T) = K₀ + T H is linear in T (H from the difference at 1 N), restricted to the angles the model's
+    joint equalities allow (:func:`equality_basis` N: Nᵀ K N, a rigid tie), so T_crit = 1/μ_max with μ the
+    eigenvalues of −L⁻¹ Nᵀ H N L⁻ᵀ (Nᵀ K₀ N = L Lᵀ). The mode is the hinge angles, largest |entry| 1,
+    shape (nv,). ``inf`` and zeros when no tension buckles it (a fixed tendon: H = 0).
     """
     K0 = tangent_stiffness(built, 0.0)
     H = tangent_stiffness(built, 1.0) - K0
-    Li = np.linalg.inv(np.linalg.cholesky(K0))
-    mu, vecs = np.linalg.eigh(-Li @ H @ Li.T)
+    N = equality_basis(built)
+    Li = np.linalg.inv(np.linalg.cholesky(N.T @ K0 @ N))
+    mu, vecs = np.linalg.eigh(-Li @ (N.T @ H @ N) @ Li.T)
     if mu[-1] <= _NO_BUCKLING:
         return float("inf"), np.zeros(built.model.nv)
-    mode = Li.T @ vecs[:, -1]
+    mode = N @ (Li.T @ vecs[:, -1])
     return float(1.0 / mu[-1]), mode / mode[np.argmax(np.abs(mode))]
 
 

@@ -26,6 +26,9 @@ __all__ = [
     "TENDON_LEVERS",
     "ROUTINGS",
     "MAX_FLEXURE_HINGES",
+    "PRINTED_FLEXURE_HINGES",
+    "DEFAULT_TIMESTEP",
+    "TIED_TIMESTEP",
     "FLEX_GRASP_REFUSAL",
     "grasp_model",
     "tendon_exit_site",
@@ -55,6 +58,22 @@ MAX_FLEXURE_HINGES = 16
 """Most chain hinges per flexure under the printed routing (:attr:`SimOptions.hinges_per_block`): with 16
 the first flexure's buckling tension under the printed tendon is 0.24% short of its Euler–Bernoulli
 limit (the gap falls as 1/n²)."""
+
+
+PRINTED_FLEXURE_HINGES = 2
+"""Hinges per flexure of the ``printed`` routing's default chain, tied to one angle
+(:attr:`SimOptions.tied_flexures`). Two tied hinges buckle uniform fingers at 1.005× the converged FEM's
+global modes; three at 1.12× and four at 1.16×, the tie holding an arc of equal turns, stiffer than the
+flexure's own mode as n grows (docs/concepts/models.md)."""
+
+DEFAULT_TIMESTEP = 2e-3
+"""Step [s] of every model but a chain with tied flexures."""
+
+TIED_TIMESTEP = 1e-3
+"""Default step [s] of a chain with tied flexures (:attr:`SimOptions.tied_flexures`). At 2 ms the servo's
+pull (up to 65 N, tens of times a soft finger's buckling tension) whips the fingers faster than a step
+resolves: of 8 real-regime grasps 3 diverged and 3 broke the energy bound; at 1 ms none did
+(``benchmarks/records/2026-12-05_tied_flexure_grasps.json``)."""
 
 
 def tendon_exit_site(design: FingerDesign) -> np.ndarray:
@@ -133,8 +152,9 @@ class TendonMode(enum.Enum):
 class SimOptions:
     """Numerical options of a finger or gripper model."""
 
-    timestep: float = 2e-3
-    """Step [s]."""
+    timestep: float | None = None
+    """Step [s]; None: :data:`DEFAULT_TIMESTEP`, or :data:`TIED_TIMESTEP` for a chain with
+    :attr:`tied_flexures`."""
     damping_time: float = 5e-3
     """Stiffness-proportional (Rayleigh) damping time [s]: hinge damping b = β k, flex damping β.
 
@@ -167,8 +187,9 @@ class SimOptions:
     of 2, and the grasp blew up (BADQACC) or made energy. 1e-6 brings ω dt below 1 up to the tension
     limit; it is 3% of one finger's inertia about its base, so the slow grasp motion hardly sees it
     (docs/benchmarks.md, time step and armature)."""
-    hinges_per_block: int = 1
-    """Chain hinges per block: 1, at its middle; or 2, at its quarter points, each twice as stiff (the
+    hinges_per_block: int | None = None
+    """Chain hinges per block (None: 1, or :data:`PRINTED_FLEXURE_HINGES` per flexure for the ``printed``
+    :attr:`routing`, tied, unless :attr:`tied_flexures` is False): 1, at its middle; or 2, at its quarter points, each twice as stiff (the
     same small-deflection compliance), with the middle link carrying the block's tendon waypoint. Two
     hinges keep a spatial tendon's lever as the block bends (the curl within 4.4% of the FEM's to 1.4 rad,
     6.7% at 3.3 rad); the default single hinge gets the same from :attr:`tendon_lever` ``constant``
@@ -183,8 +204,9 @@ class SimOptions:
     at k (a+b)/(ab), n → ∞ at an Euler–Bernoulli flexure's tension, 1.75× that on the first flexure (the
     single hinge's guides give it that tension: :attr:`routing`). A
     flexure's stop holds the sum of its hinges (a limited fixed tendon) where a single hinge's range
-    holds its angle (:mod:`mjcodesign.models.chain`). For a finger below buckling (statics, stability);
-    :func:`~mjcodesign.models.build_gripper` refuses it (``FLEXURE_HINGES_GRASP_REFUSAL``)."""
+    holds its angle (:mod:`mjcodesign.models.chain`). Free, its hinges fold into an S past buckling, so
+    :func:`~mjcodesign.models.build_gripper` refuses them (``FLEXURE_HINGES_GRASP_REFUSAL``) unless they
+    are :attr:`tied_flexures`."""
     tendon_lever: str = "constant"
     """How the chain's guided native tendon (:attr:`routing`) acts on its hinges. ``constant`` (default): a fixed tendon,
     ``ℓ = Σ_j (dℓ/dθ_j)₀ θ_j``, every hinge's lever frozen at the straight finger's
@@ -208,14 +230,24 @@ class SimOptions:
     (:func:`~mjcodesign.models.channels.flexure_guides`, 1.74× the span's ends on the first flexure); their
     short span lines up with the hinge at large bends (flexure 1's lever reverses at 0.8 rad). The
     segments' stops are the same. The chain's native tendon only (:class:`UnsupportedError` for a flex
-    model or the point-force mode), with one hinge per block by default, or several per flexure
-    (:attr:`hinges_per_block`), which bend along its length themselves and are crossed end to end."""
+    model or the point-force mode). By default each flexure is :data:`PRINTED_FLEXURE_HINGES` hinges tied
+    to one angle (:attr:`tied_flexures`), crossed end to end, at :data:`TIED_TIMESTEP`;
+    ``hinges_per_block=1`` gives the one hinge between guides, ``n`` free hinges per flexure."""
+    tied_flexures: bool | None = None
+    """None: True for the ``printed`` :attr:`routing`'s default flexures (:attr:`hinges_per_block` not
+    given), False otherwise. Under the ``printed`` :attr:`routing` with several hinges per flexure (:attr:`hinges_per_block` > 1):
+    tie each flexure's hinges to one angle, every consecutive pair by a MuJoCo joint equality
+    (``θ_j = θ_{j+1}``; :mod:`mjcodesign.models.chain`). The flexure keeps the n-hinge chain's path for
+    the tendon (straight from one channel's exit to the next one's entry across all n) and bends as one
+    arc of n equal turns; its hinges cannot fold into an S. :class:`DesignError` where there is nothing to
+    tie (the guided routing, or one hinge per flexure)."""
     stiffness_model: str = "fem"
     """How block moduli become finger stiffness: ``fem``, calibrated to the converged Warp FEM
     (:mod:`mjcodesign.design.calibration`; the default finger geometry only), or ``beam``,
     Euler–Bernoulli (exact for uniform designs only; any geometry)."""
 
     def __post_init__(self) -> None:
+        self._resolve_defaults()
         if self.stiffness_model not in STIFFNESS_MODELS:
             raise DesignError(
                 f"stiffness_model must be one of {STIFFNESS_MODELS}, got {self.stiffness_model!r}"
@@ -245,6 +277,26 @@ class SimOptions:
                 )
         elif hinges not in (1, 2) or isinstance(hinges, bool):
             raise DesignError(f"hinges_per_block must be 1 or 2, got {hinges!r}")
+        if not isinstance(self.tied_flexures, bool):
+            raise DesignError(f"tied_flexures must be True, False or None, got {self.tied_flexures!r}")
+        if self.tied_flexures and (self.routing != "printed" or hinges == 1):
+            raise DesignError(
+                "tied_flexures ties the hinges of a printed chain's flexure to one angle: it needs "
+                f"routing='printed' and hinges_per_block > 1 (got {self.routing!r}, {hinges!r})"
+            )
+
+    def _resolve_defaults(self) -> None:
+        """Fill the fields left None: the routing's flexure model, then its step."""
+        printed = self.routing == "printed"
+        tied, hinges = self.tied_flexures, self.hinges_per_block
+        if tied is None:
+            tied = printed and hinges is None
+        if hinges is None:
+            hinges = PRINTED_FLEXURE_HINGES if printed and tied else 1
+        object.__setattr__(self, "tied_flexures", tied)
+        object.__setattr__(self, "hinges_per_block", hinges)
+        if self.timestep is None:
+            object.__setattr__(self, "timestep", TIED_TIMESTEP if tied is True else DEFAULT_TIMESTEP)
 
 
 @dataclass
