@@ -2,17 +2,19 @@
 
 ``guided`` (the default: a waypoint on every block, constant levers) against ``printed`` (through the
 segments' channels at the printed finger's heights, straight across each flexure gap;
-`mjcodesign.models.channels`):
+`mjcodesign.models.channels`; each flexure two hinges tied to one angle, the routing's default):
 
 * the straight finger's buckling tension of uniform fingers, ln E 13.5-17.0 (`mjcodesign.models.stability`,
-  MuJoCo's forces differenced), against the closed form k (a+b)/(ab) of the first flexure to go;
+  MuJoCo's forces differenced), against the closed form k (a+b)/(ab) of the first flexure to go as one
+  hinge across the channel ends;
 * the tests' 50 g box (50 mm, 400 kg/m³, auto pose) grasped by the three presets and by uniform fingers,
   under force 4 N (the FEM grasp study's), force 10 N (the default) and position 1000 ticks (the
   hardware servo): the outcome, and the most outward turn of finger A's flexures during the rollout
-  (negative: a flexure folded outward, opening its gap);
-* the printed routing's position-mode grasps of soft and semi-rigid at 1 ms and 0.25 ms steps.
+  (the sum of its hinges; negative: a flexure folded outward, opening its gap);
+* the printed routing's position-mode grasps of soft and semi-rigid at 2 ms and 0.25 ms steps (its
+  default is 1 ms).
 
-    python3 scripts/routing_compare.py --out benchmarks/records/2026-12-03_routing_compare.json
+    python3 scripts/routing_compare.py --out benchmarks/records/2026-12-05_routing_compare_tied.json
 
 About a minute on one core. Not part of the package: a record of how the numbers in the models page
 were made.
@@ -32,6 +34,7 @@ from mjcodesign.bench.record import provenance
 from mjcodesign.design.finger import BlockKind, FingerDesign
 from mjcodesign.design.stiffness import Stiffness
 from mjcodesign.models import build_finger
+from mjcodesign.models.chain import hinge_stiffness
 from mjcodesign.models.channels import channel_points
 from mjcodesign.models.stability import buckling_tension
 from mjcodesign.models.types import ROUTINGS, FingerModel, SimOptions
@@ -51,7 +54,7 @@ from mjcodesign.sim.mujoco_c import STATE_SPEC, initial_state
 _LOG_E = (13.5, 14.0, 14.5, 15.0, 15.5, 16.0, 16.5, 17.0)
 _DRIVES = ("force:4", "force:10", "position:1000")
 _PRESETS = ("soft", "semi-rigid", "paper-optimized")
-_STEPS = (1e-3, 2.5e-4)  # [s]: the printed routing's position-mode grasps at finer steps than 2 ms
+_STEPS = (2e-3, 2.5e-4)  # [s]: the printed routing's position-mode grasps beside its default 1 ms
 
 
 def _buckling() -> list[dict]:
@@ -67,7 +70,7 @@ def _buckling() -> list[dict]:
             options=SimOptions(routing="printed", gravity=False),
         )
         t_crit, mode = buckling_tension(built)
-        k = built.model.jnt_stiffness
+        k = hinge_stiffness(design, np.full(design.n_blocks, np.exp(log_e)))  # each block's, one hinge
         closed = [
             k[f.index] * (a + b) / (a * b)
             for f, a, b in ((f, f.mid - pts[i, 2, 0], pts[i + 1, 0, 0] - f.mid) for i, f in enumerate(flex))
@@ -78,7 +81,7 @@ def _buckling() -> list[dict]:
                 "t_crit_n": t_crit,
                 "closed_form_n": min(closed),
                 "ratio": t_crit / min(closed),
-                "hinge": int(np.argmax(np.abs(mode))),
+                "mode_block": built.fingers[0].joint_blocks[int(np.argmax(np.abs(mode)))],
                 "closed_form_flexure_block": flex[int(np.argmin(closed))].index,
             }
         )
@@ -86,23 +89,21 @@ def _buckling() -> list[dict]:
 
 
 def _most_outward(scene, scenario) -> float:
-    """Smallest angle [rad] any of finger A's flexure hinges reaches in the rollout (the same steps)."""
+    """Smallest turn [rad] any of finger A's flexures (the sum of its hinges) reaches in the rollout."""
     scene = drive_scene(scene, scenario)
     m = scene.model
     ctrl, _ = phase_controls(scene, scenario)
     d = mujoco.MjData(m)
     mujoco.mj_setState(m, d, initial_state(scene), mujoco.mjtState(STATE_SPEC))
-    blocks = scene.built.design.blocks()
-    adr = [
-        m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"A_hinge{b.index}")]
-        for b in blocks
-        if b.kind is BlockKind.FLEXURE
-    ]
+    hand = scene.built.fingers[0]
+    blocks = np.array(hand.joint_blocks)
+    adr = np.array([m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, n)] for n in hand.joints])
+    flexures = [adr[blocks == b.index] for b in scene.built.design.blocks() if b.kind is BlockKind.FLEXURE]
     low = 0.0
     for row in ctrl:
         mujoco.mj_setState(m, d, row, control_spec())
         mujoco.mj_step(m, d)
-        low = min(low, float(d.qpos[adr].min()))
+        low = min(low, min(float(d.qpos[a].sum()) for a in flexures))
     return low
 
 
@@ -145,7 +146,7 @@ def _timesteps() -> list[dict]:
     rows = []
     for dt in _STEPS:
         for name in ("soft", "semi-rigid"):
-            options = SimOptions(routing="printed", timestep=dt)
+            options = SimOptions(routing="printed", timestep=dt)  # two tied hinges per flexure
             scene = build_scene(
                 obj,
                 FingerDesign(),
