@@ -243,3 +243,27 @@ def test_a_grasp_under_the_servo_holds_the_ties_and_does_not_diverge():
     assert not out.failures or not any(f.is_sample_error for f in out.failures), out.reason
     assert out.success, out.reason
     assert ties.worst is not None and ties.worst < _TOL_TIE_MOTION
+
+
+@pytest.mark.parametrize("text", ["random:3", ",".join(["14", "17"] * 11)])
+def test_a_batchs_design_rewrite_equals_a_recompile(text):
+    # Evaluations and datasets write each design into a copy of one scene's model (with_stiffness) instead
+    # of compiling it: with the ties, every hinge, damping and piece solref must equal a recompile, the
+    # ties themselves included (they do not depend on the design).
+    from numpy.testing import assert_array_equal
+
+    from mjcodesign.objects import box_object
+    from mjcodesign.scenarios.grasp import auto_pose, build_scene
+    from mjcodesign.sim import with_stiffness
+
+    obj, printed = box_object((0.05,) * 3, 400.0), SimOptions(routing="printed")
+    pose, design = auto_pose(obj), Stiffness.parse(text)
+    scene = build_scene(
+        obj, FingerDesign(), Stiffness.preset("soft"), FingerModel.CHAIN, pose, options=printed
+    )
+    ref = build_scene(obj, FingerDesign(), design, FingerModel.CHAIN, pose, options=printed).model
+    m = with_stiffness(scene, design)
+    assert m.neq == ref.neq == 2 * len(_FLEXURES)
+    names = ("jnt_stiffness", "dof_damping", "geom_solref", "body_mass", "eq_data", "eq_solref", "eq_solimp")
+    for name in names:
+        assert_array_equal(getattr(m, name), getattr(ref, name), err_msg=name)
