@@ -3,13 +3,14 @@
     python3 scripts/kfold_compare.py FOLDS_DIR DATASET [--seed 0] --out RECORD.json
 
 ``FOLDS_DIR`` is ``mjcodesign train --folds K --out FOLDS_DIR`` on ``DATASET``. For each fold this
-rebuilds its split (the same objects, seed and validation fraction as the training), predicts the fold's
-held-out rows with its checkpoint's success head, fits the trees' classifier and the design-only linear
-baseline on the fold's training rows, and pools the held-out rows of all folds: success ROC AUC and
-Brier score of the head and the trees; per object the Brier difference (head − trees) with its paired
-bootstrap interval over objects; and the design-ranking Spearman per held-out pose (>= 8 designs, the
-measured p varying) of the head, the trees and the linear baseline, with the head's paired differences
-over objects.
+rebuilds its split (the same objects, seed and validation fraction as the training) and predicts the
+fold's held-out rows four ways (:data:`MODELS`): the checkpoint's success head; its calibrated success
+score (its outputs through the success rule, Platt-mapped on the fold's validation rows); the trees'
+classifier fitted on the fold's training rows; and the trees' regressed outputs through the same rule
+and map. It pools the held-out rows of all folds: success ROC AUC and Brier score of each; per object
+the Brier and AUC differences (surrogate − trees) with their paired bootstrap intervals over objects;
+and the design-ranking Spearman per held-out pose (>= 8 designs, the measured p varying) of each and of
+the design-only linear baseline, with the surrogate's paired differences over objects.
 """
 
 from __future__ import annotations
@@ -21,6 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
+MODELS = ("head", "score", "trees", "trees_score")
+"""The success predictions compared: the surrogate's success head and its calibrated success score (the
+paper's outputs through the success rule, Platt-mapped on the fold's validation rows), the trees'
+classifier on the soft label and the trees' regressed outputs through the same rule and map."""
+
 
 def compare(folds_dir: Path, dataset: str, seed: int = 0) -> dict:
     """The comparison of the module docstring."""
@@ -29,9 +35,9 @@ def compare(folds_dir: Path, dataset: str, seed: int = 0) -> dict:
     from mjcodesign.evaluation import paired_difference
     from mjcodesign.surrogate import load_surrogate
     from mjcodesign.surrogate.data import fold_splits, load_grasp_data
-    from mjcodesign.surrogate.metrics import tree_success
+    from mjcodesign.surrogate.metrics import calibrated_success, tree_baseline, tree_success
     from mjcodesign.surrogate.ranking import linear_design_effect, ranking_fidelity
-    from mjcodesign.surrogate.report import predict_success
+    from mjcodesign.surrogate.report import predict_rows, predict_success
 
     manifest = json.loads((folds_dir / "folds.json").read_text(encoding="utf-8"))
     data = load_grasp_data(dataset)
@@ -39,40 +45,68 @@ def compare(folds_dir: Path, dataset: str, seed: int = 0) -> dict:
         raise SystemExit("kfold_compare: the dataset is not the folds' (manifest SHA-256 differs)")
     fold_of = {o: k for k, f in enumerate(manifest["folds"]) for o in f["held_out"]}
     splits = fold_splits(data, fold_of, seed=int(manifest["train"]["seed"]))
-    rows, head, trees, per_fold, ranking = [], [], [], [], []
+    rows, preds, per_fold, ranking = [], {m: [] for m in MODELS}, [], []
     for parts, entry in zip(splits, manifest["folds"], strict=True):
         if sorted(parts.test_objects) != sorted(entry["held_out"]):
             raise SystemExit(f"kfold_compare: {entry['path']}'s split does not rebuild")
-        h = predict_success(load_surrogate(folds_dir / entry["path"]), data, parts.test)
+        sur = load_surrogate(folds_dir / entry["path"])
+        net, net_val = predict_rows(sur, data, parts.test), predict_rows(sur, data, parts.val)
         (t,) = tree_success(data, parts.train, [parts.test], seed=seed)
-        lin = linear_design_effect(data, parts.train, parts.test)
+        tree, tree_val = tree_baseline(data, parts.train, [parts.test, parts.val], seed=seed)
+        fold = {
+            "head": predict_success(sur, data, parts.test),
+            "score": calibrated_success(net, data, parts.test, net_val, parts.val),
+            "trees": t,
+            "trees_score": calibrated_success(tree, data, parts.test, tree_val, parts.val),
+        }
         truth = data.success[parts.test].astype(float)
+        val = data.success[parts.val]
         per_fold.append({"fold": entry["path"], "held_out": list(parts.test_objects), "rows": len(parts.test),
-                         "head": _scores(truth, h, roc_auc_score), "trees": _scores(truth, t, roc_auc_score)})  # fmt: skip
-        r = ranking_fidelity({"head": h, "trees": t, "linear": lin}, data, parts.test)
-        ranking += r["per_pose"]
+                         "platt_fitted": bool(0 < val.sum() < len(val)),
+                         **{m: _scores(truth, fold[m], roc_auc_score) for m in MODELS}})  # fmt: skip
+        lin = linear_design_effect(data, parts.train, parts.test)
+        ranking += ranking_fidelity({**fold, "linear": lin}, data, parts.test)["per_pose"]
         rows.append(parts.test)
-        head.append(h)
-        trees.append(t)
-    rows, head, trees = np.concatenate(rows), np.concatenate(head), np.concatenate(trees)
+        for m in MODELS:
+            preds[m].append(fold[m])
+    rows = np.concatenate(rows)
+    preds = {m: np.concatenate(v) for m, v in preds.items()}
     truth = data.success[rows].astype(float)
     objects = np.array([str(data.objects[p]) for p in data.pose[rows]])
     names = sorted(set(objects))
     brier = {m: np.array([np.mean((p[objects == o] - truth[objects == o]) ** 2) for o in names])
-             for m, p in (("head", head), ("trees", trees))}  # fmt: skip
+             for m, p in preds.items()}  # fmt: skip
+    diffs = {f"brier_{a}_minus_{b}": paired_difference(brier[a], brier[b], names=(a, b), seed=seed).as_dict()
+             for a in ("head", "score") for b in ("trees", "trees_score")}  # fmt: skip
     return {
         "folds": per_fold,
         "pooled": {
             "objects": len(names),
             "rows": int(len(rows)),
-            "head": _scores(truth, head, roc_auc_score),
-            "trees": _scores(truth, trees, roc_auc_score),
-            "brier_head_minus_trees": paired_difference(
-                brier["head"], brier["trees"], names=("head", "trees"), seed=seed
-            ).as_dict(),
-        },  # fmt: skip
+            **{m: _scores(truth, preds[m], roc_auc_score) for m in MODELS},
+            **diffs,
+            "auc_per_object": _auc_per_object(truth, preds, objects, names, seed),
+        },
         "ranking": _ranking_summary(ranking, seed),
     }
+
+
+def _auc_per_object(truth, preds, objects, names, seed) -> dict:
+    """Per object with both outcomes, the AUC of each prediction; the surrogate's minus the trees' over them."""
+    from sklearn.metrics import roc_auc_score
+
+    from mjcodesign.evaluation import paired_difference
+
+    both = [o for o in names if 0 < truth[objects == o].sum() < np.sum(objects == o)]
+    auc = {
+        m: np.array([roc_auc_score(truth[objects == o], p[objects == o]) for o in both])
+        for m, p in preds.items()
+    }
+    out = {"objects": len(both), **{m: float(np.mean(v)) for m, v in auc.items()}}
+    for a in ("head", "score"):
+        for b in ("trees", "trees_score"):
+            out[f"{a}_minus_{b}"] = paired_difference(auc[a], auc[b], names=(a, b), seed=seed).as_dict()
+    return out
 
 
 def _scores(truth: np.ndarray, p: np.ndarray, auc) -> dict:
@@ -85,7 +119,7 @@ def _ranking_summary(per_pose: list[dict], seed: int) -> dict:
     """Medians over the ranked poses; the head's paired differences over objects (per-object means)."""
     from mjcodesign.evaluation import paired_difference
 
-    models = ("head", "trees", "linear")
+    models = (*MODELS, "linear")
     out = {"poses": len(per_pose), "objects": len({p["object"] for p in per_pose})}
     if not per_pose:  # no held-out pose with enough designs and a varying measured p
         return out
@@ -96,10 +130,11 @@ def _ranking_summary(per_pose: list[dict], seed: int) -> dict:
     mean = {
         m: np.array([np.mean([p[m] for p in per_pose if p["object"] == o]) for o in names]) for m in models
     }
-    for other in ("trees", "linear"):
-        out[f"head_minus_{other}"] = paired_difference(
-            mean["head"], mean[other], names=("head", other), seed=seed
-        ).as_dict()
+    for mine in ("head", "score"):
+        for other in ("trees", "trees_score", "linear"):
+            out[f"{mine}_minus_{other}"] = paired_difference(
+                mean[mine], mean[other], names=(mine, other), seed=seed
+            ).as_dict()
     return out
 
 
@@ -117,11 +152,11 @@ def main() -> int:
            **compare(Path(a.folds), a.dataset, a.seed)}  # fmt: skip
     Path(a.out).write_text(json.dumps(rec, indent=1) + "\n", encoding="utf-8")
     p, r = rec["pooled"], rec["ranking"]
-    print(f"pooled over {p['objects']} objects: head AUC {p['head']['roc_auc']:.3f} Brier {p['head']['brier']:.3f}; "
-          f"trees AUC {p['trees']['roc_auc']:.3f} Brier {p['trees']['brier']:.3f}", file=sys.stderr)  # fmt: skip
+    print(f"pooled over {p['objects']} objects: " + "; ".join(
+        f"{m} AUC {p[m]['roc_auc']:.3f} Brier {p[m]['brier']:.3f}" for m in MODELS), file=sys.stderr)  # fmt: skip
     if r["poses"]:
-        print(f"ranking over {r['poses']} poses, medians: head {r['head']['median']:.2f}, trees "
-              f"{r['trees']['median']:.2f}, linear {r['linear']['median']:.2f}", file=sys.stderr)  # fmt: skip
+        print(f"ranking over {r['poses']} poses, medians: " + ", ".join(
+            f"{m} {r[m]['median']:.2f}" for m in (*MODELS, "linear")), file=sys.stderr)  # fmt: skip
     return 0
 
 

@@ -27,6 +27,7 @@ from mjcodesign.surrogate.data import N_REGRESSION, OUTPUT_NAMES, GraspData
 from mjcodesign.surrogate.inference import success_score
 
 __all__ = [
+    "calibrated_success",
     "cloud_statistics",
     "mean_baseline",
     "score_outputs",
@@ -72,6 +73,18 @@ def _platt(val_score: np.ndarray, val_truth: np.ndarray):
         return lambda s: lr.predict_proba(np.asarray(s)[:, None])[:, 1]
     rate = float(val_truth.mean()) if len(val_truth) else 0.5
     return lambda s: np.full(len(s), rate)
+
+
+def calibrated_success(
+    pred: np.ndarray, data: GraspData, rows: np.ndarray, val_pred: np.ndarray, val_rows: np.ndarray
+) -> np.ndarray:
+    """The success probability (S,) of outputs ``pred`` (S, 10) of ``rows``: their success score, Platt-mapped.
+
+    The logistic map of :func:`success_scores` to the 0/1 success is fitted on the outputs ``val_pred``
+    of the validation rows ``val_rows`` (never on ``rows``).
+    """
+    fit = _platt(success_scores(val_pred, data, val_rows), data.success[val_rows])
+    return fit(success_scores(pred, data, rows))
 
 
 def _reliability(prob: np.ndarray, truth: np.ndarray) -> list[dict]:
@@ -126,7 +139,7 @@ def score_outputs(
     contact = true[:, 9].astype(bool)
     score = success_scores(pred, data, rows)
     truth = data.success[rows]
-    prob = _platt(success_scores(val_pred, data, val_rows), data.success[val_rows])(score)
+    prob = calibrated_success(pred, data, rows, val_pred, val_rows)
     return {
         "samples": int(len(rows)),
         "mae": mae,

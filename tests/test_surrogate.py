@@ -529,6 +529,18 @@ def test_train_folds_writes_one_checkpoint_per_fold_and_evaluate_uses_the_one_th
         f["held_out"] for f in manifest["folds"]
     ]
     assert 0.0 <= rec["pooled"]["trees"]["brier"] <= 1.0
+    for f, entry in zip(rec["folds"], manifest["folds"], strict=True):
+        # the calibrated score is a logistic map of the score the training scored, fold by fold: the same
+        # AUC, or its complement where the validation rows fit a falling map (a tiny training's score
+        # can run backwards), and 0.5 where they hold one outcome (a constant: nothing to fit)
+        auc = entry["test"]["success"]["roc_auc"]  # None: the fold's held-out rows hold one outcome
+        if auc is None:
+            assert f["score"]["roc_auc"] is None
+        elif f["platt_fitted"]:
+            assert min(abs(f["score"]["roc_auc"] - a) for a in (auc, 1.0 - auc)) < 1e-9
+        else:
+            assert f["score"]["roc_auc"] == pytest.approx(0.5, abs=1e-9)
+        assert all(0.0 <= f[m]["brier"] <= 1.0 for m in ("score", "trees_score"))
 
     files = [str(dataset.parent / f"{n}.stl") for n in names[:2]]
     suite = build_suite(files, poses_per_object=2, seed=0)
