@@ -62,16 +62,19 @@ def table(runs: dict[str, list[dict]], presets: list[str], seed: int = 0) -> dic
                     / max(1, sum(c["sample_errors"] + c["valid"] for c in cells if c["design"] == d))
                     for d in designs
                 }
-            entry: dict = {"success": {}, "change": {}, "unusable_share": errors, "ranking": {}, "lead": {}}
+            # a design without rows in this split (one design per training object) is left out of it
+            present = [d for d in designs if all(rates[n].get(d) for n in names)]
+            entry: dict = {"success": {}, "change": {}, "unusable_share": errors, "ranking": {}, "lead": {},
+                           "absent": [d for d in designs if d not in present]}  # fmt: skip
             for n in names:
                 entry["success"][n] = {
-                    d: bootstrap_mean(list(rates[n][d].values()), seed=seed).as_dict() for d in designs
+                    d: bootstrap_mean(list(rates[n][d].values()), seed=seed).as_dict() for d in present
                 }
-                order = sorted(designs, key=lambda d: -entry["success"][n][d]["value"])
+                order = sorted(present, key=lambda d: -entry["success"][n][d]["value"])
                 entry["ranking"][n] = order
                 if n != names[0]:
                     entry["change"][n] = {}
-                    for d in designs:
+                    for d in present:
                         common = sorted(set(rates[n][d]) & set(rates[names[0]][d]))
                         diff = paired_difference(
                             [rates[n][d][o] for o in common],
@@ -83,7 +86,7 @@ def table(runs: dict[str, list[dict]], presets: list[str], seed: int = 0) -> dic
             entry["same_ranking_as_nominal"] = {
                 n: entry["ranking"][n] == entry["ranking"][names[0]] for n in names
             }
-            for d in candidates:
+            for d in (c for c in candidates if c in present):
                 leads = {}
                 for n in names:
                     best = max(presets, key=lambda p: entry["success"][n][p]["value"])
