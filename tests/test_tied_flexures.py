@@ -99,6 +99,18 @@ def test_the_printed_routing_defaults_to_two_tied_hinges_per_flexure_at_a_finer_
         SimOptions(routing="printed", tied_flexures=1)
 
 
+def test_replace_resolves_the_routing_defaults_again_and_keeps_what_was_given():
+    assert SimOptions().replace(routing="printed") == SimOptions(routing="printed")  # tied, 1 ms
+    assert SimOptions(routing="printed").replace(routing="guided") == SimOptions()
+    one = SimOptions(routing="printed", hinges_per_block=1, friction=0.6)
+    assert one.replace(friction=1.0) == SimOptions(routing="printed", hinges_per_block=1)  # still one hinge
+    fine = SimOptions(timestep=5e-4).replace(routing="printed")
+    assert (fine.timestep, fine.tied_flexures) == (5e-4, True)  # a given step stays given
+    assert SimOptions().replace(routing="printed", timestep=2e-3).timestep == 2e-3
+    with pytest.raises(DesignError, match="no field colour"):
+        SimOptions().replace(colour="red")
+
+
 def test_each_flexures_hinges_are_tied_by_a_joint_equality():
     built = build_finger(FingerDesign(), Stiffness([15.0] * 11), FingerModel.CHAIN, options=_TIED)
     m = built.model

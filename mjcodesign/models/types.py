@@ -148,9 +148,16 @@ class TendonMode(enum.Enum):
     """The paper's model: forces at the waypoints, applied each step (see :mod:`mjcodesign.models.tendon`)."""
 
 
+_ROUTING_DEPENDENT = ("timestep", "hinges_per_block", "tied_flexures")
+"""The :class:`SimOptions` fields whose None default the routing resolves."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class SimOptions:
-    """Numerical options of a finger or gripper model."""
+    """Numerical options of a finger or gripper model.
+
+    Derive options with :meth:`replace`, which resolves the routing's defaults again.
+    """
 
     timestep: float | None = None
     """Step [s]; None: :data:`DEFAULT_TIMESTEP`, or :data:`TIED_TIMESTEP` for a chain with
@@ -247,6 +254,8 @@ class SimOptions:
     Euler–Bernoulli (exact for uniform designs only; any geometry)."""
 
     def __post_init__(self) -> None:
+        # what the caller gave, before the defaults that depend on the routing fill it (see replace)
+        object.__setattr__(self, "_given", {f: getattr(self, f) for f in _ROUTING_DEPENDENT})
         self._resolve_defaults()
         if self.stiffness_model not in STIFFNESS_MODELS:
             raise DesignError(
@@ -284,6 +293,23 @@ class SimOptions:
                 "tied_flexures ties the hinges of a printed chain's flexure to one angle: it needs "
                 f"routing='printed' and hinges_per_block > 1 (got {self.routing!r}, {hinges!r})"
             )
+
+    def replace(self, **changes) -> SimOptions:
+        """These options with ``changes``; the fields left None here are resolved again for the result.
+
+        :attr:`timestep`, :attr:`hinges_per_block` and :attr:`tied_flexures` default by the
+        :attr:`routing`: ``SimOptions().replace(routing="printed")`` is the printed routing's default
+        (tied flexures at :data:`TIED_TIMESTEP`), as ``SimOptions(routing="printed")`` is, where
+        :func:`dataclasses.replace` would pass the guided routing's resolved single hinge and 2 ms step
+        on as if they were given.
+        """
+        unknown = sorted(set(changes) - {f for f in self.__dataclass_fields__})
+        if unknown:
+            raise DesignError(f"SimOptions has no field {', '.join(unknown)}")
+        kept = {f: getattr(self, f) for f in self.__dataclass_fields__ if f not in _ROUTING_DEPENDENT}
+        return SimOptions(**{**kept, **self._given, **changes})
+
+    __replace__ = replace  # copy.replace (Python 3.13)
 
     def _resolve_defaults(self) -> None:
         """Fill the fields left None: the routing's flexure model, then its step."""
