@@ -100,6 +100,21 @@ def test_the_smoke_scale_runs_end_to_end_and_resumes(tmp_path):
         assert len(groups["held-out"]["paired"]) == 9 + 6 and len(groups["train"]["paired"]) == 12 + 7
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     assert again.returncode == 0 and again.stderr.count("done before, skipped") == len(names)
+    # the co-designs on 2 object folds continue the run (~1 min): every in-domain object held out once
+    krec = tmp_path / "kfold.json"
+    kcmd = [sys.executable, str(SCRIPT.with_name("kfold_codesign.py")), "--work", str(tmp_path / "w"), "--scale",
+            "smoke", "--record", str(krec)]  # fmt: skip
+    k = subprocess.run(kcmd, capture_output=True, text=True, timeout=600)
+    assert k.returncode == 0, k.stderr[-2000:]
+    kr = json.loads(krec.read_text())
+    assert all(s["exit_code"] == 0 for s in kr["steps"].values()) and len(kr["folds"]) == 2
+    held = sorted(o for f in kr["folds"] for o in f["held_out"])
+    assert held == sorted(r["objects"]["train"] + r["objects"]["held_out"])  # each in-domain object once
+    assert kr["objects_per_design"] == {"joint_lopt": 5, "joint_success": 5, "hybrid": 5}
+    g = kr["groups"]["kfold_groups_all"]["groups"]["in-domain"]
+    assert (
+        len(g["objects"]) == 5 and len(g["paired"]) == 3 * 3 + 3
+    )  # each against each preset and its single split
 
 
 def test_table_one_pairs_each_design_with_the_best_preset_of_each_column(pipeline):
