@@ -147,18 +147,15 @@ def fold_commands(
     s, *, seed: int, fold: int, ckpt: str, train: list[str], hybrid_budget: int, suite: list[str]
 ) -> dict[str, list[str]]:
     """Fold ``fold``'s co-design steps (argv, run from the work folder), named ``fold{k}_NAME``."""
-    sd = str(seed)
-    base = ["mjcodesign", "optimize", "--ckpt", ckpt, "--objects", ",".join(train), "--poses", "data",
-            "--poses-per-object", str(s.poses), "--max-iterations", str(s.iterations), "--threads", str(s.threads),
-            "--seed", sd, "--json"]  # fmt: skip
+    pp = _pipeline()
+    base = pp.optimize_command(s, seed=seed, ckpt=ckpt, objects=train)
     out = {
         f"fold{fold}_joint_lopt": [*base, "--mode", "joint", "--objective", "lopt", "--out", f"fold{fold}_joint_lopt"],
         f"fold{fold}_joint_success": [*base, "--mode", "joint", "--objective", "success", "--out",
                                       f"fold{fold}_joint_success"],
     }  # fmt: skip
     out[f"fold{fold}_hybrid"] = [
-        "mjcodesign", "bench", "oracle", *suite, "--only", ",".join(train), "--perturbations", "1",
-        "--population", str(s.population), "--seed", sd, "--json",
+        *pp.cma_command(s, seed=seed, suite=suite, objects=train),
         "--start", f"joint:{design_file(fold, 'joint_success')}", "--budget", str(hybrid_budget),
         "--out", f"fold{fold}_hybrid",
     ]  # fmt: skip

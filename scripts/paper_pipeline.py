@@ -130,6 +130,19 @@ POLICIES = ("all", "fixed", "oracle")
 """The groups' pose policies: every pose of the suite, its first (fixed), each design's best (oracle)."""
 
 
+def optimize_command(s: Scale, *, seed: int, ckpt: str, objects: list[str]) -> list[str]:
+    """``mjcodesign optimize`` through ``ckpt`` on ``objects`` at this scale (add ``--mode``, ``--objective``, ``--out``)."""
+    return ["mjcodesign", "optimize", "--ckpt", ckpt, "--objects", ",".join(objects), "--poses", "data",
+            "--poses-per-object", str(s.poses), "--max-iterations", str(s.iterations), "--threads", str(s.threads),
+            "--seed", str(seed), "--json"]  # fmt: skip
+
+
+def cma_command(s: Scale, *, seed: int, suite: list[str], objects: list[str]) -> list[str]:
+    """``mjcodesign bench oracle`` (CMA-ES on the simulator) on ``objects`` (add ``--start``, ``--budget``, ``--out``)."""
+    return ["mjcodesign", "bench", "oracle", *suite, "--only", ",".join(objects), "--perturbations", "1",
+            "--population", str(s.population), "--seed", str(seed), "--json"]  # fmt: skip
+
+
 def step_commands(
     s: Scale, *, seed: int, train: list[str], held: list[str], hybrid_budget: int, oracle: str | int
 ) -> dict[str, list[str]]:
@@ -141,9 +154,7 @@ def step_commands(
     """
     sd = str(seed)
     out: dict[str, list[str]] = {}
-    base = ["mjcodesign", "optimize", "--ckpt", "surrogate", "--objects", ",".join(train), "--poses", "data",
-            "--poses-per-object", str(s.poses), "--max-iterations", str(s.iterations), "--threads", str(s.threads),
-            "--seed", sd, "--json"]  # fmt: skip
+    base = optimize_command(s, seed=seed, ckpt="surrogate", objects=train)
     codesigns = {"joint_lopt": ["--mode", "joint", "--objective", "lopt"],
                  "joint_success": ["--mode", "joint", "--objective", "success"],
                  "individual": ["--mode", "individual", "--objective", "success"]}  # fmt: skip
@@ -154,8 +165,7 @@ def step_commands(
         out["suite"] = ["mjcodesign", "evaluate", "--objects", s.objects, "--egad-like", "1", "--poses-per-object",
                         str(s.eval_poses), "--designs", "soft", "--perturbations", "1", "--save-suite", "suite.json",
                         "--out", "suite_check"]  # fmt: skip
-    cma = ["mjcodesign", "bench", "oracle", *suite, "--only", ",".join(train), "--perturbations", "1",
-              "--population", str(s.population), "--seed", sd, "--json"]  # fmt: skip
+    cma = cma_command(s, seed=seed, suite=suite, objects=train)
     out["hybrid"] = [*cma, "--start", "joint:joint_success/design.txt", "--budget", str(hybrid_budget),
                      "--out", "hybrid"]  # fmt: skip
     designs = [
