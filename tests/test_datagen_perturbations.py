@@ -167,6 +167,44 @@ def test_draws_come_from_the_pose_stream():
         assert_array_equal(old.random(3), new.random(3))
 
 
+def test_a_replicate_is_an_independent_stream_of_the_same_pose():
+    """Replicate 0 is the dataset's draws; r >= 1 another stream, reproducible; the other streams unchanged."""
+    assert_array_equal(
+        PoseStreams(0, 1, 2).perturbations.random(4), PoseStreams(0, 1, 2, 0).perturbations.random(4)
+    )
+    first = PoseStreams(0, 1, 2, replicate=1).perturbations.random(4)
+    assert_array_equal(first, PoseStreams(0, 1, 2, replicate=1).perturbations.random(4))
+    for other in (PoseStreams(0, 1, 2), PoseStreams(0, 1, 2, replicate=2)):
+        assert not np.any(np.isclose(first, other.perturbations.random(4)))
+    a, b = PoseStreams(0, 1, 2), PoseStreams(0, 1, 2, replicate=3)
+    for x, y in ((a.density, b.density), (a.designs, b.designs), (a.cloud, b.cloud)):
+        assert_array_equal(x.random(3), y.random(3))
+
+
+def test_a_shard_rerun_from_the_dataset_gives_its_rows_and_a_replicate_redraws_them(adaptive, work):
+    """shard_tasks + Worker at replicate 0 recompute a shard's rollouts bit for bit; replicate 1 keeps the
+    designs and the procedure (K, extended to M where they disagree) under other draws."""
+    from mjcodesign.data.store import shard_tasks
+    from mjcodesign.data.tasks import Worker
+
+    config = DatagenConfig.from_dict(adaptive.manifest["config"])
+    task = shard_tasks(adaptive.root, adaptive.manifest, 0, config, str(work / "cache"))[0]
+    worker = Worker(nthread=1)
+    (again,) = worker.run([task])
+    stored = adaptive.rollouts().to_pydict()
+    mine = [i for i, (o, q) in enumerate(zip(stored["object_index"], stored["pose_index"], strict=True))
+            if (o, q) == (0, task.pose_index)]  # fmt: skip
+    got = again.rollouts.to_pydict()
+    for key in ("design_index", "draw", "perturbation", "success", "body_force"):
+        assert got[key] == [stored[key][i] for i in mine], key
+    (rep,) = worker.run([dataclasses.replace(task, replicate=1)])
+    r = rep.rollouts.to_pydict()
+    assert r["perturbation"][0] != got["perturbation"][0]
+    assert rep.samples.column("log_e").to_pylist() == again.samples.column("log_e").to_pylist()
+    per_cell = np.bincount(np.asarray(r["design_index"]))
+    assert set(per_cell[per_cell > 0]) <= {_K, _M}
+
+
 def test_two_workers_and_a_resume_give_the_same_dataset(adaptive, work):
     config = _config(work, perturbations=_K, perturbations_max=_M)
     two = _make(work, "two", config, workers=2)

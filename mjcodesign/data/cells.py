@@ -70,14 +70,16 @@ def run_cells(
     pose_index: int,
     backend,
     scenes: SceneCache,
+    replicate: int = 0,
 ) -> list[list[tuple[Perturbation, Outcome]]]:
     """Every cell's rollouts: per job of ``jobs_of`` (one pose, a design each), its (draw, outcome) pairs.
 
     K draws for every design; with :attr:`~DatagenConfig.perturbations_max`, M for those whose first K
-    disagree (:func:`disagree`).
+    disagree (:func:`disagree`). ``replicate`` r >= 1: the same procedure under the pose's r-th
+    independent stream of draws (:class:`~mjcodesign.data.sampling.PoseStreams`), not the dataset's.
     """
     c = config
-    rng = PoseStreams(c.seed, object_index, pose_index).perturbations
+    rng = PoseStreams(c.seed, object_index, pose_index, replicate).perturbations
     pose = jobs_of[0].pose
     base = scenes.scene(jobs_of[0])
     try:

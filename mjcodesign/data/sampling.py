@@ -29,11 +29,15 @@ class PoseStreams:
 
     A new instance draws the same numbers again. ``perturbations`` (the fourth child) feeds the draws
     every design of the pose shares; the first three children are those of a pose before it existed.
+    ``replicate`` r >= 1 replaces ``perturbations`` by an independent stream of the same pose (a
+    test-retest of its labels: the same cells under fresh draws); 0, the dataset's own.
     """
 
-    def __init__(self, seed: int, object_index: int, pose_index: int):
+    def __init__(self, seed: int, object_index: int, pose_index: int, replicate: int = 0):
         ss = np.random.SeedSequence(seed, spawn_key=(object_index, pose_index))
         density, designs, cloud, perturbations = ss.spawn(4)
+        if replicate:  # the r-th child of the draws' stream: independent of it and of each other
+            perturbations = perturbations.spawn(replicate)[-1]
         self.density = np.random.default_rng(density)
         self.designs = np.random.default_rng(designs)
         self.cloud = np.random.default_rng(cloud)

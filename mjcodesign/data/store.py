@@ -38,7 +38,7 @@ from mjcodesign.data.tasks import ObjectResult, ShardResult, ShardTask
 from mjcodesign.errors import OutputError
 from mjcodesign.outputs import TMP_SUFFIX, OutputKind, check_output, write_atomic
 
-__all__ = ["FORMAT", "LOCK", "MANIFEST", "DatasetDir", "project_version"]
+__all__ = ["FORMAT", "LOCK", "MANIFEST", "DatasetDir", "project_version", "shard_tasks"]
 
 MANIFEST = "manifest.json"
 LOCK = ".lock"
@@ -70,6 +70,40 @@ def project_version() -> str:
 
 def _now() -> str:
     return datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+
+
+def shard_tasks(
+    root: Path,
+    manifest: dict,
+    index: int,
+    config: DatagenConfig,
+    cache_dir: str | None = None,
+    *,
+    replicate: int = 0,
+) -> list[ShardTask]:
+    """One task per pose of ready object ``index`` of the dataset in ``root`` (its ``manifest``).
+
+    ``replicate`` (perturbed datasets): 0 reruns the dataset's draws; r >= 1 the r-th independent
+    replicate of them (:attr:`~mjcodesign.data.tasks.ShardTask.replicate`).
+    """
+    entry = manifest["objects"][index]
+    poses = pq.read_table(
+        Path(root) / entry["poses_file"], columns=["pose_index", "palm_pose", "openings", "density"]
+    ).to_pydict()
+    return [
+        ShardTask(
+            object_index=index,
+            pose_index=p,
+            matrix=tuple(poses["palm_pose"][k]),
+            openings=tuple(poses["openings"][k]),
+            density=poses["density"][k],
+            hulls_sha256=entry["hulls_sha256"],
+            config=config,
+            cache_dir=cache_dir,
+            replicate=replicate,
+        )
+        for k, p in enumerate(poses["pose_index"])
+    ]
 
 
 class DatasetDir:
@@ -161,21 +195,7 @@ class DatasetDir:
 
     def shard_tasks(self, index: int, config: DatagenConfig, cache_dir: str | None = None) -> list[ShardTask]:
         """One task per pose of ready object ``index``, finished or not."""
-        entry = self.object_entry(index)
-        poses = self.read_poses(index).to_pydict()
-        return [
-            ShardTask(
-                object_index=index,
-                pose_index=p,
-                matrix=tuple(poses["palm_pose"][k]),
-                openings=tuple(poses["openings"][k]),
-                density=poses["density"][k],
-                hulls_sha256=entry["hulls_sha256"],
-                config=config,
-                cache_dir=cache_dir,
-            )
-            for k, p in enumerate(poses["pose_index"])
-        ]
+        return shard_tasks(self.root, self.manifest, index, config, cache_dir)
 
     # -- writes -------------------------------------------------------------------------------------
 

@@ -117,6 +117,9 @@ class ShardTask:
     cache_dir: str | None = None
     log_e: tuple[tuple[float, ...], ...] | None = None
     """Designs to run instead of the seeded draw, ln(E / Pa), 22 each (e.g. presets); None: the draw."""
+    replicate: int = 0
+    """Perturbed shards: 0 runs the dataset's draws; r >= 1 the pose's r-th independent replicate of
+    them (:func:`~mjcodesign.data.cells.run_cells`), a test-retest of the shard's labels."""
 
     @property
     def key(self) -> str:
@@ -282,7 +285,12 @@ class Worker:
         t0 = time.perf_counter()
         where = {"object_index": t.object_index, "pose_index": t.pose_index}
         cells = run_cells(
-            _jobs(obj, t), config=t.config, backend=self.backend("mujoco"), scenes=self.scenes, **where
+            _jobs(obj, t),
+            config=t.config,
+            backend=self.backend("mujoco"),
+            scenes=self.scenes,
+            replicate=t.replicate,
+            **where,
         )
         tables = cell_tables(cells, t.designs(), name=obj.name, config=t.config, density=t.density, **where)
         wall = time.perf_counter() - t0
