@@ -74,7 +74,7 @@ def varying_poses(
 
 def retest_summary(first: dict, second: dict) -> dict:
     """Agreement of two labels per cell and per pose; ``first``/``second``: (object, pose) -> {design: p}."""
-    from mjcodesign.surrogate.ranking import _spearman
+    from mjcodesign.surrogate.ranking import group_spearman
 
     a, b, rho = [], [], []
     for key, cells in first.items():
@@ -83,7 +83,7 @@ def retest_summary(first: dict, second: dict) -> dict:
         y = np.array([second[key][d] for d in both])
         a.extend(x)
         b.extend(y)
-        r = _spearman(y, x) if len(both) >= 2 else float("nan")
+        r = group_spearman(y, x, [np.arange(len(both))])[0] if len(both) >= 2 else float("nan")
         rho.append(0.0 if np.isnan(r) else r)  # a constant replicate ranks nothing
     a, b, rho = np.array(a), np.array(b), np.array(rho)
     diff = np.abs(a - b)
