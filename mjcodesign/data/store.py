@@ -189,10 +189,6 @@ class DatasetDir:
         """Keys of the shards the manifest lists as finished (with rows or an error)."""
         return set(self.manifest["shards"])
 
-    def read_poses(self, index: int):
-        """The poses table of a ready object."""
-        return pq.read_table(self.root / self.object_entry(index)["poses_file"])
-
     def shard_tasks(self, index: int, config: DatagenConfig, cache_dir: str | None = None) -> list[ShardTask]:
         """One task per pose of ready object ``index``, finished or not."""
         return shard_tasks(self.root, self.manifest, index, config, cache_dir)
