@@ -62,13 +62,15 @@ def varying_poses(
     obj: np.ndarray, pose: np.ndarray, p: np.ndarray, min_designs: int
 ) -> list[tuple[int, int]]:
     """(object_index, pose_index) of the poses with >= ``min_designs`` samples whose ``p`` varies."""
-    out = []
-    keys = np.stack([obj, pose], axis=1)
-    uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
-    for i, (o, q) in enumerate(uniq):
-        m = inverse.ravel() == i
-        if m.sum() >= min_designs and np.ptp(p[m]) > 1e-12:
-            out.append((int(o), int(q)))
+    uniq, inverse = np.unique(np.stack([obj, pose], axis=1), axis=0, return_inverse=True)
+    inverse = inverse.ravel()
+    count = np.bincount(inverse, minlength=len(uniq))
+    high = np.full(len(uniq), -np.inf)
+    np.maximum.at(high, inverse, p)
+    low = np.full(len(uniq), np.inf)
+    np.minimum.at(low, inverse, p)
+    keep = (count >= min_designs) & (high - low > 1e-12)
+    out = [(int(o), int(q)) for o, q in uniq[keep]]
     return out
 
 
@@ -131,7 +133,7 @@ def main() -> None:
         ds = open_dataset(a.data)
         config = DatagenConfig.from_dict(ds.manifest["config"])
     except (MjcodesignError, OSError) as exc:
-        _fail(f"{a.data}: {exc}")
+        _fail(str(exc))  # the error names the path
     if not ds.perturbed:
         _fail(f"{a.data}: one rollout per cell; this needs a perturbed dataset (datagen --perturbations)")
     s = ds.samples().select(["object_index", "pose_index", "design_index", "success_p"]).to_pydict()

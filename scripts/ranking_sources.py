@@ -116,7 +116,7 @@ def main() -> None:
     try:
         d = load_grasp_data(a.data)
     except (MjcodesignError, OSError) as exc:
-        _fail(f"{a.data}: {exc}")
+        _fail(str(exc))  # the error names the path
     if d.success_p is None:
         _fail(f"{a.data}: one rollout per cell; this needs a perturbed dataset (datagen --perturbations)")
     rows = np.arange(len(d.pose))
