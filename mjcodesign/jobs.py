@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import threading
 from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -127,7 +128,9 @@ class SceneCache:
     A scene is compiled once per object, density, finger model, geometry, options and scenario (its
     friction is compiled in: :func:`~mjcodesign.scenarios.grasp.scene_options`); designs and poses
     are written into model copies, so a cached scene gives the same numbers as a fresh compile (chain:
-    bitwise; flex: a design's cells are rescaled, equal to a recompile to round-off).
+    bitwise; flex: a design's cells are rescaled, equal to a recompile to round-off). Threads may
+    share one cache: a scene missing is compiled once, under the cache's lock, and the scenes are
+    only read by the runs that use them.
     """
 
     def __init__(self, size: int = 16):
@@ -136,6 +139,7 @@ class SceneCache:
         self.size = size
         self._scenes: dict[tuple, tuple[GraspObject, GraspScene]] = {}
         self._perturbed: dict[tuple, tuple[GraspScene, GraspScene]] = {}
+        self._lock = threading.RLock()
 
     def keep_perturbed(
         self, base: GraspScene, scenario: GraspScenario, pose: GripperPose, p: Perturbation, scene: GraspScene
@@ -145,15 +149,17 @@ class SceneCache:
         ``scene`` is :func:`~mjcodesign.scenarios.perturb.perturbed_scene`'s, as a draw's start check
         built it. ``base`` must be a scene of this cache: the rollout looks it up by the scene it runs on.
         """
-        self._perturbed[_perturbed_key(base, scenario, pose, p)] = (base, scene)  # base held: its id stays
-        while len(self._perturbed) > _KEPT_PERTURBED:  # oldest first out: a later rollout builds it again
-            self._perturbed.pop(next(iter(self._perturbed)))
+        with self._lock:
+            self._perturbed[_perturbed_key(base, scenario, pose, p)] = (base, scene)  # base held: id stays
+            while len(self._perturbed) > _KEPT_PERTURBED:  # oldest first out: a later rollout builds it again
+                self._perturbed.pop(next(iter(self._perturbed)))
 
     def take_perturbed(
         self, base: GraspScene, scenario: GraspScenario, pose: GripperPose, p: Perturbation
     ) -> GraspScene:
         """The kept perturbed scene (removed from the cache), or a new one; :class:`PoseError` if bad."""
-        kept = self._perturbed.pop(_perturbed_key(base, scenario, pose, p), None)
+        with self._lock:
+            kept = self._perturbed.pop(_perturbed_key(base, scenario, pose, p), None)
         if kept is not None and kept[0] is base:
             return kept[1]
         return perturbed_scene(base, scenario, p, pose=pose)
@@ -161,22 +167,23 @@ class SceneCache:
     def scene(self, job: GraspJob) -> GraspScene:
         """The compiled scene (gripper at the reference pose) for ``job``'s object and fingers."""
         key = _scene_key(job)
-        hit = self._scenes.pop(key, None)
-        if hit is None:
-            obj = _at_density(job.obj, job.rho)
-            hit = (
-                job.obj,
-                compile_scene(
-                    obj,
-                    job.geometry,
-                    job.design,
-                    job.finger_model,
-                    options=scene_options(job.scenario, job.options),
-                ),
-            )
-            while len(self._scenes) >= self.size:
-                self._scenes.pop(next(iter(self._scenes)))
-        self._scenes[key] = hit  # most recent last; the object is held so that its id stays unique
+        with self._lock:
+            hit = self._scenes.pop(key, None)
+            if hit is None:
+                obj = _at_density(job.obj, job.rho)
+                hit = (
+                    job.obj,
+                    compile_scene(
+                        obj,
+                        job.geometry,
+                        job.design,
+                        job.finger_model,
+                        options=scene_options(job.scenario, job.options),
+                    ),
+                )
+                while len(self._scenes) >= self.size:
+                    self._scenes.pop(next(iter(self._scenes)))
+            self._scenes[key] = hit  # most recent last; the object is held so that its id stays unique
         return hit[1]
 
 

@@ -349,6 +349,31 @@ def test_one_core_gives_the_same_dataset(reference, config, work, monkeypatch):
     _assert_same_dataset(reference, open_dataset(work / "inline"))
 
 
+def test_worker_threads_share_objects_and_scenes(reference, config, work, monkeypatch):
+    """Two worker threads (``--workers 1`` on two cores) load each object once and compile each scene once."""
+    import importlib
+
+    from mjcodesign import jobs
+    from mjcodesign.data import tasks
+
+    gen = importlib.import_module("mjcodesign.data.generate")
+    loads, compiles = [], []
+    load, compile_scene = tasks.load_grasp_object, jobs.compile_scene
+    monkeypatch.setattr(gen, "cpu_count", lambda: 2)
+    monkeypatch.setattr(
+        tasks, "load_grasp_object", lambda source, *a, **k: loads.append(source) or load(source, *a, **k)
+    )
+    monkeypatch.setattr(
+        jobs, "compile_scene", lambda *a, **k: compiles.append(a[0].density) or compile_scene(*a, **k)
+    )
+    generate(config, work / "threads", workers=1, cache_dir=work / "cache")
+    assert sorted(loads) == sorted(config.objects)
+    # One scene per (object, density): the densities are drawn per pose, so per shard here.
+    shards = sum(int(o["poses"]) for o in reference.manifest["objects"] if o["status"] == "ready")
+    assert len(compiles) == shards
+    _assert_same_dataset(reference, open_dataset(work / "threads"))
+
+
 _RUNNER = """
 import json, os, pickle, signal, sys, time
 from mjcodesign.data import generate

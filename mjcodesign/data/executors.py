@@ -114,29 +114,27 @@ def _wait_futures(handles: list) -> list[tuple[object, object, BaseException | N
 
 
 class ThreadExecutor:
-    """``threads`` workers in this process, each with one MuJoCo thread (``--workers 1`` on MuJoCo C).
+    """``threads`` threads in this process, each rollout on one MuJoCo thread (``--workers 1`` on MuJoCo C).
 
-    A rollout releases the GIL, so one worker's Python work (model copies, outcome replays) overlaps
+    A rollout releases the GIL, so one thread's Python work (model copies, outcome replays) overlaps
     another's rollout instead of leaving a core idle, as it does between the batches of one worker on
-    every core. Object preparation (Warp's SDF kernels) runs one task at a time. A shard's rows do not
-    depend on which worker runs it, so the dataset is the same as the other executors'.
+    every core. The threads share one :class:`Worker`, so each object is loaded and each scene compiled
+    once. Object preparation (Warp's SDF kernels) runs one task at a time. A shard's rows do not
+    depend on which thread runs it, so the dataset is the same as the other executors'.
     """
 
     def __init__(self, threads: int, device: str = "cpu", slots: int | None = None):
         self.slots = slots or 2 * threads
         self.device = device
-        self._local = threading.local()
+        self.worker = Worker(nthread=1, device=device)
         self._prepare = threading.Lock()
         self.pool = cf.ThreadPoolExecutor(max_workers=threads, thread_name_prefix="datagen")
 
     def _run(self, kind: str, payload):
-        worker = getattr(self._local, "worker", None)
-        if worker is None:
-            worker = self._local.worker = Worker(nthread=1, device=self.device)
         if kind == "prepare":
             with self._prepare:
-                return execute(kind, payload, worker)
-        return execute(kind, payload, worker)
+                return execute(kind, payload, self.worker)
+        return execute(kind, payload, self.worker)
 
     def submit(self, kind: str, payload) -> cf.Future:  # noqa: D102
         return self.pool.submit(self._run, kind, payload)

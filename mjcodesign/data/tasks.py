@@ -15,6 +15,7 @@ so a task gives the same rows in this process, a pool process or on a Ray node.
 from __future__ import annotations
 
 import hashlib
+import threading
 import time
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -151,6 +152,8 @@ class Worker:
     """Runs tasks, keeping loaded objects, compiled scenes and the simulator between them.
 
     ``nthread``: MuJoCo C's threads per batch; ``device``: MJWarp's Warp device (``cpu``, ``cuda``).
+    Threads may share one worker (MuJoCo C shards; :class:`~mjcodesign.data.executors.ThreadExecutor`):
+    an object is loaded, and a scene compiled, once for all of them.
     """
 
     def __init__(self, nthread: int | None = None, device: str = "cpu"):
@@ -159,25 +162,28 @@ class Worker:
         self.scenes = SceneCache()
         self._objects: OrderedDict[tuple, GraspObject] = OrderedDict()
         self._backends: dict[str, object] = {}
+        self._lock = threading.RLock()
 
     def backend(self, name: str):
         """The simulator ``name``, built once."""
-        if name not in self._backends:
-            kwargs = {"nthread": self.nthread} if name == "mujoco" else {"device": self.device}
-            self._backends[name] = get_backend(name, **kwargs)
-        return self._backends[name]
+        with self._lock:
+            if name not in self._backends:
+                kwargs = {"nthread": self.nthread} if name == "mujoco" else {"device": self.device}
+                self._backends[name] = get_backend(name, **kwargs)
+            return self._backends[name]
 
     def grasp_object(self, config: DatagenConfig, index: int, cache_dir: str | None) -> GraspObject:
         """Object ``index`` of ``config``, loaded and decomposed once per worker."""
         key = (config.objects[index], config.object_seed, cache_dir)
-        obj = self._objects.pop(key, None)
-        if obj is None:
-            obj = load_grasp_object(
-                config.objects[index], _LOAD_DENSITY, seed=config.object_seed, cache_dir=cache_dir
-            )
-            while len(self._objects) >= _OBJECTS_KEPT:
-                self._objects.popitem(last=False)
-        self._objects[key] = obj
+        with self._lock:
+            obj = self._objects.pop(key, None)
+            if obj is None:
+                obj = load_grasp_object(
+                    config.objects[index], _LOAD_DENSITY, seed=config.object_seed, cache_dir=cache_dir
+                )
+                while len(self._objects) >= _OBJECTS_KEPT:
+                    self._objects.popitem(last=False)
+            self._objects[key] = obj
         return obj
 
     def prepare(self, task: ObjectTask) -> ObjectResult:

@@ -75,12 +75,17 @@ class CalibratedFem:
         young = np.asarray(young, dtype=float)
         if young.shape != (self.blocks.shape[0],) or not np.all(np.isfinite(young)) or np.any(young <= 0):
             raise DesignError(f"need {self.blocks.shape[0]} positive moduli, got {young!r}")
-        from scipy.linalg import cho_factor, cho_solve  # lazily: importing this package stays numpy-only
-
-        # Cholesky: the reduced stiffness is symmetric positive definite. numpy's LU solve went
-        # multi-threaded at this size and took 2-19 ms on the loaded 2-core machine, Cholesky 0.25 ms.
-        k = np.tensordot(young, self.blocks, axes=1)
-        return (self.rows @ cho_solve(cho_factor(k, check_finite=False), self.loads, check_finite=False)).T
+        # Cholesky (LAPACK potrf/potrs, as scipy's cho_factor/cho_solve call them, without their
+        # wrappers' ~0.1 ms): the reduced stiffness is symmetric positive definite. numpy's LU solve
+        # went multi-threaded at this size and took 2-19 ms on the loaded 2-core machine.
+        potrf, potrs, flat = self._lapack
+        k = np.dot(young[None], flat).reshape(self.blocks.shape[1:])  # = tensordot(young, blocks, 1)
+        c, info = potrf(k, lower=0, overwrite_a=1, clean=0)
+        if info == 0:
+            x, info = potrs(c, self.loads, lower=0)
+        if info != 0:
+            raise DesignError(f"the reduced FEM stiffness is not positive definite for E = {young!r}")
+        return (self.rows @ x).T
 
     def output(self, young: np.ndarray, load: str, name: str) -> float:
         """One output of one load (``tip`` or ``tendon``), e.g. ``tip_face_z``."""
@@ -90,6 +95,13 @@ class CalibratedFem:
     def face_angles(self, young: np.ndarray) -> np.ndarray:
         """Section rotation at every block's distal face under the unit tip load [rad/N], (n_blocks,)."""
         return self.solve(young)[0][self._faces]
+
+    @functools.cached_property
+    def _lapack(self) -> tuple:
+        from scipy.linalg import get_lapack_funcs  # lazily: importing this package stays numpy-only
+
+        potrf, potrs = get_lapack_funcs(("potrf", "potrs"), (self.blocks, self.loads))
+        return potrf, potrs, self.blocks.reshape(self.blocks.shape[0], -1)
 
     @functools.cached_property
     def _faces(self) -> np.ndarray:
