@@ -17,11 +17,9 @@ dataset, so an interrupted run goes on where it stopped):
 5. ``oracle`` (with ``--oracle-budget N``): CMA-ES on the simulator alone from semi-rigid, N rollouts;
    or (with ``--oracle-design FILE``) the design of an earlier oracle run on the same training objects,
    regime and suite (``bench oracle``'s ``design.json`` or its record), copied to ``oracle/design.json``;
-6. ``evaluate``: every design against soft, semi-rigid and paper-optimized by perturbed re-simulation
-   on the frozen suite (46 in-domain, 41 out-of-domain objects), both pose policies, the disturbance
-   sweep; ``evaluate_oracle``: the oracle with semi-rigid on the same draws (a second evaluation, so
-   the oracle can come after the first; semi-rigid must agree rollout by rollout, which checks the
-   pairing);
+6. ``evaluate``: every design, the oracle's included, against soft, semi-rigid and paper-optimized by
+   perturbed re-simulation on the frozen suite (46 in-domain, 41 out-of-domain objects), both pose
+   policies, the disturbance sweep: one evaluation, so every design meets the same draws;
 7. ``groups``: the evaluation split into the surrogate's training objects, its held-out objects and
    out of domain, each co-design paired against each preset and the oracle, per pose policy (every
    pose, the first, each design's best) and per disturbance (``scripts/object_groups.py``);
@@ -85,13 +83,32 @@ def _done(work: Path, name: str) -> bool:
     return f.is_file() and json.loads(f.read_text()).get("exit_code") == 0
 
 
+def _same_command(recorded: str, argv: list[str]) -> bool:
+    """Whether a step's recorded command line is ``argv``, whatever interpreter and checkout ran it."""
+
+    def key(args: list[str]) -> list[str]:
+        args = args if args[0] == "mjcodesign" else args[1:]  # a script step starts with the interpreter
+        return [Path(a).name if a.endswith(".py") else a for a in args]
+
+    return key(shlex.split(recorded)) == key(argv)
+
+
 def _run(work: Path, name: str, argv: list[str], dry: bool) -> dict:
-    """Run one step (or report it as done); its record; exit the script on a failure."""
+    """Run one step (or report it as done); its record; exit the script on a failure.
+
+    A step done before with another command line (a folder from an older pipeline, or other flags)
+    stops the run: its results would not be what the later steps expect.
+    """
     text = shlex.join(argv)
     rec_file = work / "steps" / f"{name}.json"
     if _done(work, name):
+        rec = json.loads(rec_file.read_text())
+        if not _same_command(rec["command"], argv):
+            print(f"pipeline: step {name} was done with another command ({rec['command']}); remove "
+                  f"{rec_file} and its output to run it as: {text}", file=sys.stderr)  # fmt: skip
+            raise SystemExit(2)
         print(f"pipeline: {name}: done before, skipped", file=sys.stderr)
-        return json.loads(rec_file.read_text())
+        return rec
     print(f"pipeline: {name}: {text}", file=sys.stderr)
     if dry:
         return {"command": text}
@@ -168,13 +185,13 @@ def step_commands(
     cma = cma_command(s, seed=seed, suite=suite, objects=train)
     out["hybrid"] = [*cma, "--start", "joint:joint_success/design.txt", "--budget", str(hybrid_budget),
                      "--out", "hybrid"]  # fmt: skip
-    designs = [
-        *PRESETS,
+    codesigned = [
         "joint:joint_lopt/design.txt",
         "joint:joint_success/design.txt",
         "joint:hybrid/design.json",
         "individual:individual",
     ]
+    designs = [*PRESETS, *codesigned, *([ORACLE] if oracle else [])]
     if isinstance(oracle, str):
         out["oracle"] = [
             sys.executable,
@@ -189,22 +206,13 @@ def step_commands(
     evaluate = ["mjcodesign", "evaluate", *suite, "--perturbations", str(s.eval_perturbations), "--pose-sampling",
                 "fixed,oracle", "--impulse", s.impulses, "--seed", sd, "--json"]  # fmt: skip
     out["evaluate"] = [*evaluate, "--designs", ",".join(designs), "--out", "evaluation"]
-    compare = [arg for m in designs if m not in PRESETS for p in PRESETS for arg in ("--compare", f"{m},{p}")]
-    also = []
+    compare = [arg for m in codesigned for p in PRESETS for arg in ("--compare", f"{m},{p}")]
     if oracle:
-        out["evaluate_oracle"] = [
-            *evaluate,
-            "--designs",
-            f"semi-rigid,{ORACLE}",
-            "--out",
-            "evaluation_oracle",
-        ]
-        also = ["--also", "evaluation_oracle"]
-        compare += [a for m in (*PRESETS, *designs[len(PRESETS) :]) for a in ("--compare", f"{ORACLE},{m}")]
+        compare += [a for m in (*PRESETS, *codesigned) for a in ("--compare", f"{ORACLE},{m}")]
     for i, impulse in enumerate(s.impulses.split(",")):
         for policy in POLICIES:
             name = f"groups_{policy}" + (f"_impulse{impulse}" if i else "")
-            out[name] = [sys.executable, str(HERE / "object_groups.py"), "evaluation", *also, "--group",
+            out[name] = [sys.executable, str(HERE / "object_groups.py"), "evaluation", "--group",
                          "train=train_objects.txt", "--group", "held-out=held_out_objects.txt", *compare,
                          "--policy", policy, "--impulse", impulse, "--out", f"{name}.json"]  # fmt: skip
     out["limits"] = [sys.executable, str(HERE / "suite_limits.py"), "evaluation/results.json", "--impulse",

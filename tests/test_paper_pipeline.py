@@ -34,30 +34,47 @@ def test_every_step_parses_and_the_groups_compare_what_is_evaluated(pipeline, sc
         if argv[0] == "mjcodesign":
             args = parser.parse_args(argv[1:])  # a flag the CLI no longer takes exits here
             assert callable(args.func), name
-    assert ("oracle" in cmds) == ("evaluate_oracle" in cmds) == bool(oracle)
+    assert ("oracle" in cmds) == bool(oracle) and "evaluate_oracle" not in cmds
     if isinstance(oracle, str):
         assert cmds["oracle"][-2:] == ["--adopt-oracle", oracle]
     assert (("suite" in cmds) == (scale == "smoke")) and "--resume" in cmds["datagen"]
     ev = cmds["evaluate"]
     designs = ev[ev.index("--designs") + 1].split(",")
-    assert designs[:3] == list(pipeline.PRESETS) and len(designs) == 7
-    if oracle:  # the oracle's evaluation shares every setting but the designs and the folder
-        eo = cmds["evaluate_oracle"]
-        assert eo[eo.index("--designs") + 1] == f"semi-rigid,{pipeline.ORACLE}"
-        assert eo[: eo.index("--designs")] == ev[: ev.index("--designs")]
+    # one evaluation: the presets, the four co-designs and, with an oracle, the oracle on the same draws
+    assert designs[:3] == list(pipeline.PRESETS) and len(designs) == 7 + bool(oracle)
+    assert (pipeline.ORACLE in designs) == bool(oracle)
     impulses = s.impulses.split(",")
     groups = [n for n in cmds if n.startswith("groups_")]
     assert len(groups) == len(pipeline.POLICIES) * len(impulses)
     for name in groups:
         g = cmds[name]
-        assert g[g.index("--impulse") + 1] in impulses and ("--also" in g) == bool(oracle)
+        assert g[g.index("--impulse") + 1] in impulses and "--also" not in g
         pairs = {tuple(g[i + 1].split(",", 1)) for i, a in enumerate(g) if a == "--compare"}
-        expected = {(m, p) for m in designs[3:] for p in pipeline.PRESETS}
+        codesigned = [m for m in designs[3:] if m != pipeline.ORACLE]
+        expected = {(m, p) for m in codesigned for p in pipeline.PRESETS}
         if oracle:
-            expected |= {(pipeline.ORACLE, m) for m in designs}
+            expected |= {(pipeline.ORACLE, m) for m in designs if m != pipeline.ORACLE}
         assert pairs == expected
     # the hybrid starts from the success co-design the optimize step writes
     assert "joint:joint_success/design.txt" in cmds["hybrid"] and cmds["joint_success"][-1] == "joint_success"
+
+
+def test_a_step_done_with_another_command_stops_the_run(pipeline, tmp_path, capsys):
+    import json
+
+    steps = tmp_path / "steps"
+    steps.mkdir()
+    old = [sys.executable, "/elsewhere/scripts/object_groups.py", "evaluation", "--also", "evaluation_oracle"]
+    (steps / "groups_all.json").write_text(json.dumps({"command": pipeline.shlex.join(old), "exit_code": 0}))
+    # the same step from another checkout and interpreter is done
+    same = ["/usr/bin/python3", str(SCRIPT.with_name("object_groups.py")), *old[2:]]
+    assert pipeline._run(tmp_path, "groups_all", same, False)["exit_code"] == 0
+    assert "done before, skipped" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        pipeline._run(tmp_path, "groups_all", [*same[:3]], False)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "done with another command" in err[0] and "groups_all.json" in err[0]
 
 
 @pytest.mark.slow
@@ -85,7 +102,7 @@ def test_the_smoke_scale_runs_end_to_end_and_resumes(tmp_path):
     assert first.returncode == 0, first.stderr[-2000:]
     r = json.loads(rec.read_text())
     names = ["datagen", "train", "joint_lopt", "joint_success", "individual", "suite", "hybrid", "oracle",
-             "evaluate", "evaluate_oracle", "groups_all", "groups_fixed", "groups_oracle", "limits"]  # fmt: skip
+             "evaluate", "groups_all", "groups_fixed", "groups_oracle", "limits"]  # fmt: skip
     assert list(r["steps"]) == names and all(s["exit_code"] == 0 for s in r["steps"].values())
     assert r["objects"]["held_out"] and set(r["objects"]["train"]).isdisjoint(r["objects"]["held_out"])
     assert json.loads((tmp_path / "w" / "oracle" / "design.json").read_text())["design"] == [15.5] * 22
