@@ -31,6 +31,7 @@ __all__ = [
     "cloud_statistics",
     "mean_baseline",
     "score_outputs",
+    "soft_label_trees",
     "success_scores",
     "success_head_metrics",
     "tree_baseline",
@@ -231,16 +232,24 @@ def tree_success(
     (:func:`~mjcodesign.surrogate.train.success_labels`) with the head's cross-entropy: each training
     row enters as a success of weight p and a failure of weight 1 − p.
     """
-    from sklearn.ensemble import HistGradientBoostingClassifier
-
     from mjcodesign.surrogate.train import success_labels
 
     stats = cloud_statistics(data.clouds)
-    p = success_labels(data, train_rows)
     x = tree_features(data, train_rows, stats)
     xs = [tree_features(data, r, stats) for r in rows_list]
+    return soft_label_trees(x, success_labels(data, train_rows), xs, seed)
+
+
+def soft_label_trees(x: np.ndarray, p: np.ndarray, xs: list[np.ndarray], seed: int = 0) -> list[np.ndarray]:
+    """Success probability for each of ``xs`` from trees fitted on inputs ``x`` (S, F) and soft labels ``p`` (S,).
+
+    Each training row enters as a success of weight p and a failure of weight 1 − p (the head's
+    cross-entropy); a constant label gives its mean everywhere.
+    """
+    from sklearn.ensemble import HistGradientBoostingClassifier
+
     if not 0 < p.sum() < len(p):
-        return [np.full(len(r), float(p.mean())) for r in rows_list]
+        return [np.full(len(xr), float(p.mean())) for xr in xs]
     y = np.concatenate([np.ones(len(p), dtype=int), np.zeros(len(p), dtype=int)])
     w = np.concatenate([p, 1.0 - p])
     keep = w > 0
