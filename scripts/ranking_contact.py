@@ -169,11 +169,9 @@ def main() -> None:
 
     t0 = time.perf_counter()
     try:
-        d = load_grasp_data(a.data)
+        d = load_grasp_data(a.data, perturbed=True)
     except (MjcodesignError, OSError) as exc:
         _fail(str(exc))  # the error names the path
-    if d.success_p is None:
-        _fail(f"{a.data}: one rollout per cell; this needs a perturbed dataset (datagen --perturbations)")
     names = sorted({str(o) for o in d.objects[d.pose]})
     if len(names) < k:
         _fail(f"{a.data}: {len(names)} object(s), fewer than --folds {k}")

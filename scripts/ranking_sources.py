@@ -114,11 +114,9 @@ def main() -> None:
 
     t0 = time.perf_counter()
     try:
-        d = load_grasp_data(a.data)
+        d = load_grasp_data(a.data, perturbed=True)
     except (MjcodesignError, OSError) as exc:
         _fail(str(exc))  # the error names the path
-    if d.success_p is None:
-        _fail(f"{a.data}: one rollout per cell; this needs a perturbed dataset (datagen --perturbations)")
     rows = np.arange(len(d.pose))
     groups, _ = pose_groups(d, rows)
     obj = np.array([str(d.objects[d.pose[g[0]]]) for g in groups])

@@ -40,7 +40,7 @@ import torch
 
 from mjcodesign.data import Dataset, PoseRows, StoredPoses, open_dataset, read_poses
 from mjcodesign.design.stiffness import N_LOG_E
-from mjcodesign.errors import DesignError, OutputError
+from mjcodesign.errors import DatasetError, DesignError, OutputError
 
 __all__ = [
     "N_OUTPUTS",
@@ -168,12 +168,17 @@ def _fixed(column, width: int) -> np.ndarray:
     return np.asarray(flat, dtype=float).reshape(-1, width)
 
 
-def load_grasp_data(source: str | Path | Dataset) -> GraspData:
+def load_grasp_data(source: str | Path | Dataset, *, perturbed: bool = False) -> GraspData:
     """The samples and poses of a dataset folder (or an open :class:`~mjcodesign.data.Dataset`).
 
-    Raises :class:`OutputError` when it is not a dataset or holds no sample.
+    Raises :class:`OutputError` when it is not a dataset or holds no sample; with ``perturbed``,
+    :class:`DatasetError` when its cells are one rollout each (no ``success_p``).
     """
     ds = source if isinstance(source, Dataset) else open_dataset(source)
+    if perturbed and not ds.perturbed:
+        raise DatasetError(
+            f"{ds.root}: one rollout per cell; this needs a perturbed dataset (datagen --perturbations)"
+        )
     mpath = ds.root / "manifest.json"
     sha = hashlib.sha256(mpath.read_bytes()).hexdigest()
     samples = ds.samples()

@@ -643,6 +643,15 @@ def test_data_info_summary(reference):
     assert sum(v["samples"] for v in info["by_object"].values()) == info["samples"]
 
 
+def test_a_perturbed_only_reader_refuses_one_rollout_per_cell(reference, work):
+    from mjcodesign.errors import DatasetError
+    from mjcodesign.surrogate.data import load_grasp_data
+
+    assert load_grasp_data(work / "ref").success_p is None
+    with pytest.raises(DatasetError, match="one rollout per cell"):
+        load_grasp_data(work / "ref", perturbed=True)
+
+
 def test_reader_does_not_import_torch():
     code = "import sys, mjcodesign.data.reader; print('torch' in sys.modules)"
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
