@@ -32,21 +32,16 @@ def _per_pose(metrics: dict) -> tuple[dict, dict]:
 
 def _paired(a: dict, b: dict, objects: dict, rng) -> dict:
     """Mean and median of a - b over their shared poses, with an object-bootstrap 95 % interval of the mean."""
+    from mjcodesign.evaluation.stats import cluster_bootstrap_mean
+
     poses = sorted(set(a) & set(b))
     d = np.array([a[p] - b[p] for p in poses])
-    obj = np.array([objects[p] for p in poses])
-    names = np.unique(obj)
-    means = []
-    for _ in range(DRAWS):
-        pick = rng.choice(names, size=len(names), replace=True)
-        dd = np.concatenate([d[obj == n] for n in pick])
-        means.append(dd.mean())
-    lo, hi = np.percentile(means, [2.5, 97.5])
+    iv = cluster_bootstrap_mean(d, np.array([objects[p] for p in poses]), rng, n_boot=DRAWS)
     return {
         "poses": len(poses),
-        "mean": float(d.mean()),
+        "mean": iv.value,
         "median": float(np.median(d)),
-        "mean_95ci": [float(lo), float(hi)],
+        "mean_95ci": [iv.low, iv.high],
     }
 
 

@@ -87,14 +87,12 @@ def object_folds(objects: list[str], k: int, seed: int) -> dict[str, int]:
 
 def paired(a: np.ndarray, b: np.ndarray, objects: np.ndarray, seed: int) -> dict:
     """Mean and median of a − b over poses, with a 95 % interval of the mean from resampling objects."""
+    from mjcodesign.evaluation.stats import cluster_bootstrap_mean
+
     d = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
-    names = np.unique(objects)
-    by = [d[objects == o] for o in names]
-    rng = np.random.default_rng(seed)
-    means = [np.concatenate([by[i] for i in rng.integers(0, len(by), len(by))]).mean() for _ in range(DRAWS)]
-    lo, hi = np.percentile(means, [2.5, 97.5])
-    return {"poses": int(len(d)), "objects": int(len(names)), "mean": float(d.mean()), "median": float(np.median(d)),
-            "low": float(lo), "high": float(hi), "positive": int(np.sum(d > 0))}  # fmt: skip
+    iv = cluster_bootstrap_mean(d, objects, np.random.default_rng(seed), n_boot=DRAWS)
+    return {"poses": int(len(d)), "objects": int(len(np.unique(objects))), "mean": iv.value,
+            "median": float(np.median(d)), "low": iv.low, "high": iv.high, "positive": int(np.sum(d > 0))}  # fmt: skip
 
 
 def _summary(v: np.ndarray) -> dict:

@@ -94,3 +94,18 @@ def test_bad_samples_are_refused():
         paired_difference([1.0, 2.0], [1.0])
     with pytest.raises(DesignError):
         bootstrap_mean([np.nan])
+
+
+def test_cluster_bootstrap_resamples_clusters_and_refuses_bad_input():
+    import numpy as np
+
+    from mjcodesign.evaluation.stats import cluster_bootstrap_mean
+
+    # cluster a: 9 values at +1, cluster b: one at -1. The pooled mean is 0.8; a resample of b alone
+    # gives -1, of a alone +1: the interval spans both, as a pose-level bootstrap's would not.
+    v = np.array([1.0] * 9 + [-1.0])
+    iv = cluster_bootstrap_mean(v, np.array(["a"] * 9 + ["b"]), np.random.default_rng(0))
+    assert iv.value == pytest.approx(0.8) and iv.low == pytest.approx(-1.0) and iv.high == pytest.approx(1.0)
+    for values, clusters in (([], []), ([1.0, np.nan], ["a", "b"]), ([1.0, 2.0], ["a"])):
+        with pytest.raises(DesignError):
+            cluster_bootstrap_mean(np.array(values), np.array(clusters), np.random.default_rng(0))

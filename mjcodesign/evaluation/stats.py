@@ -27,6 +27,7 @@ __all__ = [
     "Interval",
     "PairedDifference",
     "bootstrap_mean",
+    "cluster_bootstrap_mean",
     "mean_interval",
     "paired_difference",
     "wilson",
@@ -111,6 +112,25 @@ def bootstrap_mean(
     means = v[rng.integers(0, v.size, size=(n_boot, v.size))].mean(axis=1)
     alpha = 1 - confidence
     lo, hi = np.quantile(means, [alpha / 2, 1 - alpha / 2])
+    return Interval(float(v.mean()), float(lo), float(hi), int(v.size))
+
+
+def cluster_bootstrap_mean(
+    values, clusters, rng: np.random.Generator, *, n_boot: int = 2000, confidence: float = CONFIDENCE
+) -> Interval:
+    """Mean of ``values`` with a percentile interval from resampling their ``clusters`` (e.g. poses by object).
+
+    Each resample draws as many clusters as there are, with replacement (sorted cluster names, indices
+    from ``rng.integers``), and pools their values; the interval is over the pooled means.
+    """
+    v = np.asarray(values, dtype=float)
+    c = np.asarray(clusters)
+    if v.size == 0 or v.shape != c.shape or not np.all(np.isfinite(v)):
+        raise DesignError("cluster_bootstrap_mean: needs finite values, one cluster label each")
+    by = [v[c == name] for name in np.unique(c)]
+    means = [np.concatenate([by[i] for i in rng.integers(0, len(by), len(by))]).mean() for _ in range(n_boot)]
+    a = round((1 - confidence) / 2, 12)  # 0.95 -> percentiles 2.5 and 97.5 exactly
+    lo, hi = np.percentile(means, [100 * a, 100 * (1 - a)])
     return Interval(float(v.mean()), float(lo), float(hi), int(v.size))
 
 
