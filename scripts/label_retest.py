@@ -1,6 +1,7 @@
 """Test-retest of a perturbed dataset's labels: the same cells rerun under fresh perturbation draws.
 
-    python3 scripts/label_retest.py --data DIR --poses N [--seed S] [--replicate R] [--workers W] --out FILE.json
+    python3 scripts/label_retest.py --data DIR --poses N [--seed S] [--replicate R] [--workers W]
+        [--shift-mm D1,D2,...] --out FILE.json
 
 For N poses drawn (``--seed``) from those the design ranking scores (>= 8 designs, a measured
 ``success_p`` that varies over them: :func:`~mjcodesign.surrogate.ranking.ranking_fidelity`'s poses),
@@ -18,6 +19,14 @@ whole labels: no Spearman–Brown step and no adaptive-extension bias. The poses
 label varying, as the ranking's are, so the retest measures what that metric meets. Before the
 replicate, the first chosen pose is rerun with its own draws and must give its stored labels exactly
 (else exit 2: this code no longer makes the dataset). Objects load from datagen's CoACD cache.
+
+``--shift-mm``: each pose is also rerun, under the same replicate's draws, with its palm moved by each
+distance along both signs of each palm axis (x across the fingers, y the closing axis, z the approach
+axis; :class:`~mjcodesign.models.types.GripperPose`). Per axis and distance, the Spearman between the
+first label and the moved pose's label, beside the unmoved retest's on the same poses (the paired
+difference, its interval resampling objects): how far a grasp can move before its design ranking is
+another one. A moved pose counts only where every design has a usable rollout (a palm moved into the
+object gives none).
 """
 
 from __future__ import annotations
@@ -74,10 +83,16 @@ def varying_poses(
     return out
 
 
-def retest_summary(first: dict, second: dict) -> dict:
-    """Agreement of two labels per cell and per pose; ``first``/``second``: (object, pose) -> {design: p}."""
+def _spearman(x: np.ndarray, y: np.ndarray) -> float:
+    """Spearman of one pose's two labels over its designs; 0 where one is constant (it ranks nothing)."""
     from mjcodesign.surrogate.ranking import group_spearman
 
+    r = group_spearman(y, x, [np.arange(len(x))])[0] if len(x) >= 2 else float("nan")
+    return 0.0 if np.isnan(r) else float(r)
+
+
+def retest_summary(first: dict, second: dict) -> dict:
+    """Agreement of two labels per cell and per pose; ``first``/``second``: (object, pose) -> {design: p}."""
     a, b, rho = [], [], []
     for key, cells in first.items():
         both = sorted(set(cells) & set(second.get(key, {})))
@@ -85,8 +100,7 @@ def retest_summary(first: dict, second: dict) -> dict:
         y = np.array([second[key][d] for d in both])
         a.extend(x)
         b.extend(y)
-        r = group_spearman(y, x, [np.arange(len(both))])[0] if len(both) >= 2 else float("nan")
-        rho.append(0.0 if np.isnan(r) else r)  # a constant replicate ranks nothing
+        rho.append(_spearman(x, y))
     a, b, rho = np.array(a), np.array(b), np.array(rho)
     diff = np.abs(a - b)
     med = float(np.median(rho)) if len(rho) else float("nan")
@@ -108,6 +122,67 @@ def retest_summary(first: dict, second: dict) -> dict:
     }
 
 
+AXES = ("x", "y", "z")
+"""The palm axes a pose is moved along (:class:`~mjcodesign.models.types.GripperPose`'s frame)."""
+
+
+def shifted_matrix(matrix, axis: int, distance_m: float) -> tuple[float, ...]:
+    """The 4x4 row-major palm pose ``matrix`` moved by ``distance_m`` along its own axis ``axis``."""
+    t = np.array(matrix, dtype=float).reshape(4, 4)
+    t[:3, 3] += distance_m * t[:3, axis]
+    return tuple(t.ravel())
+
+
+def _pose_rho(first: dict, second: dict) -> float | None:
+    """:func:`_spearman` of one pose's labels ({design: p}); None unless ``second`` has every design."""
+    if set(first) - set(second):
+        return None
+    d = sorted(first)
+    return _spearman(np.array([first[k] for k in d]), np.array([second[k] for k in d]))
+
+
+def shift_summary(first: dict, retest: dict, moved: dict, *, seed: int = 0) -> dict:
+    """Per moved distance: the design ranking of the moved poses against the first label.
+
+    ``first``/``retest``: (object, pose) -> {design: p}, the stored and the unmoved replicate's labels;
+    ``moved``: (axis, signed distance in mm) -> the same for the moved poses (designs without a usable
+    rollout left out). Per axis and distance (both signs pooled: a pose's mean over the signs it has),
+    and over every axis: the median and mean Spearman of the moved poses, the unmoved retest's mean on
+    the same poses and the paired difference with its object-resampled 95 % interval.
+    """
+    from mjcodesign.evaluation.stats import cluster_bootstrap_mean
+
+    base = {k: _pose_rho(v, retest.get(k, {})) for k, v in first.items()}
+    distances = sorted({abs(d) for _, d in moved})
+    groups = {f"{a}{d:g}mm": [(a, d), (a, -d)] for d in distances for a in AXES}
+    groups |= {f"all{d:g}mm": [(a, s * d) for a in AXES for s in (1, -1)] for d in distances}
+    out = {}
+    for name, keys in groups.items():
+        rho, rho0, obj = [], [], []
+        for key, cells in first.items():
+            got = [_pose_rho(cells, moved[k].get(key, {})) for k in keys if k in moved]
+            got = [r for r in got if r is not None]
+            if got and base[key] is not None:
+                rho.append(float(np.mean(got)))
+                rho0.append(base[key])
+                obj.append(key[0])
+        if not rho:
+            out[name] = {"poses": 0}
+            continue
+        rho, rho0 = np.array(rho), np.array(rho0)
+        diff = cluster_bootstrap_mean(rho - rho0, np.array(obj), np.random.default_rng(seed))
+        out[name] = {
+            "poses": int(len(rho)),
+            "objects": int(len(set(obj))),
+            "median": float(np.median(rho)),
+            "mean": float(rho.mean()),
+            "retest_median": float(np.median(rho0)),
+            "retest_mean": float(rho0.mean()),
+            "paired_difference": {"mean": diff.value, "ci95": [diff.low, diff.high]},
+        }
+    return out
+
+
 def main() -> None:
     """Parse the flags, rerun the cells, write the JSON and print it."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -116,10 +191,17 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0, help="seeds the choice of poses")
     ap.add_argument("--replicate", type=int, default=1, help="which independent stream of draws (>= 1)")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--shift-mm", default="", help="also move each palm by these distances [mm], e.g. 2,5,10")
     ap.add_argument("--out", required=True)
     a = ap.parse_args()
     if a.poses < 1 or a.replicate < 1 or a.workers < 1:
         _fail("--poses, --replicate and --workers must be at least 1")
+    try:
+        shifts = sorted({float(x) for x in a.shift_mm.split(",")}) if a.shift_mm.strip() else []
+    except ValueError:
+        _fail(f"--shift-mm {a.shift_mm}: write distances in mm separated by commas, e.g. 2,5,10")
+    if not all(np.isfinite(d) and d > 0 for d in shifts):
+        _fail(f"--shift-mm {a.shift_mm}: every distance must be a finite number > 0")
     from mjcodesign.bench.record import provenance
     from mjcodesign.cli.common import user_cache_dir
     from mjcodesign.data import open_dataset
@@ -167,14 +249,27 @@ def main() -> None:
     if {d: v for d, (v, _) in cells.items()} != first[key]:
         _fail(f"{a.data}: pose o{key[0]:04d}-p{key[1]:03d} rerun with its own draws gives other labels: "
               "this code does not reproduce the dataset")  # fmt: skip
+    moves = [None] + [(ax, s * d) for d in shifts for ax in range(len(AXES)) for s in (1, -1)]
+    runs = [
+        (m, t if m is None else dataclasses.replace(t, matrix=shifted_matrix(t.matrix, m[0], m[1] / 1000)))
+        for t in tasks
+        for m in moves
+    ]
     second: dict = {}
+    moved: dict = {}
     rollouts = 0
     with ProcessPoolExecutor(a.workers) as pool:
-        for i, (o, q, cells) in enumerate(pool.map(_run, tasks), start=1):
-            second[(o, q)] = {d: v for d, (v, _) in cells.items()}
+        done = pool.map(_run, [t for _, t in runs])
+        for i, ((m, _), (o, q, cells)) in enumerate(zip(runs, done, strict=True), start=1):
+            usable = {d: v for d, (v, n) in cells.items() if n > 0}
+            if m is None:
+                second[(o, q)] = {d: v for d, (v, _) in cells.items()}
+            else:
+                moved.setdefault((AXES[m[0]], m[1]), {})[(o, q)] = usable
             rollouts += sum(n for _, n in cells.values())
+            where = "" if m is None else f" palm {AXES[m[0]]} {m[1]:+g} mm"
             print(
-                f"label_retest: pose {i}/{len(tasks)} o{o:04d}-p{q:03d} ({time.perf_counter() - t0:.0f} s)",
+                f"label_retest: shard {i}/{len(runs)} o{o:04d}-p{q:03d}{where} ({time.perf_counter() - t0:.0f} s)",
                 flush=True,
             )
     out = {
@@ -190,8 +285,12 @@ def main() -> None:
         **retest_summary(first, second),
         "wall_s": round(time.perf_counter() - t0, 1),
     }
+    if shifts:
+        out["shift_mm"] = shifts
+        out["shifted"] = shift_summary(first, second, moved, seed=a.seed)
     cmd = (f"python3 scripts/label_retest.py --data {a.data} --poses {a.poses} --seed {a.seed} "
-           f"--replicate {a.replicate} --workers {a.workers} --out {a.out}")  # fmt: skip
+           f"--replicate {a.replicate} --workers {a.workers}"
+           + (f" --shift-mm {a.shift_mm}" if shifts else "") + f" --out {a.out}")  # fmt: skip
     out["provenance"] = provenance("label_retest", command=cmd)
     Path(a.out).write_text(json.dumps(out, indent=1))
     print(json.dumps({k: v for k, v in out.items() if k != "provenance"}, indent=1))

@@ -42,6 +42,44 @@ def test_varying_poses_need_enough_designs_and_a_spread(script_module):
     assert lr.varying_poses(obj, pose, p, 8) == [(0, 0)]
 
 
+def test_shifted_matrix_moves_the_palm_along_its_own_axis(script_module):
+    lr = script_module("label_retest")
+    c, s = np.cos(0.3), np.sin(0.3)
+    t = np.array([[c, -s, 0, 0.1], [s, c, 0, 0.2], [0, 0, 1, 0.3], [0, 0, 0, 1]], dtype=float)
+    moved = np.reshape(lr.shifted_matrix(tuple(t.ravel()), 1, 0.005), (4, 4))
+    np.testing.assert_array_equal(moved[:3, :3], t[:3, :3])
+    np.testing.assert_allclose(moved[:3, 3], t[:3, 3] + 0.005 * np.array([-s, c, 0.0]), atol=1e-15)
+    back = np.reshape(lr.shifted_matrix(tuple(moved.ravel()), 1, -0.005), (4, 4))
+    np.testing.assert_allclose(back, t, atol=1e-15)
+
+
+def test_shift_summary_pairs_moved_poses_with_the_unmoved_retest(script_module):
+    lr = script_module("label_retest")
+    up, down = {0: 0.0, 1: 0.3, 2: 0.6, 3: 1.0}, {0: 1.0, 1: 0.6, 2: 0.3, 3: 0.0}
+    first = {(0, 0): up, (1, 0): up}
+    retest = {(0, 0): up, (1, 0): up}  # the unmoved replicate ranks both poses as the first label: +1
+    moved = {
+        ("x", 2.0): {(0, 0): up, (1, 0): up},  # +x keeps the ranking
+        ("x", -2.0): {(0, 0): down, (1, 0): up},  # -x reverses pose (0, 0)'s: its mean over the signs 0
+        ("y", 2.0): {(0, 0): {0: 0.0, 1: 0.5}},  # a moved pose without every design does not count
+        ("z", 2.0): {(0, 0): down, (1, 0): down},
+        ("z", 5.0): {(0, 0): {k: 0.5 for k in up}},  # a constant moved label ranks nothing: 0
+    }
+    s = lr.shift_summary(first, retest, moved)
+    assert s["x2mm"]["poses"] == 2 and s["x2mm"]["median"] == pytest.approx(0.5)
+    assert s["x2mm"]["retest_median"] == pytest.approx(1.0)
+    assert s["x2mm"]["paired_difference"]["mean"] == pytest.approx(-0.5)
+    lo, hi = s["x2mm"]["paired_difference"]["ci95"]
+    assert -1.0 <= lo <= -0.5 <= hi <= 0.0
+    assert s["y2mm"] == {"poses": 0}
+    assert s["z2mm"]["mean"] == pytest.approx(-1.0) and s["z2mm"]["paired_difference"][
+        "mean"
+    ] == pytest.approx(-2.0)
+    # every axis pooled: pose (0, 0) has x+ 1, x- -1, z+ -1 -> -1/3; pose (1, 0) x+ 1, x- 1, z+ -1 -> 1/3
+    assert s["all2mm"]["mean"] == pytest.approx(0.0) and s["all2mm"]["poses"] == 2
+    assert s["z5mm"]["poses"] == 1 and s["z5mm"]["median"] == 0.0 and s["x5mm"] == {"poses": 0}
+
+
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
     """One 50 mm box at 1500 kg/m³ (a marginal grasp: at 300-500 every cell holds), 2 poses x 8 designs,
@@ -88,9 +126,31 @@ def test_a_run_reruns_every_cell_of_the_varying_poses(dataset, tmp_path):
     assert r["provenance"]["command"].startswith("python3 scripts/label_retest.py")
 
 
+def test_a_run_with_shifts_reruns_each_pose_moved_along_every_palm_axis(dataset, tmp_path):
+    out = tmp_path / "shift.json"
+    res = _script("--data", str(dataset), "--workers", "1", "--shift-mm", "3", "--out", str(out))
+    assert res.returncode == 0, res.stderr
+    r = json.loads(out.read_text())
+    assert r["shift_mm"] == [3.0] and set(r["shifted"]) == {"x3mm", "y3mm", "z3mm", "all3mm"}
+    for name, got in r["shifted"].items():
+        assert 0 <= got["poses"] <= r["poses"], name
+        if got["poses"]:
+            assert -1.0 <= got["median"] <= 1.0 and -2.0 <= got["paired_difference"]["mean"] <= 2.0
+    assert r["shifted"]["all3mm"]["poses"] >= max(r["shifted"][f"{a}3mm"]["poses"] for a in "xyz")
+    moved = [ln for ln in res.stdout.splitlines() if ln.startswith("label_retest: shard") and "palm" in ln]
+    assert len(moved) == 6 * r["poses_rerun"] and any("palm z -3 mm" in ln for ln in moved)
+    assert "--shift-mm 3" in r["provenance"]["command"]
+
+
 @pytest.mark.parametrize(
     ("args", "says"),
-    [(["--poses", "0"], "at least 1"), (["--replicate", "0"], "at least 1"), ([], "missing_dataset")],
+    [
+        (["--poses", "0"], "at least 1"),
+        (["--replicate", "0"], "at least 1"),
+        ([], "missing_dataset"),
+        (["--shift-mm", "2,x"], "--shift-mm 2,x"),
+        (["--shift-mm", "-1"], "> 0"),
+    ],
 )
 def test_bad_input_exits_2_with_one_line(tmp_path, args, says):
     out = tmp_path / "o.json"
