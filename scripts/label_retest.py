@@ -148,7 +148,8 @@ def shift_summary(first: dict, retest: dict, moved: dict, *, seed: int = 0) -> d
     ``moved``: (axis, signed distance in mm) -> the same for the moved poses (designs without a usable
     rollout left out). Per axis and distance (both signs pooled: a pose's mean over the signs it has),
     and over every axis: the median and mean Spearman of the moved poses, the unmoved retest's mean on
-    the same poses and the paired difference with its object-resampled 95 % interval.
+    the same poses and the paired difference with its object-resampled 95 % interval; and the mean
+    absolute difference of a cell's two labels, moved and unmoved.
     """
     from mjcodesign.evaluation.stats import cluster_bootstrap_mean
 
@@ -158,14 +159,19 @@ def shift_summary(first: dict, retest: dict, moved: dict, *, seed: int = 0) -> d
     groups |= {f"all{d:g}mm": [(a, s * d) for a in AXES for s in (1, -1)] for d in distances}
     out = {}
     for name, keys in groups.items():
-        rho, rho0, obj = [], [], []
+        rho, rho0, obj, dp, dp0 = [], [], [], [], []
         for key, cells in first.items():
-            got = [_pose_rho(cells, moved[k].get(key, {})) for k in keys if k in moved]
-            got = [r for r in got if r is not None]
+            got = [
+                moved[k][key]
+                for k in keys
+                if k in moved and key in moved[k] and not set(cells) - set(moved[k][key])
+            ]
             if got and base[key] is not None:
-                rho.append(float(np.mean(got)))
+                rho.append(float(np.mean([_pose_rho(cells, g) for g in got])))
                 rho0.append(base[key])
                 obj.append(key[0])
+                dp.extend(abs(g[d] - v) for g in got for d, v in cells.items())
+                dp0.extend(abs(retest[key][d] - v) for d, v in cells.items())
         if not rho:
             out[name] = {"poses": 0}
             continue
@@ -179,6 +185,8 @@ def shift_summary(first: dict, retest: dict, moved: dict, *, seed: int = 0) -> d
             "retest_median": float(np.median(rho0)),
             "retest_mean": float(rho0.mean()),
             "paired_difference": {"mean": diff.value, "ci95": [diff.low, diff.high]},
+            "mean_abs_difference": float(np.mean(dp)),
+            "retest_mean_abs_difference": float(np.mean(dp0)),
         }
     return out
 

@@ -71,6 +71,9 @@ def test_shift_summary_pairs_moved_poses_with_the_unmoved_retest(script_module):
     assert s["x2mm"]["paired_difference"]["mean"] == pytest.approx(-0.5)
     lo, hi = s["x2mm"]["paired_difference"]["ci95"]
     assert -1.0 <= lo <= -0.5 <= hi <= 0.0
+    assert s["x2mm"]["retest_mean_abs_difference"] == 0.0
+    # pose (0, 0) moved -x: |1-0|, |0.6-0.3| twice, |0-1| over 8 cells of the two signs
+    assert s["x2mm"]["mean_abs_difference"] == pytest.approx((1 + 0.3 + 0.3 + 1) / 16)
     assert s["y2mm"] == {"poses": 0}
     assert s["z2mm"]["mean"] == pytest.approx(-1.0) and s["z2mm"]["paired_difference"][
         "mean"
