@@ -161,16 +161,13 @@ def shift_summary(first: dict, retest: dict, moved: dict, *, seed: int = 0) -> d
     for name, keys in groups.items():
         rho, rho0, obj, dp, dp0 = [], [], [], [], []
         for key, cells in first.items():
-            got = [
-                moved[k][key]
-                for k in keys
-                if k in moved and key in moved[k] and not set(cells) - set(moved[k][key])
-            ]
-            if got and base[key] is not None:
-                rho.append(float(np.mean([_pose_rho(cells, g) for g in got])))
+            scored = [(g, _pose_rho(cells, g)) for k in keys if (g := moved.get(k, {}).get(key)) is not None]
+            scored = [(g, r) for g, r in scored if r is not None]  # None: a design without a usable rollout
+            if scored and base[key] is not None:
+                rho.append(float(np.mean([r for _, r in scored])))
                 rho0.append(base[key])
                 obj.append(key[0])
-                dp.extend(abs(g[d] - v) for g in got for d, v in cells.items())
+                dp.extend(abs(g[d] - v) for g, _ in scored for d, v in cells.items())
                 dp0.extend(abs(retest[key][d] - v) for d, v in cells.items())
         if not rho:
             out[name] = {"poses": 0}
