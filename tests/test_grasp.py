@@ -50,16 +50,84 @@ def test_single_rollout_is_deterministic(box_scene):
     assert np.all(np.isfinite(a.body_force)) and np.all(np.isfinite(a.displacement))
 
 
-def test_batched_rollout_equals_single_bitwise(box_scene):
+@pytest.mark.parametrize("nthread", [1, 2])
+def test_batched_rollout_equals_single_bitwise(box_scene, nthread):
+    # nthread 1 replays the outcomes in this thread on the rollout's own data, 2 on a pool: both must
+    # give what a fresh single rollout gives.
     scenario = GraspScenario(impulse=0.0, hold_s=0.1, post_hold_s=0.05)
     designs = [Stiffness.preset("paper-optimized"), Stiffness.preset("soft")]
-    outs = MujocoBackend(nthread=2).run_batch(box_scene, scenario, designs)
+    outs = MujocoBackend(nthread=nthread).run_batch(box_scene, scenario, designs)
     single = MujocoBackend().run(box_scene, scenario)
     assert_array_equal(outs[0].body_force, single.body_force)
     assert_array_equal(outs[0].displacement, single.displacement)
     soft_scene = build_scene(box_scene.obj, FingerDesign(), designs[1], FingerModel.CHAIN, box_scene.pose)
     soft = MujocoBackend().run(soft_scene, scenario)
     assert_array_equal(outs[1].body_force, soft.body_force)
+
+
+_TOL_WRENCH = 1e-12  # relative: the same contact forces summed by another formula (round-off only)
+
+
+def _reference_wrench(scene, d):
+    """The fingers' wrench on the object, contact by contact through mj_contactForce and np.cross."""
+    import mujoco
+
+    m, ob = scene.model, scene.object_body
+    torque, force, fingers, ground = np.zeros(3), np.zeros(3), 0, False
+    for i in range(d.ncon):
+        c = d.contact[i]
+        bodies = [int(m.geom_bodyid[g]) if g >= 0 else -1 for g in c.geom]
+        if ob not in bodies:
+            continue
+        side = 1 if bodies[0] == ob else 0
+        g, b, f = int(c.geom[side]), bodies[side], int(c.flex[side])
+        ground |= g == scene.ground_geom
+        if f < 0 and (b < 0 or b not in scene.finger_bodies):
+            continue
+        f6 = np.zeros(6)
+        mujoco.mj_contactForce(m, d, i, f6)
+        frame = c.frame.reshape(3, 3)  # rows: the contact's axes in world
+        sign = 1.0 if bodies[1] == ob else -1.0  # the force is geom 1's on geom 2
+        fw, tw = sign * frame.T @ f6[:3], sign * frame.T @ f6[3:]
+        force += fw
+        torque += np.cross(c.pos - d.xipos[ob], fw) + tw
+        fingers += 1
+    return np.r_[torque, force], fingers, ground
+
+
+@pytest.mark.parametrize("cone", ["elliptic", "pyramidal"])
+def test_finger_wrench_equals_contact_by_contact_sum(box_scene, cone):
+    # finger_wrench reads elliptic contact forces from efc_force as arrays; pyramidal cones go through
+    # mj_contactForce. Both equal the plain per-contact sum at every 10th step of tighten and hold.
+    import copy
+
+    import mujoco
+
+    from mjcodesign.scenarios.grasp import STATE_SPEC, control_spec, phase_controls
+    from mjcodesign.scenarios.outcome import finger_wrench
+    from mjcodesign.sim.mujoco_c import initial_state
+
+    scene = copy.copy(box_scene)
+    scene.model = copy.copy(box_scene.model)
+    scene.model.opt.cone = getattr(mujoco.mjtCone, f"mjCONE_{cone.upper()}")
+    m = scene.model
+    ctrl, starts = phase_controls(scene, GraspScenario())
+    d = mujoco.MjData(m)
+    mujoco.mj_setState(m, d, initial_state(scene), STATE_SPEC)
+    checked = 0
+    for t in range(starts["impulse"]):
+        mujoco.mj_setState(m, d, ctrl[t], control_spec())
+        mujoco.mj_step(m, d)
+        if t % 10:
+            continue
+        mujoco.mj_forward(m, d)
+        wrench, finger, ground = finger_wrench(scene, d)
+        ref, fingers, ref_ground = _reference_wrench(scene, d)
+        assert (finger, ground) == (fingers > 0, ref_ground)
+        scale = max(np.abs(ref).max(), 1e-9)
+        np.testing.assert_allclose(wrench, ref, rtol=0, atol=_TOL_WRENCH * scale)
+        checked += fingers > 0
+    assert checked >= 10, "too few states with the fingers on the box"
 
 
 _ALTERNATING = ",".join(["14", "17"] * 11)  # soft segments, stiff flexures (and the reverse on finger B)

@@ -26,6 +26,7 @@ per step), so the check costs no replay.
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import mujoco
@@ -99,6 +100,53 @@ def _sensor(m: mujoco.MjModel, name: str) -> int:
     return int(m.sensor_adr[sid])
 
 
+@dataclass(frozen=True)
+class _Columns:
+    """Where :func:`energy_balance` reads a model's sensors, and which joints and bodies it weighs."""
+
+    force: np.ndarray  # (nu,): each actuator's force sensor
+    velocity: np.ndarray  # (nu,): each actuator's velocity sensor
+    kinetic: int
+    potential: int
+    compensated: tuple[tuple[int, int], ...]  # (body, its position sensor) of gravity-compensated bodies
+    tendon_actuators: tuple[int, ...]
+
+
+def _columns(m: mujoco.MjModel) -> _Columns:
+    """:class:`_Columns` of ``m``, looked up once per model layout (the names and sensor addresses).
+
+    A grasp's design copies (:func:`~mjcodesign.sim.with_stiffness`) share one layout; the values the
+    bound weighs (masses, gravity compensation, damping) are read from each model by the caller.
+    """
+    weighed = (m.body_gravcomp > 0) & (m.body_mass > 0)
+    key = (bytes(m.names), m.sensor_adr.tobytes(), m.actuator_trntype.tobytes(), weighed.tobytes())
+    cols = _COLUMNS.get(key)
+    if cols is None:
+        names = [m.actuator(a).name for a in range(m.nu)]
+        cols = _Columns(
+            force=np.array([_sensor(m, f"{_PREFIX}f_{n}") for n in names], dtype=int),
+            velocity=np.array([_sensor(m, f"{_PREFIX}v_{n}") for n in names], dtype=int),
+            kinetic=_sensor(m, f"{_PREFIX}kinetic"),
+            potential=_sensor(m, f"{_PREFIX}potential"),
+            compensated=tuple(
+                (b, _sensor(m, f"{_PREFIX}z_{m.body(b).name}")) for b in np.flatnonzero(weighed).tolist()
+            ),
+            tendon_actuators=tuple(
+                a for a in range(m.nu) if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_TENDON
+            ),
+        )
+        with _COLUMNS_LOCK:  # worker threads share the cache
+            while len(_COLUMNS) >= _COLUMNS_KEPT:
+                _COLUMNS.pop(next(iter(_COLUMNS)))
+            _COLUMNS[key] = cols
+    return cols
+
+
+_COLUMNS: dict[tuple, _Columns] = {}
+_COLUMNS_KEPT = 64
+_COLUMNS_LOCK = threading.Lock()
+
+
 def energy_balance(
     m: mujoco.MjModel,
     object_body: int,
@@ -116,22 +164,22 @@ def energy_balance(
     which copies back only some full states, copies the joint velocities of every step for this.
     """
     dt = m.opt.timestep
-    nu = m.nu
-    f = np.stack([sensordata[:, _sensor(m, f"{_PREFIX}f_{m.actuator(a).name}")] for a in range(nu)], axis=1)
-    v = np.stack([sensordata[:, _sensor(m, f"{_PREFIX}v_{m.actuator(a).name}")] for a in range(nu)], axis=1)
+    cols = _columns(m)
+    f = sensordata[:, cols.force]
+    v = sensordata[:, cols.velocity]
     # MuJoCo evaluates the kinetic-energy sensor before it updates d.energy in the same step, so the
     # sensor of step t holds the kinetic energy of the state before step t - 1 (measured: sensor[t] equals
     # ½ vᵀMv of states[t - 2] to round-off), and at step 0 whatever the data last held (the previous
     # rollout's, on reused data). The potential sensor is current. So the kinetic energy of the state
     # before step t is the sensor of step t + 1, and the last step, whose kinetic energy no sensor
     # holds, is left out of the bound.
-    kinetic = sensordata[1:, _sensor(m, f"{_PREFIX}kinetic")]
-    energy = kinetic + sensordata[:-1, _sensor(m, f"{_PREFIX}potential")]
+    kinetic = sensordata[1:, cols.kinetic]
+    energy = kinetic + sensordata[:-1, cols.potential]
     g = -float(m.opt.gravity[2])
-    for b in range(m.nbody):
-        if m.body_gravcomp[b] > 0 and m.body_mass[b] > 0:
-            z = sensordata[:-1, _sensor(m, f"{_PREFIX}z_{m.body(b).name}") + 2]
-            energy = energy - m.body_gravcomp[b] * m.body_mass[b] * g * z
+    gravcomp, mass = m.body_gravcomp, m.body_mass
+    for b, z_adr in cols.compensated:
+        z = sensordata[:-1, z_adr + 2]
+        energy = energy - gravcomp[b] * mass[b] * g * z
     # Only what each actuator gives counts: a servo's damping is integrated implicitly, so its sensed
     # force (at the step's start) overstates what it absorbs, and absorbed work can only lower the bound.
     power = np.sum(np.maximum(f * v, 0.0), axis=1)
@@ -140,13 +188,13 @@ def energy_balance(
     # implicit integrator applies them there): the lift's 50 N·s/m alone takes ~0.27 J of a 3 cm lift.
     qvel = np.vstack([x0[None, 1 + m.nq : 1 + m.nq + m.nv], states[:, 1 + m.nq : 1 + m.nq + m.nv]])
     loss = qvel[1:] ** 2 @ m.dof_damping
-    for a in range(nu):
-        if m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_TENDON:
-            loss = loss + m.tendon_damping[m.actuator_trnid[a, 0]] * v[:, a] ** 2
+    for a in cols.tendon_actuators:
+        loss = loss + m.tendon_damping[m.actuator_trnid[a, 0]] * v[:, a] ** 2
     damped = np.concatenate([[0.0], np.cumsum(loss * dt)])[:-1]
     # The object's COM velocity (free joint: linear velocity in the world) before and after each step.
     qv = 1 + m.nq + int(m.jnt_dofadr[m.body_jntadr[object_body]])
     vel = np.vstack([x0[None, qv : qv + 3], states[:, qv : qv + 3]])
+    nu = m.nu
     force = ctrl[:, nu + 6 * object_body : nu + 6 * object_body + 3]
     w_imp = np.concatenate([[0.0], np.cumsum(np.sum(force * 0.5 * (vel[1:] + vel[:-1]), axis=1) * dt)])[:-1]
     excess = energy - energy[0] - w_act[:-1] - w_imp[:-1] + damped[:-1]

@@ -124,6 +124,8 @@ def finger_wrench(
     """(wrench on the object by the fingers [torque about COM, force] in world, finger contact, ground).
 
     With ``forces=False`` only the two flags are read (``d`` needs contacts, not constraint forces).
+    The contacts are selected and summed as arrays, in contact order; with elliptic cones a contact's
+    force is read from ``d.efc_force`` as ``mj_contactForce`` reads it (pyramidal cones call it).
     """
     m = scene.model
     ob = scene.object_body
@@ -132,30 +134,22 @@ def finger_wrench(
         return wrench, False, False
     con = d.contact
     # Per contact, its side away from the object: geom, body and flex (a flex side has geom -1 and
-    # its flex id in con.flex; every flex is a finger). Plain Python: ~10 contacts, called per replay.
-    geoms, flexes, bodyid, mask = con.geom.tolist(), con.flex.tolist(), m.geom_bodyid, scene.finger_mask
-    ground, sel, b2 = False, [], []
-    for i, ((g1, g2), (f1, f2)) in enumerate(zip(geoms, flexes, strict=True)):
-        b1_ = int(bodyid[g1]) if g1 >= 0 else -1
-        b2_ = int(bodyid[g2]) if g2 >= 0 else -1
-        if b1_ == ob:
-            g, b, f = g2, b2_, f2
-        elif b2_ == ob:
-            g, b, f = g1, b1_, f1
-        else:
-            continue
-        ground = ground or g == scene.ground_geom
-        if f >= 0 or (b >= 0 and mask[b]):
-            sel.append(i)
-            b2.append(b2_)
-    if not sel or not forces:
-        return wrench, bool(sel), ground
-    sel, b2 = np.array(sel), np.array(b2)
-    f6 = np.zeros(6)
-    local = np.empty((sel.size, 6))
-    for k, i in enumerate(sel):
-        mujoco.mj_contactForce(m, d, int(i), f6)
-        local[k] = f6
+    # its flex id in con.flex; every flex is a finger). A side with geom 1 and body 1 is the object's.
+    geom, flex = con.geom, con.flex
+    body = np.where(geom >= 0, m.geom_bodyid[np.maximum(geom, 0)], -1)
+    first = body[:, 0] == ob  # the object is side 1: the other side is 2
+    touches = first | (body[:, 1] == ob)
+    other = np.where(first, 1, 0)[:, None]
+    g = np.take_along_axis(geom, other, axis=1)[:, 0]
+    b = np.take_along_axis(body, other, axis=1)[:, 0]
+    f = np.take_along_axis(flex, other, axis=1)[:, 0]
+    ground = bool(np.any(touches & (g == scene.ground_geom)))
+    on_finger = touches & ((f >= 0) | ((b >= 0) & scene.finger_mask[np.maximum(b, 0)]))
+    sel = np.flatnonzero(on_finger)
+    if not sel.size or not forces:
+        return wrench, bool(sel.size), ground
+    b2 = body[sel, 1]
+    local = _contact_forces(m, d, con, sel)
     # mj_contactForce gives the force of geom1 on geom2 in the contact frame (rows = axes).
     frames = np.asarray(con.frame)[sel].reshape(-1, 3, 3)
     sign = np.where(b2 == ob, 1.0, -1.0)[:, None]
@@ -167,6 +161,26 @@ def finger_wrench(
     rxf = r[:, [1, 2, 0]] * F[:, [2, 0, 1]] - r[:, [2, 0, 1]] * F[:, [1, 2, 0]]
     wrench[:3] = rxf.sum(axis=0) + T.sum(axis=0)
     return wrench, True, ground
+
+
+def _contact_forces(m: mujoco.MjModel, d: mujoco.MjData, con, sel: np.ndarray) -> np.ndarray:
+    """``mj_contactForce`` of the contacts ``sel``, shape (len(sel), 6).
+
+    Elliptic cones: the first ``dim`` constraint forces of each contact, copied as MuJoCo copies them
+    (zeros for a contact without constraint rows); pyramidal cones: MuJoCo's own decoding per contact.
+    """
+    local = np.zeros((sel.size, 6))
+    if m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC:
+        adr, dim = con.efc_address[sel], con.dim[sel]
+        col = np.arange(6)
+        rows = (col < dim[:, None]) & (adr[:, None] >= 0)
+        local[rows] = d.efc_force[(adr[:, None] + col)[rows]]
+        return local
+    f6 = np.zeros(6)
+    for k, i in enumerate(sel):
+        mujoco.mj_contactForce(m, d, int(i), f6)
+        local[k] = f6
+    return local
 
 
 def _palm_frame(scene: GraspScene, d: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:

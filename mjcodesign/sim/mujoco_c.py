@@ -6,7 +6,7 @@ import copy
 import dataclasses
 import functools
 import os
-import threading
+import queue
 import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -388,25 +388,28 @@ class MujocoBackend(SceneBatchSimulator):
         for i in np.flatnonzero(bad):  # run() hands these to the observer itself
             outs[i] = self.run(scenes[i], scenario, observer=observer, label=labels[i])
         good = np.flatnonzero(~bad)
-        with ThreadPoolExecutor(max_workers=self.nthread) as pool:
-            scratch = threading.local()
+        # The rollout's data (one per thread) are scratch for the replays now: _Replay clears the warm
+        # start, so the forces equal those of fresh data.
+        scratch = queue.SimpleQueue()
+        for d in started.datas:
+            scratch.put(d)
 
-            def evaluate(i: int) -> Outcome:
-                if not hasattr(scratch, "data"):
-                    scratch.data = mujoco.MjData(models[0])
+        def evaluate(i: int) -> Outcome:
+            d = scratch.get()
+            try:
                 return outcome_from_states(
-                    scenes[i],
-                    scenario,
-                    x0[i],
-                    states[i],
-                    ctrl[i],
-                    starts,
-                    scratch.data,
-                    sensordata=sensors[i],
+                    scenes[i], scenario, x0[i], states[i], ctrl[i], starts, d, sensordata=sensors[i]
                 )
+            finally:
+                scratch.put(d)
 
-            for i, out in zip(good, pool.map(evaluate, good), strict=True):
-                outs[i] = out
+        if len(started.datas) > 1 and len(good) > 1:
+            with ThreadPoolExecutor(max_workers=len(started.datas)) as pool:
+                done = list(pool.map(evaluate, good))
+        else:  # one thread (datagen's worker threads): no pool to start per batch
+            done = [evaluate(i) for i in good]
+        for i, out in zip(good, done, strict=True):
+            outs[i] = out
         wall = (time.perf_counter() - started.t0) / len(scenes)
         outs = [o.with_wall_time(wall) for o in outs]
         for i in good if observer is not None else ():
