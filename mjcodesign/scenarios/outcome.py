@@ -124,8 +124,6 @@ def finger_wrench(
     """(wrench on the object by the fingers [torque about COM, force] in world, finger contact, ground).
 
     With ``forces=False`` only the two flags are read (``d`` needs contacts, not constraint forces).
-    The contacts are selected and summed as arrays, in contact order; with elliptic cones a contact's
-    force is read from ``d.efc_force`` as ``mj_contactForce`` reads it (pyramidal cones call it).
     """
     m = scene.model
     ob = scene.object_body
@@ -134,21 +132,25 @@ def finger_wrench(
         return wrench, False, False
     con = d.contact
     # Per contact, its side away from the object: geom, body and flex (a flex side has geom -1 and
-    # its flex id in con.flex; every flex is a finger). A side with geom 1 and body 1 is the object's.
-    geom, flex = con.geom, con.flex
-    body = np.where(geom >= 0, m.geom_bodyid[np.maximum(geom, 0)], -1)
-    first = body[:, 0] == ob  # the object is side 1: the other side is 2
-    touches = first | (body[:, 1] == ob)
-    other = np.where(first, 1, 0)[:, None]
-    g = np.take_along_axis(geom, other, axis=1)[:, 0]
-    b = np.take_along_axis(body, other, axis=1)[:, 0]
-    f = np.take_along_axis(flex, other, axis=1)[:, 0]
-    ground = bool(np.any(touches & (g == scene.ground_geom)))
-    on_finger = touches & ((f >= 0) | ((b >= 0) & scene.finger_mask[np.maximum(b, 0)]))
-    sel = np.flatnonzero(on_finger)
-    if not sel.size or not forces:
-        return wrench, bool(sel.size), ground
-    b2 = body[sel, 1]
+    # its flex id in con.flex; every flex is a finger). Plain Python: ~10 contacts, called per replay.
+    geoms, flexes, bodyid, mask = con.geom.tolist(), con.flex.tolist(), m.geom_bodyid, scene.finger_mask
+    ground, sel, b2 = False, [], []
+    for i, ((g1, g2), (f1, f2)) in enumerate(zip(geoms, flexes, strict=True)):
+        b1_ = int(bodyid[g1]) if g1 >= 0 else -1
+        b2_ = int(bodyid[g2]) if g2 >= 0 else -1
+        if b1_ == ob:
+            g, b, f = g2, b2_, f2
+        elif b2_ == ob:
+            g, b, f = g1, b1_, f1
+        else:
+            continue
+        ground = ground or g == scene.ground_geom
+        if f >= 0 or (b >= 0 and mask[b]):
+            sel.append(i)
+            b2.append(b2_)
+    if not sel or not forces:
+        return wrench, bool(sel), ground
+    sel, b2 = np.array(sel), np.array(b2)
     local = _contact_forces(m, d, con, sel)
     # mj_contactForce gives the force of geom1 on geom2 in the contact frame (rows = axes).
     frames = np.asarray(con.frame)[sel].reshape(-1, 3, 3)
@@ -158,27 +160,33 @@ def finger_wrench(
     r = np.asarray(con.pos)[sel] - d.xipos[ob]
     wrench[3:] = F.sum(axis=0)
     # Σ r × F, written out: np.cross costs more than the rest of this function on ~20 contacts.
-    rxf = r[:, [1, 2, 0]] * F[:, [2, 0, 1]] - r[:, [2, 0, 1]] * F[:, [1, 2, 0]]
+    rxf = r[:, _NEXT] * F[:, _AFTER] - r[:, _AFTER] * F[:, _NEXT]
     wrench[:3] = rxf.sum(axis=0) + T.sum(axis=0)
     return wrench, True, ground
 
 
-def _contact_forces(m: mujoco.MjModel, d: mujoco.MjData, con, sel: np.ndarray) -> np.ndarray:
-    """``mj_contactForce`` of the contacts ``sel``, shape (len(sel), 6).
+_NEXT, _AFTER = np.array([1, 2, 0]), np.array([2, 0, 1])  # the cross product's index rotations
 
-    Elliptic cones: the first ``dim`` constraint forces of each contact, copied as MuJoCo copies them
-    (zeros for a contact without constraint rows); pyramidal cones: MuJoCo's own decoding per contact.
+
+def _contact_forces(m: mujoco.MjModel, d: mujoco.MjData, con, sel: np.ndarray) -> np.ndarray:
+    """``mj_contactForce`` of the contacts ``sel`` (contact frame), shape (len(sel), 6).
+
+    With elliptic cones MuJoCo's function copies each contact's first ``dim`` constraint forces (zeros
+    without constraint rows); this copies them here, without a call per contact. Pyramidal cones,
+    whose forces MuJoCo decodes, go through ``mj_contactForce``.
     """
     local = np.zeros((sel.size, 6))
     if m.opt.cone == mujoco.mjtCone.mjCONE_ELLIPTIC:
-        adr, dim = con.efc_address[sel], con.dim[sel]
-        col = np.arange(6)
-        rows = (col < dim[:, None]) & (adr[:, None] >= 0)
-        local[rows] = d.efc_force[(adr[:, None] + col)[rows]]
+        efc = d.efc_force
+        for k, (adr, dim) in enumerate(
+            zip(con.efc_address[sel].tolist(), con.dim[sel].tolist(), strict=True)
+        ):
+            if adr >= 0:
+                local[k, :dim] = efc[adr : adr + dim]
         return local
     f6 = np.zeros(6)
-    for k, i in enumerate(sel):
-        mujoco.mj_contactForce(m, d, int(i), f6)
+    for k, i in enumerate(sel.tolist()):
+        mujoco.mj_contactForce(m, d, i, f6)
         local[k] = f6
     return local
 
