@@ -58,26 +58,35 @@ class _Clock:
         self.calls.clear()
 
 
-def _instrument(clock: _Clock) -> None:
-    """Time the rollout calls, the outcome replays and the model copies of the MuJoCo C backend."""
+def _instrument(clock: _Clock):
+    """Time the MuJoCo C backend's rollout calls, outcome replays and model copies; returns the undo."""
     import mjcodesign.sim.mujoco_c as mc
 
+    saved = {k: getattr(mc, k) for k in ("mj_rollout", "outcome_from_states", "_stiffness_writer")}
+
     class _Rollout:  # stands in for the module's ``mujoco.rollout``
-        rollout = staticmethod(clock.timed(mc.mj_rollout.rollout, "rollout"))
+        rollout = staticmethod(clock.timed(saved["mj_rollout"].rollout, "rollout"))
 
     mc.mj_rollout = _Rollout
-    mc.outcome_from_states = clock.timed(mc.outcome_from_states, "outcomes")
-    writer = mc._stiffness_writer
-    mc._stiffness_writer = lambda scene: clock.timed(writer(scene), "model_copies")
+    mc.outcome_from_states = clock.timed(saved["outcome_from_states"], "outcomes")
+    mc._stiffness_writer = lambda scene: clock.timed(saved["_stiffness_writer"](scene), "model_copies")
+    return lambda: [setattr(mc, k, v) for k, v in saved.items()]
 
 
 def measure(objects: list[str], poses_per_object: int, designs_per_pose: int, passes: int, seed: int) -> dict:
     """Per pass, the CPU split of :class:`~mjcodesign.data.Worker` over the bench's shards (module docstring)."""
+    clock = _Clock()
+    undo = _instrument(clock)
+    try:
+        return _passes(clock, objects, poses_per_object, designs_per_pose, passes, seed)
+    finally:
+        undo()
+
+
+def _passes(clock: _Clock, objects, poses_per_object, designs_per_pose, passes, seed) -> dict:
     from mjcodesign.bench.datagen import _shards
     from mjcodesign.data import DatagenConfig, DatasetDir, ObjectTask, Worker, parse_density_spec
 
-    clock = _Clock()
-    _instrument(clock)
     config = DatagenConfig(
         objects=tuple(objects),
         poses_per_object=poses_per_object,
