@@ -188,7 +188,13 @@ def test_printed_grasp_refusals(force_grasp):
     # vertex are refused (none do on the meshes in use; here one is made to).
     g = FemGripper(force_grasp.gripper.design, Stiffness.preset("semi-rigid"), options=PRINTED, dt=_DT)
     assert g.tendon_points_disjoint()
-    g.waypoint_idx[1, 0] = g.waypoint_idx[0, 0]  # both weigh it (the table's first slots are non-zero)
+    # Which slot holds a free vertex of non-zero weight depends on the mesh's round-off (a slot may
+    # hold a pinned vertex at weight 1e-16), so the shared vertex is planted between two such slots.
+    free = g.pinned[: g.n_per_finger] == 0
+    a, b = ([k for k in range(g.waypoint_idx.shape[1]) if g.waypoint_w[p, k] != 0 and free[g.waypoint_idx[p, k]]]
+            for p in (0, 1))  # fmt: skip
+    assert a and b, "the first two tendon points weigh no free vertex"
+    g.waypoint_idx[1, b[0]] = g.waypoint_idx[0, a[0]]  # both weigh it now
     assert not g.tendon_points_disjoint()
     with pytest.raises(UnsupportedError, match="implicit damper"):
         _grasp(TendonPosition(ticks=50), gripper=g)
