@@ -37,7 +37,6 @@ class _Clock:
 
     def __init__(self):
         self.cpu: dict[str, float] = {}
-        self.calls: dict[str, int] = {}
 
     def timed(self, f, name: str):
         """``f``, its calls' CPU added to ``name``."""
@@ -49,13 +48,11 @@ class _Clock:
                 return f(*args, **kwargs)
             finally:
                 self.cpu[name] = self.cpu.get(name, 0.0) + time.thread_time() - t0
-                self.calls[name] = self.calls.get(name, 0) + 1
 
         return timed
 
     def reset(self) -> None:
         self.cpu.clear()
-        self.calls.clear()
 
 
 def _instrument(clock: _Clock):
